@@ -1,0 +1,87 @@
+#pragma once
+// Host brick cache: decompressed bricks under LRU with a byte budget. Thread-safe. A brick
+// in use is held by a BrickPin and is never evicted while pinned; when every resident brick
+// is pinned the cache may exceed its budget (counted in stats) rather than fail a frame.
+#include "brickstore/StoreLayout.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <vector>
+
+namespace bc::brickstore {
+
+class BrickStore;
+
+struct BrickCacheConfig {
+    std::uint64_t budgetBytes = 1ull << 30;  ///< bytes of decompressed bricks kept resident
+};
+
+struct BrickCacheStats {
+    std::uint64_t hits = 0;
+    std::uint64_t misses = 0;
+    std::uint64_t evictions = 0;
+    std::uint64_t bytesLoaded = 0;    ///< bytes brought in by misses
+    std::uint64_t bytesEvicted = 0;
+    std::uint64_t residentBytes = 0;  ///< now
+    std::uint64_t pinnedBytes = 0;    ///< now
+    std::uint64_t residentBricks = 0; ///< now
+};
+
+namespace detail {
+struct CacheEntry;
+class CacheCore;
+} // namespace detail
+
+/// A pinned, decompressed brick. Move-only; unpins in its destructor. The cache must outlive it.
+class BrickPin {
+public:
+    BrickPin() = default;
+    BrickPin(BrickPin&& other) noexcept;
+    BrickPin& operator=(BrickPin&& other) noexcept;
+    BrickPin(const BrickPin&) = delete;
+    BrickPin& operator=(const BrickPin&) = delete;
+    ~BrickPin();
+
+    const BrickKey& key() const;
+    /// The brick's stored voxels ((B+2A)^3, native type, x fastest).
+    std::span<const std::byte> data() const;
+    explicit operator bool() const { return mEntry != nullptr; }
+
+private:
+    friend class BrickCache;
+    BrickPin(detail::CacheCore* core, detail::CacheEntry* entry) : mCore(core), mEntry(entry) {}
+    void release();
+    detail::CacheCore* mCore = nullptr;
+    detail::CacheEntry* mEntry = nullptr;
+};
+
+class BrickCache {
+public:
+    /// Fills `out` (already sized by the loader) with brick `key`; may throw (StoreCorrupt).
+    using Loader = std::function<void(const BrickKey& key, std::vector<std::byte>& out)>;
+
+    BrickCache(Loader loader, BrickCacheConfig config);
+    /// A cache over a store's bricks (store.readBrick); the store must outlive the cache.
+    BrickCache(const BrickStore& store, BrickCacheConfig config);
+    ~BrickCache();
+    BrickCache(const BrickCache&) = delete;
+    BrickCache& operator=(const BrickCache&) = delete;
+
+    /// The brick, loaded on a miss. Concurrent requests for one key share a single load.
+    /// @throw what the loader throws; a failed load leaves nothing cached.
+    BrickPin pin(const BrickKey& key);
+    /// The brick only if resident (counts a hit), else nullopt (counts nothing).
+    std::optional<BrickPin> tryPin(const BrickKey& key);
+    /// Changes the budget; evicts unpinned bricks down to it.
+    void setBudgetBytes(std::uint64_t budgetBytes);
+    BrickCacheStats stats() const;
+
+private:
+    std::unique_ptr<detail::CacheCore> mCore;
+};
+
+} // namespace bc::brickstore

@@ -1,0 +1,86 @@
+#pragma once
+// Read side of a brick store (layout in FORMAT.md): opens and validates the file, reads and
+// verifies bricks and their leaf summaries. Thread-safe for concurrent reads.
+#include "brickstore/StoreLayout.h"
+#include "brickstore/VolumeSource.h"
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace bc::brickstore {
+
+/// Value range of the voxels a brick's or leaf's samples can read (payload and apron).
+struct ValueRange {
+    float min = 0.0f;
+    float max = 0.0f;
+};
+
+/// One index entry (FORMAT.md "Brick record").
+struct BrickRecord {
+    std::uint64_t offset = 0;           ///< file offset of the zstd frame (0 if not stored)
+    std::uint32_t compressedBytes = 0;
+    std::uint32_t leafBytes = 0;        ///< leaf table that follows the frame
+    std::uint32_t flags = 0;            ///< kBrickStored
+    ValueRange range;                   ///< min == max == value for a brick not stored
+    std::uint64_t payloadChecksum = 0;  ///< XXH3-64 of the compressed frame
+    std::uint64_t leafChecksum = 0;     ///< XXH3-64 of the leaf table
+    bool stored() const { return (flags & 1u) != 0; }
+};
+constexpr std::uint32_t kBrickStored = 1u;
+
+/// Everything the header and index say about the volume.
+struct StoreInfo {
+    VolumeInfo volume;
+    BrickGeometry geometry;
+    double valueMin = 0.0;
+    double valueMax = 0.0;
+    std::uint64_t fileBytes = 0;
+    std::uint64_t storedBricks = 0;
+    std::uint64_t storedBytes = 0;       ///< compressed payloads plus leaf tables
+    std::vector<std::uint64_t> histogram;///< level-0 voxels in equal bins over [valueMin, valueMax]
+};
+
+namespace detail {
+class MappedFile;
+}
+
+class BrickStore {
+public:
+    /// Opens and validates header and index (offsets inside the file, no overlaps, sizes
+    /// within limits, checksums of header and index). Brick payloads are checked on read.
+    /// @throw StoreCorrupt naming the store and what is wrong; StoreIoError if unreadable.
+    static std::unique_ptr<BrickStore> open(const std::string& path);
+    ~BrickStore();
+
+    const std::string& path() const { return mPath; }
+    const StoreInfo& info() const { return mInfo; }
+    const StoreLayout& layout() const { return *mLayout; }
+    const BrickRecord& record(const BrickKey& key) const;
+    /// Bytes of one decompressed brick ((B+2A)^3 voxels).
+    std::uint64_t brickBytes() const;
+
+    /// Decompresses brick `key` into `out` (brickBytes() long); a brick not stored is filled
+    /// with its constant value. @throw StoreCorrupt naming the brick on a checksum or
+    /// decompression failure; other bricks stay readable.
+    void readBrick(const BrickKey& key, std::span<std::byte> out) const;
+    /// Per-leaf value ranges (leafCount() entries, x fastest), checksum verified, without
+    /// touching voxels. @throw StoreCorrupt naming the brick.
+    std::vector<ValueRange> leafRanges(const BrickKey& key) const;
+
+    /// Full scrub of every brick and leaf table on `threads` workers (0 = all cores).
+    /// Returns one line per fault, naming the brick; empty when the store is sound.
+    std::vector<std::string> verify(unsigned threads = 0) const;
+
+private:
+    BrickStore() = default;
+    std::string mPath;
+    StoreInfo mInfo;
+    std::unique_ptr<StoreLayout> mLayout;
+    std::vector<BrickRecord> mRecords;
+    std::unique_ptr<detail::MappedFile> mFile;
+};
+
+} // namespace bc::brickstore

@@ -1,0 +1,51 @@
+#pragma once
+// A volume as a stream of z-slices: the one interface every reader and generator offers to
+// ingest. Slices arrive strictly in order, each once, so a reader never needs the whole
+// volume in memory (gzip and zstd inputs can only be read forwards anyway).
+#include "brickstore/VoxelType.h"
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+
+namespace bc::brickstore {
+
+struct VolumeInfo {
+    std::array<std::uint64_t, 3> dims{};          ///< voxels along x, y, z
+    VoxelType type = VoxelType::U8;               ///< native type as stored
+    std::array<double, 3> spacingMm{1, 1, 1};     ///< voxel size along x, y, z
+    std::array<double, 3> originMm{0, 0, 0};      ///< position of voxel (0,0,0)'s centre
+    double background = 0.0;                      ///< value of regions with no data (VDB)
+    std::string description;                      ///< e.g. "NIfTI-1 CT_AVM.nii.gz, u8"
+
+    std::uint64_t voxelCount() const { return dims[0] * dims[1] * dims[2]; }
+    std::uint64_t sliceBytes() const { return dims[0] * dims[1] * voxelBytes(type); }
+};
+
+/// Largest edge accepted on any axis, and largest volume in bytes: no reader allocates from
+/// a size beyond these, whatever a header promises.
+constexpr std::uint64_t kMaxDimVoxels = 1ull << 20;
+constexpr std::uint64_t kMaxVolumeBytes = 1ull << 50;
+
+/// Checks dims (non-zero, byte size without 64-bit overflow, within the limits above) and
+/// spacing (finite, positive). @throw FormatError naming `file` and the field at fault.
+void validateVolumeInfo(const VolumeInfo& info, const std::string& file);
+
+/// dims[0]*dims[1]*dims[2]*bytes, or nullopt-like 0 on 64-bit overflow (checked helper).
+bool checkedVolumeBytes(const std::array<std::uint64_t, 3>& dims, std::size_t bytesPerVoxel,
+                        std::uint64_t& out);
+
+class VolumeSource {
+public:
+    virtual ~VolumeSource() = default;
+    /// Dims, type, spacing; valid from construction on.
+    virtual const VolumeInfo& info() const = 0;
+    /// Reads the next `count` z-slices into `out` (x fastest, native type, host byte order,
+    /// out.size() == count * info().sliceBytes()).
+    /// @throw FormatError when the input ends early or holds values it must not (NaN).
+    virtual void readSlices(std::uint64_t count, std::span<std::byte> out) = 0;
+};
+
+} // namespace bc::brickstore

@@ -1,0 +1,57 @@
+#pragma once
+// Shared helpers of the test suites: where the real scans are, scratch folders.
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <unistd.h>
+
+namespace bc::test {
+
+/// Path of a file in ../shared/data (read, never copied). Skips the test if the folder is absent.
+inline std::string dataPath(const std::string& name) {
+    std::filesystem::path p = std::filesystem::path(BC_SHARED_DATA_DIR) / name;
+    return p.string();
+}
+inline bool haveData(const std::string& name) { return std::filesystem::exists(dataPath(name)); }
+
+/// A fresh scratch folder removed with everything in it when the object goes.
+class TempDir {
+public:
+    TempDir() {
+        std::random_device rd;
+        mPath = std::filesystem::temp_directory_path() /
+                ("bctest-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+        std::filesystem::create_directories(mPath);
+    }
+    ~TempDir() {
+        std::error_code ec;
+        std::filesystem::remove_all(mPath, ec);
+    }
+    TempDir(const TempDir&) = delete;
+    TempDir& operator=(const TempDir&) = delete;
+    std::string file(const std::string& name) const { return (mPath / name).string(); }
+    const std::filesystem::path& path() const { return mPath; }
+
+private:
+    std::filesystem::path mPath;
+};
+
+inline void writeFile(const std::string& path, const void* data, std::size_t bytes) {
+    std::ofstream f(path, std::ios::binary);
+    f.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
+}
+inline void writeFile(const std::string& path, const std::string& text) {
+    writeFile(path, text.data(), text.size());
+}
+inline std::vector<std::uint8_t> readFile(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(f), {});
+}
+
+} // namespace bc::test
