@@ -1,0 +1,278 @@
+#include "brickstore/Ingest.h"
+
+#include "brickstore/Error.h"
+#include "brickstore/detail/BrickSummary.h"
+#include "brickstore/detail/LevelBuilder.h"
+#include "brickstore/detail/StoreFile.h"
+#include "brickstore/detail/StoreFormat.h"
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <mutex>
+#include <optional>
+#include <thread>
+#include <zstd.h>
+
+namespace bc::brickstore {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct CCtxDeleter {
+    void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); }
+};
+
+std::size_t zstdCheck(std::size_t code, const char* what) {
+    if (ZSTD_isError(code))
+        throw StoreIoError(std::string("zstd ") + what + ": " + ZSTD_getErrorName(code));
+    return code;
+}
+
+/// Bounded queue of cut bricks between the reading thread and the compression workers.
+class JobQueue {
+public:
+    explicit JobQueue(std::size_t capacity) : mCapacity(capacity) {}
+    /// Blocks while full. Returns false if the queue was aborted.
+    bool push(detail::BrickJob&& job) {
+        std::unique_lock lock(mMutex);
+        mNotFull.wait(lock, [&] { return mJobs.size() < mCapacity || mClosed; });
+        if (mClosed) return false;
+        mJobs.push_back(std::move(job));
+        mNotEmpty.notify_one();
+        return true;
+    }
+    std::optional<detail::BrickJob> pop() {
+        std::unique_lock lock(mMutex);
+        mNotEmpty.wait(lock, [&] { return !mJobs.empty() || mClosed || mDone; });
+        if (mClosed || mJobs.empty()) return std::nullopt;
+        detail::BrickJob job = std::move(mJobs.front());
+        mJobs.pop_front();
+        mNotFull.notify_one();
+        return job;
+    }
+    /// No more jobs will come; workers drain what is queued.
+    void finish() {
+        std::lock_guard lock(mMutex);
+        mDone = true;
+        mNotEmpty.notify_all();
+    }
+    /// Stop now (an error): pending jobs are dropped.
+    void abort() {
+        std::lock_guard lock(mMutex);
+        mClosed = true;
+        mJobs.clear();
+        mNotEmpty.notify_all();
+        mNotFull.notify_all();
+    }
+
+private:
+    std::size_t mCapacity;
+    std::mutex mMutex;
+    std::condition_variable mNotEmpty, mNotFull;
+    std::deque<detail::BrickJob> mJobs;
+    bool mDone = false, mClosed = false;
+};
+
+/// Everything the workers share while an ingest runs.
+struct IngestState {
+    const StoreLayout& layout;
+    VoxelType type;
+    int zstdLevel;
+    detail::StoreFile& file;
+    std::vector<BrickRecord> records;
+    std::atomic<std::uint64_t> bricksDone{0};
+    std::atomic<std::uint64_t> uncompressedBytes{0};
+    std::mutex errorMutex;
+    std::exception_ptr error;
+
+    void fail(std::exception_ptr e) {
+        std::lock_guard lock(errorMutex);
+        if (!error) error = e;
+    }
+};
+
+void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job, std::vector<std::byte>& buf) {
+    BrickRecord& rec = s.records[job.index];
+    const std::size_t vb = voxelBytes(s.type);
+    if (detail::isConstant(job.voxels, vb)) {
+        rec.range = detail::brickRange(s.type, std::span(job.voxels).first(vb));
+        return;
+    }
+    rec.range = detail::brickRange(s.type, job.voxels);
+    auto leaves = detail::encodeLeafTable(
+        detail::leafRanges(s.type, job.voxels, s.layout.geometry()));
+    buf.resize(ZSTD_compressBound(job.voxels.size()) + leaves.size());
+    std::size_t n = zstdCheck(ZSTD_compress2(cctx, buf.data(), buf.size() - leaves.size(),
+                                             job.voxels.data(), job.voxels.size()),
+                              "compress");
+    std::copy(leaves.begin(), leaves.end(), buf.begin() + std::ptrdiff_t(n));
+    rec.flags = kBrickStored;
+    rec.compressedBytes = static_cast<std::uint32_t>(n);
+    rec.leafBytes = static_cast<std::uint32_t>(leaves.size());
+    rec.payloadChecksum = detail::checksum(buf.data(), n);
+    rec.leafChecksum = detail::checksum(leaves);
+    rec.offset = s.file.append(std::span(buf).first(n + leaves.size()));
+    s.uncompressedBytes += job.voxels.size();
+}
+
+void workerLoop(IngestState& s, JobQueue& queue) {
+    std::unique_ptr<ZSTD_CCtx, CCtxDeleter> cctx(ZSTD_createCCtx());
+    std::vector<std::byte> buf;
+    try {
+        zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, s.zstdLevel), "level");
+        zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_checksumFlag, 1), "checksum flag");
+        while (auto job = queue.pop()) {
+            compressBrick(s, cctx.get(), *job, buf);
+            ++s.bricksDone;
+        }
+    } catch (...) {
+        s.fail(std::current_exception());
+        queue.abort();
+    }
+}
+
+/// Level-0 histogram over [lo, hi]; stored bricks are read back and decompressed.
+std::vector<std::uint64_t> buildHistogram(IngestState& s, std::uint32_t bins, double lo, double hi,
+                                          unsigned threads) {
+    const auto& level0 = s.layout.levels()[0];
+    const std::uint32_t a = s.layout.geometry().apronVoxels, edge = s.layout.storedEdge();
+    std::vector<std::vector<std::uint64_t>> partial(threads, std::vector<std::uint64_t>(bins));
+    std::atomic<std::uint64_t> next{0};
+    auto worker = [&](unsigned t) {
+        std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> dctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
+        std::vector<std::byte> frame, voxels(s.layout.storedVoxels() * voxelBytes(s.type));
+        for (std::uint64_t i = next++; i < level0.brickCount(); i = next++) {
+            const BrickRecord& r = s.records[i];
+            auto extent = s.layout.payloadExtent(s.layout.keyOf(i));
+            if (!r.stored()) {
+                partial[t][detail::histogramBin(r.range.min, lo, hi, bins)] += extent[0] * extent[1] * extent[2];
+                continue;
+            }
+            frame.resize(r.compressedBytes);
+            s.file.readAt(r.offset, frame);
+            zstdCheck(ZSTD_decompressDCtx(dctx.get(), voxels.data(), voxels.size(), frame.data(), frame.size()),
+                      "decompress for histogram");
+            detail::accumulateHistogram(s.type, voxels, edge, {a, a, a}, extent, lo, hi, partial[t]);
+        }
+    };
+    {
+        std::vector<std::jthread> pool;
+        for (unsigned t = 0; t < threads; ++t) pool.emplace_back(worker, t);
+    }
+    std::vector<std::uint64_t> total(bins);
+    for (const auto& p : partial)
+        for (std::uint32_t b = 0; b < bins; ++b) total[b] += p[b];
+    return total;
+}
+
+/// Reads every slice of the source into the level chain, reporting progress.
+void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestState& s,
+                  const std::function<void(const IngestProgress&)>& progress, Clock::time_point start) {
+    const VolumeInfo& info = source.info();
+    const std::uint64_t sliceBytes = info.sliceBytes();
+    const std::uint64_t chunk = std::max<std::uint64_t>(1, (8ull << 20) / sliceBytes);
+    std::vector<std::byte> staging(std::min(chunk, info.dims[2]) * sliceBytes);
+    for (std::uint64_t z = 0; z < info.dims[2];) {
+        std::uint64_t n = std::min(chunk, info.dims[2] - z);
+        source.readSlices(n, std::span(staging).first(n * sliceBytes));
+        for (std::uint64_t i = 0; i < n; ++i) level0.pushSlice(staging.data() + i * sliceBytes);
+        z += n;
+        {
+            std::lock_guard lock(s.errorMutex);
+            if (s.error) return;
+        }
+        if (progress) {
+            IngestProgress p;
+            p.bricksDone = s.bricksDone;
+            p.bricksTotal = s.layout.brickCount();
+            p.sourceBytesRead = z * sliceBytes;
+            p.sourceBytesTotal = info.dims[2] * sliceBytes;
+            p.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+            progress(p);
+        }
+    }
+}
+
+} // namespace
+
+IngestReport ingest(VolumeSource& source, const std::string& storePath, const IngestConfig& config,
+                    const std::function<void(const IngestProgress&)>& progress) {
+    const auto start = Clock::now();
+    const VolumeInfo& info = source.info();
+    validateVolumeInfo(info, info.description.empty() ? storePath : info.description);
+    StoreLayout layout(info.dims, config.geometry);  // throws std::invalid_argument
+    const std::uint32_t bins = std::clamp<std::uint32_t>(config.histogramBins, 1, detail::kMaxHistogramBins);
+    const unsigned threads = config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
+
+    detail::StoreFile file(storePath);
+    IngestState s{layout, info.type, config.zstdLevel, file, {}, {}, {}, {}, {}};
+    s.records.resize(layout.brickCount());
+    JobQueue queue(config.queueBricks ? config.queueBricks : 4 * threads);
+
+    // One builder per level, each feeding the next; jobs go to the shared queue.
+    const auto nLevels = static_cast<std::uint32_t>(layout.levels().size());
+    std::vector<std::unique_ptr<detail::LevelBuilder>> levels(nLevels);
+    auto sink = [&](detail::BrickJob&& job) { queue.push(std::move(job)); };
+    for (std::uint32_t l = nLevels; l-- > 0;)
+        levels[l] = std::make_unique<detail::LevelBuilder>(layout, l, info.type, sink,
+                                                           l + 1 < nLevels ? levels[l + 1].get() : nullptr);
+    {
+        std::vector<std::jthread> workers;
+        for (unsigned t = 0; t < threads; ++t) workers.emplace_back([&] { workerLoop(s, queue); });
+        try {
+            streamSlices(source, *levels[0], s, progress, start);
+            queue.finish();
+        } catch (...) {
+            s.fail(std::current_exception());
+            queue.abort();
+        }
+    }
+    if (s.error) std::rethrow_exception(s.error);
+
+    IngestReport report;
+    double lo = s.records[0].range.min, hi = s.records[0].range.max;
+    for (std::uint64_t i = 0; i < layout.levels()[0].brickCount(); ++i) {
+        lo = std::min<double>(lo, s.records[i].range.min);
+        hi = std::max<double>(hi, s.records[i].range.max);
+    }
+    auto histogram = buildHistogram(s, bins, lo, hi, threads);
+
+    detail::StoreHeader h;
+    h.volume = info;
+    h.geometry = config.geometry;
+    h.levelCount = nLevels;
+    h.histogramBins = bins;
+    h.valueMin = lo;
+    h.valueMax = hi;
+    h.brickCount = layout.brickCount();
+    for (const auto& r : s.records) {
+        if (!r.stored()) continue;
+        ++h.storedBricks;
+        h.storedBytes += r.compressedBytes + r.leafBytes;
+    }
+    auto index = detail::encodeIndex(layout, s.records, histogram, info.description);
+    h.indexOffset = file.end();
+    h.indexBytes = index.size();
+    h.indexChecksum = detail::checksum(index);
+    h.fileBytes = h.indexOffset + h.indexBytes;
+    file.writeAt(h.indexOffset, index);
+    file.writeAt(0, detail::encodeHeader(h));
+    file.commit();
+
+    const std::uint64_t brickBytes = layout.storedVoxels() * voxelBytes(info.type);
+    report.sourceBytes = info.voxelCount() * voxelBytes(info.type);
+    report.bricks = layout.brickCount();
+    report.storedBricks = h.storedBricks;
+    report.constantBricks = report.bricks - report.storedBricks;
+    report.storedBytes = h.storedBytes;
+    report.uncompressedBrickBytes = s.uncompressedBytes;
+    report.constantBrickBytes = report.constantBricks * brickBytes;
+    report.fileBytes = h.fileBytes;
+    report.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return report;
+}
+
+} // namespace bc::brickstore

@@ -1,0 +1,171 @@
+#include "brickstore/detail/BrickSummary.h"
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+
+namespace bc::brickstore::detail {
+namespace {
+
+template <typename T> const T* as(const std::byte* p) { return reinterpret_cast<const T*>(p); }
+
+/// Calls f with a value of the native C++ type of `type` as the template argument.
+template <typename F> decltype(auto) dispatch(VoxelType type, F&& f) {
+    switch (type) {
+    case VoxelType::U8: return f(std::uint8_t{});
+    case VoxelType::U16: return f(std::uint16_t{});
+    case VoxelType::I16: return f(std::int16_t{});
+    case VoxelType::F32: break;
+    }
+    return f(float{});
+}
+
+template <typename T> ValueRange rangeOf(const T* v, std::size_t n) {
+    T lo = v[0], hi = v[0];
+    for (std::size_t i = 1; i < n; ++i) {
+        lo = std::min(lo, v[i]);
+        hi = std::max(hi, v[i]);
+    }
+    return {static_cast<float>(lo), static_cast<float>(hi)};
+}
+
+template <typename T>
+void leafRangesT(const T* v, std::uint32_t edge, const BrickGeometry& g, std::vector<ValueRange>& out) {
+    const std::uint32_t b = g.brickVoxels, a = g.apronVoxels, l = g.leafVoxels;
+    const std::uint32_t n = (b + l - 1) / l;
+    out.resize(std::size_t(n) * n * n);
+    // Leaf payload [i*l, min((i+1)*l, b)) in payload coordinates is [i*l + a, ...) stored;
+    // samples inside read `a` more on each side: stored [i*l, min((i+1)*l, b) + 2a).
+    auto lo = [&](std::uint32_t i) { return i * l; };
+    auto hi = [&](std::uint32_t i) { return std::min((i + 1) * l, b) + 2 * a; };
+    for (std::uint32_t lz = 0; lz < n; ++lz)
+        for (std::uint32_t ly = 0; ly < n; ++ly)
+            for (std::uint32_t lx = 0; lx < n; ++lx) {
+                T mn = std::numeric_limits<T>::max(), mx = std::numeric_limits<T>::lowest();
+                for (std::uint32_t z = lo(lz); z < hi(lz); ++z)
+                    for (std::uint32_t y = lo(ly); y < hi(ly); ++y) {
+                        const T* row = v + (std::size_t(z) * edge + y) * edge;
+                        for (std::uint32_t x = lo(lx); x < hi(lx); ++x) {
+                            mn = std::min(mn, row[x]);
+                            mx = std::max(mx, row[x]);
+                        }
+                    }
+                out[(std::size_t(lz) * n + ly) * n + lx] = {float(mn), float(mx)};
+            }
+}
+
+template <typename T> T mean8(double sum) {
+    if constexpr (std::is_floating_point_v<T>) {
+        return static_cast<T>(sum / 8.0);
+    } else {
+        auto s = static_cast<std::int64_t>(sum);
+        return static_cast<T>((s + 4) >> 3);  // floor((s + 4) / 8): round half up
+    }
+}
+
+template <typename T>
+void downsampleT(const T* a, const T* b, std::uint64_t dx, std::uint64_t dy, T* out) {
+    const std::uint64_t ox = (dx + 1) / 2, oy = (dy + 1) / 2;
+    for (std::uint64_t y = 0; y < oy; ++y) {
+        std::uint64_t y0 = 2 * y, y1 = std::min(2 * y + 1, dy - 1);
+        for (std::uint64_t x = 0; x < ox; ++x) {
+            std::uint64_t x0 = 2 * x, x1 = std::min(2 * x + 1, dx - 1);
+            double s = 0;
+            for (const T* p : {a, b})
+                s += double(p[y0 * dx + x0]) + double(p[y0 * dx + x1]) + double(p[y1 * dx + x0]) +
+                     double(p[y1 * dx + x1]);
+            out[y * ox + x] = mean8<T>(s);
+        }
+    }
+}
+
+} // namespace
+
+bool isConstant(std::span<const std::byte> data, std::size_t vb) {
+    if (data.size() <= vb) return true;
+    // data[i] == data[i + vb] for every i means the bytes repeat with the voxel's period:
+    // one memcmp at memory speed.
+    return std::memcmp(data.data(), data.data() + vb, data.size() - vb) == 0;
+}
+
+ValueRange brickRange(VoxelType type, std::span<const std::byte> brick) {
+    return dispatch(type, [&](auto t) {
+        using T = decltype(t);
+        return rangeOf(as<T>(brick.data()), brick.size() / sizeof(T));
+    });
+}
+
+std::vector<ValueRange> leafRanges(VoxelType type, std::span<const std::byte> brick,
+                                   const BrickGeometry& g) {
+    std::vector<ValueRange> out;
+    const std::uint32_t edge = g.brickVoxels + 2 * g.apronVoxels;
+    dispatch(type, [&](auto t) {
+        using T = decltype(t);
+        leafRangesT(as<T>(brick.data()), edge, g, out);
+        return 0;
+    });
+    return out;
+}
+
+std::vector<std::byte> encodeLeafTable(std::span<const ValueRange> leaves) {
+    std::vector<std::byte> out(leaves.size() * 8);
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+        std::memcpy(out.data() + 8 * i, &leaves[i].min, 4);
+        std::memcpy(out.data() + 8 * i + 4, &leaves[i].max, 4);
+    }
+    return out;
+}
+
+std::vector<ValueRange> decodeLeafTable(std::span<const std::byte> bytes) {
+    std::vector<ValueRange> out(bytes.size() / 8);
+    for (std::size_t i = 0; i < out.size(); ++i) {
+        std::memcpy(&out[i].min, bytes.data() + 8 * i, 4);
+        std::memcpy(&out[i].max, bytes.data() + 8 * i + 4, 4);
+    }
+    return out;
+}
+
+void downsampleSlices(VoxelType type, const std::byte* z0, const std::byte* z1, std::uint64_t dx,
+                      std::uint64_t dy, std::byte* out) {
+    dispatch(type, [&](auto t) {
+        using T = decltype(t);
+        downsampleT(as<T>(z0), as<T>(z1), dx, dy, reinterpret_cast<T*>(out));
+        return 0;
+    });
+}
+
+void fillConstant(VoxelType type, double value, std::span<std::byte> out) {
+    dispatch(type, [&](auto t) {
+        using T = decltype(t);
+        T v = static_cast<T>(value);
+        T* p = reinterpret_cast<T*>(out.data());
+        std::fill(p, p + out.size() / sizeof(T), v);
+        return 0;
+    });
+}
+
+std::size_t histogramBin(double v, double lo, double hi, std::size_t n) {
+    if (!(hi > lo)) return 0;
+    double f = (v - lo) / (hi - lo) * double(n);
+    if (!(f > 0)) return 0;
+    return std::min<std::size_t>(static_cast<std::size_t>(f), n - 1);
+}
+
+void accumulateHistogram(VoxelType type, std::span<const std::byte> brick, std::uint32_t edge,
+                         const std::array<std::uint32_t, 3>& o,
+                         const std::array<std::uint64_t, 3>& e, double lo, double hi,
+                         std::span<std::uint64_t> bins) {
+    dispatch(type, [&](auto t) {
+        using T = decltype(t);
+        const T* v = as<T>(brick.data());
+        for (std::uint64_t z = 0; z < e[2]; ++z)
+            for (std::uint64_t y = 0; y < e[1]; ++y) {
+                const T* row = v + ((z + o[2]) * edge + (y + o[1])) * edge + o[0];
+                for (std::uint64_t x = 0; x < e[0]; ++x)
+                    ++bins[histogramBin(double(row[x]), lo, hi, bins.size())];
+            }
+        return 0;
+    });
+}
+
+} // namespace bc::brickstore::detail

@@ -1,0 +1,45 @@
+#pragma once
+// Voxel arithmetic on one stored brick or slice, per native type: value ranges, leaf
+// summaries, constant detection, 2x2x2 downsampling. Shared by ingest and verify so that a
+// scrub recomputes summaries exactly as they were written.
+#include "brickstore/BrickStore.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace bc::brickstore::detail {
+
+/// True when all `count` voxels of `data` are bitwise equal.
+bool isConstant(std::span<const std::byte> data, std::size_t voxelBytes);
+
+/// Min/max over all voxels of a stored brick.
+ValueRange brickRange(VoxelType type, std::span<const std::byte> brick);
+
+/// Per-leaf ranges of a stored brick (FORMAT.md "Leaf table"), x fastest.
+std::vector<ValueRange> leafRanges(VoxelType type, std::span<const std::byte> brick,
+                                   const BrickGeometry& geometry);
+
+/// Leaf table bytes (min f32, max f32 per leaf).
+std::vector<std::byte> encodeLeafTable(std::span<const ValueRange> leaves);
+std::vector<ValueRange> decodeLeafTable(std::span<const std::byte> bytes);
+
+/// One slice of the next pyramid level from slices z0 and z1 (equal at an odd end) of
+/// this one: 2x2x2 means, clamped at odd x/y edges, integers rounded half up.
+void downsampleSlices(VoxelType type, const std::byte* z0, const std::byte* z1, std::uint64_t dimX,
+                      std::uint64_t dimY, std::byte* out);
+
+/// Fills `out` with `value` converted to the native type.
+void fillConstant(VoxelType type, double value, std::span<std::byte> out);
+
+/// Adds the voxels of box [origin, origin+extent) of a stored brick (edge `edge`) to the
+/// histogram of `bins.size()` bins over [lo, hi].
+void accumulateHistogram(VoxelType type, std::span<const std::byte> brick, std::uint32_t edge,
+                         const std::array<std::uint32_t, 3>& origin,
+                         const std::array<std::uint64_t, 3>& extent, double lo, double hi,
+                         std::span<std::uint64_t> bins);
+/// The histogram bin of `value` (clamped into range).
+std::size_t histogramBin(double value, double lo, double hi, std::size_t binCount);
+
+} // namespace bc::brickstore::detail

@@ -1,0 +1,86 @@
+#include "brickstore/detail/LevelBuilder.h"
+
+#include "brickstore/detail/BrickSummary.h"
+
+#include <algorithm>
+#include <cstring>
+
+namespace bc::brickstore::detail {
+
+LevelBuilder::LevelBuilder(const StoreLayout& layout, std::uint32_t level, VoxelType type,
+                           Sink sink, LevelBuilder* next)
+    : mLayout(layout), mLevel(level), mType(type), mVoxelBytes(voxelBytes(type)),
+      mDims(layout.levels().at(level).dims), mRingSlices(layout.storedEdge()),
+      mSink(std::move(sink)), mNext(next) {
+    mRing.resize(std::size_t(mRingSlices) * mDims[0] * mDims[1] * mVoxelBytes);
+    if (mNext) mDown.resize(((mDims[0] + 1) / 2) * ((mDims[1] + 1) / 2) * mVoxelBytes);
+}
+
+bool LevelBuilder::finished() const { return mReceived == mDims[2]; }
+
+const std::byte* LevelBuilder::slice(std::int64_t z) const {
+    z = std::clamp<std::int64_t>(z, 0, std::int64_t(mDims[2]) - 1);
+    std::size_t sliceBytes = mDims[0] * mDims[1] * mVoxelBytes;
+    return mRing.data() + std::size_t(z % mRingSlices) * sliceBytes;
+}
+
+void LevelBuilder::pushSlice(const std::byte* data) {
+    const std::uint64_t z = mReceived++;
+    const std::size_t sliceBytes = mDims[0] * mDims[1] * mVoxelBytes;
+    std::memcpy(mRing.data() + std::size_t(z % mRingSlices) * sliceBytes, data, sliceBytes);
+
+    // The next level's slice z/2 averages slices z-1 and z (or z twice at an odd end).
+    bool last = z + 1 == mDims[2];
+    if (mNext && (z % 2 == 1 || last)) {
+        const std::byte* first = z % 2 == 1 ? slice(std::int64_t(z) - 1) : slice(z);
+        downsampleSlices(mType, first, slice(z), mDims[0], mDims[1], mDown.data());
+        mNext->pushSlice(mDown.data());
+    }
+    // A row of bricks is ready once every slice its aprons read has arrived.
+    const std::uint32_t b = mLayout.geometry().brickVoxels, a = mLayout.geometry().apronVoxels;
+    const auto& level = mLayout.levels()[mLevel];
+    while (mNextRow < level.bricks[2] &&
+           std::min<std::uint64_t>(std::uint64_t(mNextRow + 1) * b + a, mDims[2]) <= z + 1)
+        cutRow(mNextRow++);
+}
+
+void LevelBuilder::cutRow(std::uint32_t bz) {
+    const auto& level = mLayout.levels()[mLevel];
+    for (std::uint32_t by = 0; by < level.bricks[1]; ++by)
+        for (std::uint32_t bx = 0; bx < level.bricks[0]; ++bx) {
+            BrickJob job;
+            job.index = mLayout.indexOf({mLevel, {bx, by, bz}});
+            job.voxels.resize(mLayout.storedVoxels() * mVoxelBytes);
+            cutBrick(bx, by, bz, job.voxels.data());
+            mSink(std::move(job));
+        }
+}
+
+void LevelBuilder::cutBrick(std::uint32_t bx, std::uint32_t by, std::uint32_t bz, std::byte* out) const {
+    const std::int64_t b = mLayout.geometry().brickVoxels, a = mLayout.geometry().apronVoxels;
+    const std::int64_t edge = mLayout.storedEdge();
+    const std::int64_t dx = mDims[0], dy = mDims[1];
+    const std::size_t vb = mVoxelBytes;
+    const std::int64_t x0 = bx * b - a;
+    // Columns [x0, x0 + edge) map to clamped source columns: a run that is inside the volume
+    // is one memcpy; the clamped ends repeat the border voxel.
+    const std::int64_t inBegin = std::max<std::int64_t>(x0, 0);
+    const std::int64_t inEnd = std::min<std::int64_t>(x0 + edge, dx);
+    for (std::int64_t k = 0; k < edge; ++k) {
+        const std::byte* src = slice(std::int64_t(bz) * b - a + k);
+        for (std::int64_t j = 0; j < edge; ++j) {
+            std::int64_t y = std::clamp<std::int64_t>(std::int64_t(by) * b - a + j, 0, dy - 1);
+            const std::byte* row = src + std::size_t(y * dx) * vb;
+            std::byte* dst = out + std::size_t((k * edge + j) * edge) * vb;
+            std::int64_t i = 0;
+            for (; x0 + i < inBegin; ++i) std::memcpy(dst + i * vb, row, vb);
+            if (inEnd > inBegin) {
+                std::memcpy(dst + i * vb, row + inBegin * vb, std::size_t(inEnd - inBegin) * vb);
+                i += inEnd - inBegin;
+            }
+            for (; i < edge; ++i) std::memcpy(dst + i * vb, row + (dx - 1) * vb, vb);
+        }
+    }
+}
+
+} // namespace bc::brickstore::detail

@@ -1,0 +1,35 @@
+#pragma once
+// The `brickcast` command line: each sub-command registers its options on a CLI11 app and
+// runs when selected. Only this layer turns command-line text into module configs.
+#include <array>
+#include <cstdint>
+#include <string>
+
+namespace CLI {
+class App;
+}
+
+namespace bc::brickstore {
+class BrickStore;
+}
+
+namespace bc::cli {
+
+/// Registers `ingest`, `info`, `verify`, `extract` and `demo` on `app`.
+void addIngestCommand(CLI::App& app);
+void addInfoCommand(CLI::App& app);
+void addVerifyCommand(CLI::App& app);
+void addExtractCommand(CLI::App& app);
+void addDemoCommand(CLI::App& app);
+
+/// "256,256,113" -> {256,256,113}. @throw std::invalid_argument naming `what`.
+std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what);
+std::array<double, 3> parseTripleDouble(const std::string& text, const std::string& what);
+
+/// The text `brickcast info` prints.
+void printStoreInfo(const brickstore::BrickStore& store);
+
+/// Human-readable byte count ("1.50 GiB").
+std::string formatBytes(double bytes);
+
+} // namespace bc::cli

@@ -1,0 +1,64 @@
+#include "server/cli/Commands.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+#include <stdexcept>
+#include <vector>
+
+namespace bc::cli {
+namespace {
+
+std::vector<std::string> splitComma(const std::string& text) {
+    std::vector<std::string> parts;
+    std::stringstream ss(text);
+    for (std::string p; std::getline(ss, p, ',');) parts.push_back(p);
+    return parts;
+}
+
+} // namespace
+
+std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what) {
+    auto parts = splitComma(text);
+    if (parts.size() != 3) throw std::invalid_argument(what + ": expected X,Y,Z, got '" + text + "'");
+    std::array<std::uint64_t, 3> out{};
+    for (int i = 0; i < 3; ++i) {
+        const auto& p = parts[i];
+        auto [end, ec] = std::from_chars(p.data(), p.data() + p.size(), out[i]);
+        if (ec != std::errc() || end != p.data() + p.size())
+            throw std::invalid_argument(what + ": '" + p + "' is not a non-negative integer");
+    }
+    return out;
+}
+
+std::array<double, 3> parseTripleDouble(const std::string& text, const std::string& what) {
+    auto parts = splitComma(text);
+    if (parts.size() != 3) throw std::invalid_argument(what + ": expected A,B,C, got '" + text + "'");
+    std::array<double, 3> out{};
+    for (int i = 0; i < 3; ++i) {
+        std::size_t used = 0;
+        try {
+            out[i] = std::stod(parts[i], &used);
+        } catch (const std::exception&) {
+            used = 0;
+        }
+        if (used == 0 || used != parts[i].size())
+            throw std::invalid_argument(what + ": '" + parts[i] + "' is not a number");
+    }
+    return out;
+}
+
+std::string formatBytes(double bytes) {
+    const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+    int u = 0;
+    while (std::fabs(bytes) >= 1024.0 && u < 4) {
+        bytes /= 1024.0;
+        ++u;
+    }
+    char buf[64];
+    std::snprintf(buf, sizeof buf, u == 0 ? "%.0f %s" : "%.2f %s", bytes, units[u]);
+    return buf;
+}
+
+} // namespace bc::cli
