@@ -20,6 +20,8 @@ struct BrickCacheConfig {
     std::uint64_t budgetBytes = 1ull << 30;  ///< bytes of decompressed bricks kept resident
 };
 
+/// A request that waits for another thread's load of the same brick counts as a hit; a
+/// failed load counts as a miss.
 struct BrickCacheStats {
     std::uint64_t hits = 0;
     std::uint64_t misses = 0;
@@ -61,7 +63,7 @@ private:
 
 class BrickCache {
 public:
-    /// Fills `out` (already sized by the loader) with brick `key`; may throw (StoreCorrupt).
+    /// Sizes `out` and fills it with brick `key`; may throw (StoreCorrupt).
     using Loader = std::function<void(const BrickKey& key, std::vector<std::byte>& out)>;
 
     BrickCache(Loader loader, BrickCacheConfig config);

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Installs what is missing (Debian 12 packages only) and builds brickcast into ./build.
+# Used by both README commands and by CI; safe to run again (it only installs what lacks).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+packages=(
+  build-essential cmake pkg-config ninja-build
+  libopenvdb-dev libboost-iostreams-dev libtbb-dev   # OpenVDB reader (+ what FindOpenVDB needs)
+  libzstd-dev zstd libxxhash-dev zlib1g-dev           # brick compression, checksums, gzip input
+  libnifti2-dev libgdcm-dev                           # NIfTI-1 and DICOM readers
+  nlohmann-json3-dev libcli11-dev                     # info --json, command line
+  libgtest-dev                                        # tests
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "setup: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+cmake --build build -j"$(nproc)"
