@@ -45,11 +45,13 @@ std::unique_ptr<VolumeSource> openDicomSeries(const std::string& folder);
 std::unique_ptr<VolumeSource> openVdb(const std::string& path, const std::string& gridName);
 
 enum class SynthKind { Phantom, Vessels, Checker };
+/// Edge of one checkerboard cell of the Checker generator.
+constexpr std::uint64_t kCheckerPeriodVoxels = 8;
 std::optional<SynthKind> parseSynthKind(const std::string& name);
 
 /// Deterministic generators, any size, produced slice by slice:
 ///  Phantom: dense CT-like head (u16); Vessels: sparse branching tree, 1-5% occupied (u8);
-///  Checker: 3D checkerboard of `checkerPeriod`-voxel cells (u8), for aliasing tests.
+///  Checker: 3D checkerboard of kCheckerPeriodVoxels-voxel cells (u8), for aliasing tests.
 std::unique_ptr<VolumeSource> makeSynthetic(SynthKind kind, const std::array<std::uint64_t, 3>& dims,
                                             std::uint64_t seed);
 

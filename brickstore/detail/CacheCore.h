@@ -1,0 +1,66 @@
+#pragma once
+// The shared state behind BrickCache and its pins: one map of entries, one LRU of the
+// unpinned resident ones, one mutex over both. Loads run outside the mutex.
+#include "brickstore/BrickCache.h"
+
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+namespace bc::brickstore::detail {
+
+/// Mixes level and position so that neighbouring bricks spread over the buckets.
+struct BrickKeyHash {
+    std::size_t operator()(const BrickKey& key) const noexcept;
+};
+
+enum class EntryState { Loading, Ready };
+
+/// One brick known to the cache. Lives in CacheCore::mEntries (node-based, so its address
+/// is stable) from the start of its load until it is evicted or its load fails.
+struct CacheEntry {
+    BrickKey key;
+    std::vector<std::byte> data; ///< written once, under the mutex, before the first pin
+    std::uint32_t pinCount = 0;
+    EntryState state = EntryState::Loading;
+    bool inLru = false;            ///< ready and unpinned
+    CacheEntry* lruPrev = nullptr; ///< intrusive, so that unpinning never allocates
+    CacheEntry* lruNext = nullptr;
+};
+
+class CacheCore {
+  public:
+    CacheCore(BrickCache::Loader loader, BrickCacheConfig config);
+
+    /// A ready entry for `key` with one more pin, loading it on a miss.
+    /// @throw what the loader throws.
+    CacheEntry& pin(const BrickKey& key);
+    /// A ready entry with one more pin, or nullptr when `key` is not resident.
+    CacheEntry* tryPin(const BrickKey& key);
+    /// Drops one pin; an entry left unpinned becomes the most recently used.
+    void unpin(CacheEntry& entry);
+    void setBudgetBytes(std::uint64_t budgetBytes);
+    BrickCacheStats stats() const;
+
+  private:
+    CacheEntry& load(std::unique_lock<std::mutex>& lock, const BrickKey& key);
+    void addPin(CacheEntry& entry);
+    void lruPushBack(CacheEntry& entry);
+    void lruRemove(CacheEntry& entry);
+    /// Evicts unpinned entries, least recently used first, until resident <= budget.
+    void evictToBudget();
+
+    BrickCache::Loader mLoader;
+    std::uint64_t mBudgetBytes;
+    mutable std::mutex mMutex;
+    std::condition_variable mLoadDone; ///< a load finished or failed (any key)
+    std::unordered_map<BrickKey, CacheEntry, BrickKeyHash> mEntries;
+    CacheEntry* mLruHead = nullptr; ///< least recently used unpinned entry
+    CacheEntry* mLruTail = nullptr; ///< most recently used
+    BrickCacheStats mStats;
+};
+
+} // namespace bc::brickstore::detail
