@@ -18,6 +18,10 @@ struct VolumeInfo {
     std::array<double, 3> spacingMm{1, 1, 1};     ///< voxel size along x, y, z
     std::array<double, 3> originMm{0, 0, 0};      ///< position of voxel (0,0,0)'s centre
     double background = 0.0;                      ///< value of regions with no data (VDB)
+    /// Physical value = stored value * valueScale + valueOffset (NIfTI scl_slope/scl_inter
+    /// kept beside native voxels rather than applied, so a u8 scan stays u8).
+    double valueScale = 1.0;
+    double valueOffset = 0.0;
     std::string description;                      ///< e.g. "NIfTI-1 CT_AVM.nii.gz, u8"
 
     std::uint64_t voxelCount() const { return dims[0] * dims[1] * dims[2]; }

@@ -70,6 +70,8 @@ std::vector<std::byte> encodeHeader(const StoreHeader& h) {
     for (auto v : {h.indexOffset, h.indexBytes, h.indexChecksum, h.fileBytes, h.brickCount,
                    h.storedBricks, h.storedBytes})
         w.u64(v);
+    w.f64(h.volume.valueScale);
+    w.f64(h.volume.valueOffset);
     w.zeros(kHeaderBytes - 8 - w.data().size());
     w.u64(checksum(w.data().data(), w.data().size()));
     return std::move(w.data());
@@ -111,6 +113,11 @@ StoreHeader decodeHeader(std::span<const std::byte> bytes, const std::string& st
     for (auto* v : {&h.indexOffset, &h.indexBytes, &h.indexChecksum, &h.fileBytes, &h.brickCount,
                     &h.storedBricks, &h.storedBytes})
         *v = r.u64();
+    h.volume.valueScale = r.f64();
+    h.volume.valueOffset = r.f64();
+    if (!std::isfinite(h.volume.valueScale) || h.volume.valueScale == 0.0 ||
+        !std::isfinite(h.volume.valueOffset))
+        throw StoreCorrupt(store + ": header: value scale/offset must be finite, scale non-zero");
     if (h.histogramBins > kMaxHistogramBins)
         throw StoreCorrupt(store + ": header: histogram of " + std::to_string(h.histogramBins) +
                            " bins exceeds the limit");

@@ -40,6 +40,8 @@ nlohmann::json toJson(const brickstore::BrickStore& store) {
     j["spacing_mm"] = info.volume.spacingMm;
     j["origin_mm"] = info.volume.originMm;
     j["background"] = info.volume.background;
+    j["value_scale"] = info.volume.valueScale;
+    j["value_offset"] = info.volume.valueOffset;
     j["value_min"] = info.valueMin;
     j["value_max"] = info.valueMax;
     j["brick_voxels"] = g.brickVoxels;
@@ -73,7 +75,10 @@ void printStoreInfo(const brickstore::BrickStore& store) {
                 (unsigned long long)v.dims[0], (unsigned long long)v.dims[1], (unsigned long long)v.dims[2],
                 std::string(brickstore::voxelTypeName(v.type)).c_str(), v.spacingMm[0], v.spacingMm[1],
                 v.spacingMm[2]);
-    std::printf("values      %g .. %g (background %g)\n", info.valueMin, info.valueMax, v.background);
+    std::printf("values      %g .. %g (background %g)", info.valueMin, info.valueMax, v.background);
+    if (v.valueScale != 1.0 || v.valueOffset != 0.0)
+        std::printf(", physical = stored x %g + %g", v.valueScale, v.valueOffset);
+    std::printf("\n");
     std::printf("bricks      %u^3 payload + %u apron = %u^3 stored (%.1f%% apron overhead), leaves %u^3\n",
                 g.brickVoxels, g.apronVoxels, edge, 100.0 * overhead, g.leafVoxels);
     double raw = double(v.voxelCount()) * double(brickstore::voxelBytes(v.type));

@@ -74,6 +74,9 @@ TEST_P(RealDataRoundTrip, ExtractAfterIngestGivesBackTheSourceVoxels) {
     auto extracted = openStoreLevel(*store, 0);
     ASSERT_EQ(original->info().sliceBytes(), extracted->info().sliceBytes());
     EXPECT_EQ(original->info().spacingMm, extracted->info().spacingMm);
+    EXPECT_EQ(original->info().valueScale, extracted->info().valueScale);
+    EXPECT_EQ(original->info().valueOffset, extracted->info().valueOffset);
+    EXPECT_EQ(original->info().description, extracted->info().description);
     const std::uint64_t sb = original->info().sliceBytes(), slab = 7;
     std::vector<std::byte> a(slab * sb), b(slab * sb);
     for (std::uint64_t z = 0; z < in.dims[2]; z += slab) {

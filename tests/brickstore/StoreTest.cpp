@@ -129,9 +129,15 @@ INSTANTIATE_TEST_SUITE_P(
                       RoundTripCase{VoxelType::I16, {33, 20, 50}, {8, 2, 3}},
                       RoundTripCase{VoxelType::F32, {25, 31, 29}, {16, 2, 8}},
                       RoundTripCase{VoxelType::U8, {5, 3, 2}, {8, 2, 8}},
-                      RoundTripCase{VoxelType::U8, {1, 1, 1}, {4, 0, 1}}));
+                      RoundTripCase{VoxelType::U8, {1, 1, 1}, {4, 0, 1}}),
+    [](const auto& info) {
+        const auto& c = info.param;
+        return std::string(voxelTypeName(c.type)) + "_" + std::to_string(c.dims[0]) + "x" +
+               std::to_string(c.dims[1]) + "x" + std::to_string(c.dims[2]) + "_brick" +
+               std::to_string(c.geometry.brickVoxels) + "_apron" + std::to_string(c.geometry.apronVoxels);
+    });
 
-TEST(StoreTest, AprongsHoldNeighbourVoxelsAndClampedCopiesAtTheBorder) {
+TEST(StoreTest, ApronsHoldNeighbourVoxelsAndClampedCopiesAtTheBorder) {
     std::array<std::uint64_t, 3> d{37, 29, 23};
     auto v = randomVolume<std::uint16_t>(d, 7, 100, 4000);
     BrickGeometry g{8, 2, 4};

@@ -1,0 +1,505 @@
+// A folder holding one DICOM series as a slice stream. Every file's header (all tags before
+// the pixel data) is read first, to select the image slices, check that they form one
+// complete, consistent series and sort them along the slice normal; then each readSlices step
+// decodes one file's pixels with gdcm::ImageReader (any transfer syntax gdcm decodes), so only
+// a slice is ever in memory. Rescale slope/intercept keep the stored type when they are the
+// identity, give i16 when integer rescaling maps every storable value into i16 (CT in HU), and
+// f32 otherwise.
+#include "brickstore/Error.h"
+#include "brickstore/Readers.h"
+
+#include <gdcmImage.h>
+#include <gdcmImageReader.h>
+#include <gdcmReader.h>
+#include <gdcmStringFilter.h>
+#include <gdcmTag.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <optional>
+#include <set>
+#include <stdexcept>
+#include <vector>
+
+namespace bc::brickstore {
+namespace {
+
+using Vec3 = std::array<double, 3>;
+
+const gdcm::Tag kSeriesInstanceUid(0x0020, 0x000e);
+const gdcm::Tag kImagePosition(0x0020, 0x0032);
+const gdcm::Tag kImageOrientation(0x0020, 0x0037);
+const gdcm::Tag kModality(0x0008, 0x0060);
+const gdcm::Tag kSliceThickness(0x0018, 0x0050);
+const gdcm::Tag kSamplesPerPixel(0x0028, 0x0002);
+const gdcm::Tag kNumberOfFrames(0x0028, 0x0008);
+const gdcm::Tag kRows(0x0028, 0x0010);
+const gdcm::Tag kColumns(0x0028, 0x0011);
+const gdcm::Tag kPixelSpacing(0x0028, 0x0030);
+const gdcm::Tag kBitsAllocated(0x0028, 0x0100);
+const gdcm::Tag kBitsStored(0x0028, 0x0101);
+const gdcm::Tag kHighBit(0x0028, 0x0102);
+const gdcm::Tag kPixelRepresentation(0x0028, 0x0103);
+const gdcm::Tag kRescaleIntercept(0x0028, 0x1052);
+const gdcm::Tag kRescaleSlope(0x0028, 0x1053);
+const gdcm::Tag kPixelData(0x7fe0, 0x0010);
+
+/// Where the integer pixel values sit in their container (8, 16 or 32 bits allocated).
+struct PixelLayout {
+    unsigned bitsAllocated = 16;
+    unsigned bitsStored = 16;
+    unsigned highBit = 15;
+    bool isSigned = false;
+
+    /// Bits above Bits Stored (overlays, garbage) are dropped only in the usual low-aligned layout.
+    bool masked() const { return bitsStored < bitsAllocated && highBit + 1 == bitsStored; }
+    unsigned valueBits() const { return masked() ? bitsStored : bitsAllocated; }
+    double minValue() const { return isSigned ? -std::ldexp(1.0, int(valueBits()) - 1) : 0.0; }
+    double maxValue() const {
+        return isSigned ? std::ldexp(1.0, int(valueBits()) - 1) - 1.0
+                        : std::ldexp(1.0, int(valueBits())) - 1.0;
+    }
+    bool operator==(const PixelLayout&) const = default;
+};
+
+/// What one file's header says about its slice.
+struct SliceHeader {
+    std::string path;
+    std::string seriesUid;
+    std::string modality;
+    Vec3 position{};
+    std::array<double, 6> orientation{};
+    std::array<double, 2> pixelSpacing{}; ///< row spacing (y), column spacing (x)
+    double sliceThickness = 0.0;
+    std::uint64_t rows = 0;
+    std::uint64_t columns = 0;
+    PixelLayout layout;
+    double slope = 1.0;
+    double intercept = 0.0;
+    double along = 0.0; ///< position projected on the slice normal
+};
+
+std::string fileName(const std::string& path) {
+    return std::filesystem::path(path).filename().string();
+}
+
+std::string numberText(double v) {
+    char text[32];
+    std::snprintf(text, sizeof(text), "%g", v);
+    return text;
+}
+
+std::string trim(const std::string& s) {
+    const auto first = s.find_first_not_of(" \t\r\n");
+    if (first == std::string::npos) return {};
+    return s.substr(first, s.find_last_not_of(" \t\r\n") - first + 1);
+}
+
+/// Reads a tag's value(s) as text through the data dictionary (binary US values included).
+class TagText {
+  public:
+    TagText(const std::string& path, const gdcm::File& file)
+        : mPath(path), mDataSet(file.GetDataSet()) {
+        mFilter.SetFile(file);
+    }
+
+    std::string text(const gdcm::Tag& tag) const {
+        if (!mDataSet.FindDataElement(tag)) return {};
+        return trim(mFilter.ToString(tag));
+    }
+
+    /// `count` backslash-separated numbers; nullopt when the tag is absent or empty.
+    std::optional<std::vector<double>> numbers(const gdcm::Tag& tag, const char* name,
+                                               std::size_t count) const {
+        const std::string value = text(tag);
+        if (value.empty()) return std::nullopt;
+        std::vector<double> out;
+        std::size_t start = 0;
+        while (start <= value.size()) {
+            const std::size_t end = std::min(value.find('\\', start), value.size());
+            const std::string token = trim(value.substr(start, end - start));
+            char* stop = nullptr;
+            const double v = std::strtod(token.c_str(), &stop);
+            if (token.empty() || *stop != '\0' || !std::isfinite(v))
+                throw FormatError(mPath, name,
+                                  "\"" + value + "\" is not a list of " + std::to_string(count) +
+                                      " numbers");
+            out.push_back(v);
+            start = end + 1;
+        }
+        if (out.size() != count)
+            throw FormatError(mPath, name,
+                              "\"" + value + "\" holds " + std::to_string(out.size()) +
+                                  " numbers, not " + std::to_string(count));
+        return out;
+    }
+
+    std::vector<double> required(const gdcm::Tag& tag, const char* name, std::size_t count) const {
+        auto values = numbers(tag, name, count);
+        if (!values) throw FormatError(mPath, name, "missing; every slice of a series needs it");
+        return *values;
+    }
+
+    double single(const gdcm::Tag& tag, const char* name, double fallback) const {
+        auto values = numbers(tag, name, 1);
+        return values ? (*values)[0] : fallback;
+    }
+
+    /// A whole number in 0..65535 (the range of a US value); `fallback` when absent.
+    unsigned count(const gdcm::Tag& tag, const char* name,
+                   std::optional<unsigned> fallback = {}) const {
+        auto values = numbers(tag, name, 1);
+        if (!values && fallback) return *fallback;
+        if (!values) throw FormatError(mPath, name, "missing; every slice of a series needs it");
+        const double v = (*values)[0];
+        if (v < 0.0 || v > 65535.0 || v != std::floor(v))
+            throw FormatError(mPath, name,
+                              numberText(v) + " is not a whole number between 0 and 65535");
+        return unsigned(v);
+    }
+
+  private:
+    std::string mPath;
+    const gdcm::DataSet& mDataSet;
+    gdcm::StringFilter mFilter;
+};
+
+PixelLayout layoutOf(const std::string& path, const TagText& tags) {
+    PixelLayout layout;
+    layout.bitsAllocated = tags.count(kBitsAllocated, "BitsAllocated");
+    if (layout.bitsAllocated != 8 && layout.bitsAllocated != 16 && layout.bitsAllocated != 32)
+        throw FormatError(path, "BitsAllocated",
+                          std::to_string(layout.bitsAllocated) +
+                              " bits per pixel; only 8, 16 and 32 are supported");
+    layout.bitsStored = tags.count(kBitsStored, "BitsStored", layout.bitsAllocated);
+    layout.highBit = tags.count(kHighBit, "HighBit", layout.bitsStored - 1);
+    if (layout.bitsStored == 0 || layout.bitsStored > layout.bitsAllocated)
+        throw FormatError(path, "BitsStored",
+                          std::to_string(layout.bitsStored) +
+                              " is not between 1 and Bits Allocated (" +
+                              std::to_string(layout.bitsAllocated) + ")");
+    const unsigned representation = tags.count(kPixelRepresentation, "PixelRepresentation");
+    if (representation > 1)
+        throw FormatError(path, "PixelRepresentation",
+                          std::to_string(representation) + " is neither 0 nor 1");
+    layout.isSigned = representation == 1;
+    return layout;
+}
+
+void readGeometry(const TagText& tags, SliceHeader& slice) {
+    const auto position = tags.required(kImagePosition, "ImagePositionPatient", 3);
+    const auto orientation = tags.required(kImageOrientation, "ImageOrientationPatient", 6);
+    const auto spacing = tags.required(kPixelSpacing, "PixelSpacing", 2);
+    std::copy(position.begin(), position.end(), slice.position.begin());
+    std::copy(orientation.begin(), orientation.end(), slice.orientation.begin());
+    std::copy(spacing.begin(), spacing.end(), slice.pixelSpacing.begin());
+    slice.sliceThickness = tags.single(kSliceThickness, "SliceThickness", 0.0);
+}
+
+void readPixelDescription(const TagText& tags, SliceHeader& slice) {
+    if (tags.count(kSamplesPerPixel, "SamplesPerPixel", 1) != 1)
+        throw FormatError(slice.path, "SamplesPerPixel",
+                          "colour images are not supported; a series must be greyscale");
+    if (tags.single(kNumberOfFrames, "NumberOfFrames", 1.0) != 1.0)
+        throw FormatError(slice.path, "NumberOfFrames",
+                          "multi-frame files are not supported; one slice per file");
+    slice.columns = tags.count(kColumns, "Columns");
+    slice.layout = layoutOf(slice.path, tags);
+    slice.slope = tags.single(kRescaleSlope, "RescaleSlope", 1.0);
+    slice.intercept = tags.single(kRescaleIntercept, "RescaleIntercept", 0.0);
+    if (slice.slope == 0.0 || std::abs(slice.slope) > 1e20)
+        throw FormatError(slice.path, "RescaleSlope",
+                          numberText(slice.slope) + " is zero or absurdly large");
+    if (std::abs(slice.intercept) > 1e20)
+        throw FormatError(slice.path, "RescaleIntercept",
+                          numberText(slice.intercept) + " is absurdly large");
+}
+
+/// The header of one file; nullopt for a file that is not DICOM (LICENSE, notes) or a DICOM
+/// object that is not an image (DICOMDIR, structured report: no Rows).
+std::optional<SliceHeader> readSliceHeader(const std::string& path) {
+    gdcm::Reader reader;
+    reader.SetFileName(path.c_str());
+    if (!reader.ReadUpToTag(kPixelData, std::set<gdcm::Tag>{kPixelData})) return std::nullopt;
+    const TagText tags(path, reader.GetFile());
+    if (tags.text(kRows).empty()) return std::nullopt;
+    SliceHeader slice;
+    slice.path = path;
+    slice.rows = tags.count(kRows, "Rows");
+    slice.seriesUid = tags.text(kSeriesInstanceUid);
+    if (slice.seriesUid.empty()) throw FormatError(path, "SeriesInstanceUID", "missing");
+    slice.modality = tags.text(kModality);
+    readGeometry(tags, slice);
+    readPixelDescription(tags, slice);
+    return slice;
+}
+
+std::vector<SliceHeader> readFolder(const std::string& folder) {
+    std::error_code ec;
+    if (!std::filesystem::is_directory(folder, ec))
+        throw FormatError(folder, "folder", "not a folder");
+    std::vector<std::string> files;
+    for (const auto& entry : std::filesystem::directory_iterator(folder, ec))
+        if (entry.is_regular_file(ec)) files.push_back(entry.path().string());
+    if (ec) throw FormatError(folder, "folder", "cannot list it: " + ec.message());
+    std::sort(files.begin(), files.end());
+    std::vector<SliceHeader> slices;
+    for (const std::string& file : files)
+        if (auto slice = readSliceHeader(file)) slices.push_back(std::move(*slice));
+    if (slices.empty())
+        throw FormatError(folder, "slices",
+                          "no DICOM image slices among its " + std::to_string(files.size()) +
+                              " files");
+    return slices;
+}
+
+Vec3 sliceNormal(const SliceHeader& slice) {
+    const auto& o = slice.orientation;
+    const Vec3 n{o[1] * o[5] - o[2] * o[4], o[2] * o[3] - o[0] * o[5], o[0] * o[4] - o[1] * o[3]};
+    const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(length > 0.5))
+        throw FormatError(slice.path, "ImageOrientationPatient",
+                          "row and column directions are not orthogonal unit vectors");
+    return {n[0] / length, n[1] / length, n[2] / length};
+}
+
+template <typename T, std::size_t N>
+bool nearlyEqual(const std::array<T, N>& a, const std::array<T, N>& b, double tolerance) {
+    for (std::size_t i = 0; i < N; ++i)
+        if (std::abs(a[i] - b[i]) > tolerance) return false;
+    return true;
+}
+
+/// One series, one grid, one pixel layout: anything else is not one volume.
+void checkConsistent(const std::string& folder, const std::vector<SliceHeader>& slices) {
+    const SliceHeader& first = slices.front();
+    const std::string ref = " (" + fileName(first.path) + " has ";
+    for (const SliceHeader& s : slices) {
+        const std::string name = fileName(s.path);
+        if (s.seriesUid != first.seriesUid)
+            throw FormatError(folder, "SeriesInstanceUID",
+                              "mixed series: " + name + " is in series " + s.seriesUid + ", " +
+                                  fileName(first.path) + " in " + first.seriesUid +
+                                  "; put each series in its own folder");
+        if (s.rows != first.rows || s.columns != first.columns)
+            throw FormatError(folder, "Rows/Columns",
+                              name + " is " + std::to_string(s.columns) + "x" +
+                                  std::to_string(s.rows) + ref + std::to_string(first.columns) +
+                                  "x" + std::to_string(first.rows) + ")");
+        if (!nearlyEqual(s.orientation, first.orientation, 1e-4))
+            throw FormatError(folder, "ImageOrientationPatient",
+                              name + " is oriented differently" + ref + "another)");
+        if (!nearlyEqual(s.pixelSpacing, first.pixelSpacing, 1e-4))
+            throw FormatError(folder, "PixelSpacing",
+                              name + " has a different pixel spacing" + ref + "another)");
+        if (!(s.layout == first.layout))
+            throw FormatError(folder, "BitsAllocated/BitsStored/PixelRepresentation",
+                              name + " stores its pixels differently" + ref + "another layout)");
+    }
+}
+
+/// Sorts along the normal and returns the slice spacing. Equal positions (a duplicate) or a
+/// gap above 1.5x the median (a missing slice) throw.
+double sortAndSpace(const std::string& folder, std::vector<SliceHeader>& slices) {
+    const Vec3 n = sliceNormal(slices.front());
+    for (SliceHeader& s : slices)
+        s.along = s.position[0] * n[0] + s.position[1] * n[1] + s.position[2] * n[2];
+    std::stable_sort(slices.begin(), slices.end(),
+                     [](const auto& a, const auto& b) { return a.along < b.along; });
+    if (slices.size() == 1)
+        return slices.front().sliceThickness > 0.0 ? slices.front().sliceThickness : 1.0;
+    std::vector<double> gaps;
+    for (std::size_t i = 1; i < slices.size(); ++i)
+        gaps.push_back(slices[i].along - slices[i - 1].along);
+    std::vector<double> sorted = gaps;
+    std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2),
+                     sorted.end());
+    const double median = sorted[sorted.size() / 2];
+    for (std::size_t i = 0; i < gaps.size(); ++i) {
+        const SliceHeader &a = slices[i], &b = slices[i + 1];
+        const std::string where = fileName(a.path) + " (at " + numberText(a.along) + " mm) and " +
+                                  fileName(b.path) + " (at " + numberText(b.along) + " mm)";
+        if (gaps[i] <= std::max(1e-4, 0.01 * median))
+            throw FormatError(folder, "ImagePositionPatient", "duplicate slice position: " + where);
+        if (gaps[i] > 1.5 * median)
+            throw FormatError(folder, "ImagePositionPatient",
+                              "missing slice between " + where + ": gap " + numberText(gaps[i]) +
+                                  " mm, median " + numberText(median) + " mm");
+    }
+    return (slices.back().along - slices.front().along) / double(slices.size() - 1);
+}
+
+bool isSmallInteger(double v) {
+    return v == std::floor(v) && std::abs(v) < 2147483648.0;
+}
+
+/// The stored type: native when every slice's rescale is the identity, i16 when integer
+/// rescaling maps every storable value of every slice into i16, f32 otherwise.
+VoxelType storedTypeOf(const std::vector<SliceHeader>& slices) {
+    const PixelLayout& layout = slices.front().layout;
+    const bool identity = std::all_of(slices.begin(), slices.end(), [](const auto& s) {
+        return s.slope == 1.0 && s.intercept == 0.0;
+    });
+    if (identity) {
+        if (layout.bitsAllocated == 8 && !layout.isSigned) return VoxelType::U8;
+        if (layout.bitsAllocated == 16) return layout.isSigned ? VoxelType::I16 : VoxelType::U16;
+        return VoxelType::F32;
+    }
+    for (const SliceHeader& s : slices) {
+        if (!isSmallInteger(s.slope) || !isSmallInteger(s.intercept)) return VoxelType::F32;
+        const double a = layout.minValue() * s.slope + s.intercept,
+                     b = layout.maxValue() * s.slope + s.intercept;
+        if (std::min(a, b) < -32768.0 || std::max(a, b) > 32767.0) return VoxelType::F32;
+    }
+    return VoxelType::I16;
+}
+
+template <typename T> void storeVoxel(std::byte* out, std::size_t i, T v) {
+    std::memcpy(out + i * sizeof(T), &v, sizeof(T));
+}
+
+/// The stored value of one container word (U: its unsigned type), with bits above Bits
+/// Stored dropped and the sign extended when the layout asks for it.
+template <typename U> std::int64_t storedValue(U word, const PixelLayout& layout) {
+    std::uint64_t bits = word;
+    if (layout.masked()) bits &= (std::uint64_t(1) << layout.bitsStored) - 1;
+    const unsigned width = layout.valueBits();
+    if (layout.isSigned && ((bits >> (width - 1)) & 1u))
+        return std::int64_t(bits) - (std::int64_t(1) << width);
+    return std::int64_t(bits);
+}
+
+/// Decodes one slice of U-sized words into the stored type. Integer outputs are exact: the
+/// type was chosen so that every storable value lands in range.
+template <typename U>
+void decodeSlice(const std::byte* in, std::size_t count, const SliceHeader& s, VoxelType type,
+                 std::byte* out) {
+    const auto slope = std::int64_t(s.slope), intercept = std::int64_t(s.intercept);
+    for (std::size_t i = 0; i < count; ++i) {
+        U word;
+        std::memcpy(&word, in + i * sizeof(U), sizeof(U));
+        const std::int64_t v = storedValue(word, s.layout);
+        switch (type) {
+        case VoxelType::U8:
+            storeVoxel(out, i, std::uint8_t(v));
+            break;
+        case VoxelType::U16:
+            storeVoxel(out, i, std::uint16_t(v));
+            break;
+        case VoxelType::I16:
+            storeVoxel(out, i, std::int16_t(v * slope + intercept));
+            break;
+        case VoxelType::F32:
+            storeVoxel(out, i, float(double(v) * s.slope + s.intercept));
+            break;
+        }
+    }
+}
+
+class DicomSeries final : public VolumeSource {
+  public:
+    DicomSeries(const std::string& folder, std::vector<SliceHeader> slices)
+        : mFolder(folder), mSlices(std::move(slices)) {
+        checkConsistent(folder, mSlices);
+        const double sliceSpacing = sortAndSpace(folder, mSlices);
+        const SliceHeader& first = mSlices.front();
+        mInfo.dims = {first.columns, first.rows, mSlices.size()};
+        mInfo.type = storedTypeOf(mSlices);
+        mInfo.spacingMm = {first.pixelSpacing[1], first.pixelSpacing[0], sliceSpacing};
+        mInfo.originMm = first.position;
+        validateVolumeInfo(mInfo, folder);
+        mInfo.description = describe();
+    }
+
+    const VolumeInfo& info() const override { return mInfo; }
+
+    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
+        if (out.size() != count * mInfo.sliceBytes())
+            throw std::invalid_argument(
+                "DicomSeries::readSlices: buffer size does not match the slice count");
+        if (count > mInfo.dims[2] - mNextZ)
+            throw std::out_of_range("DicomSeries::readSlices: read past the last slice of " +
+                                    mFolder);
+        for (std::uint64_t i = 0; i < count; ++i) {
+            readSlice(mSlices[mNextZ], out.subspan(i * mInfo.sliceBytes(), mInfo.sliceBytes()));
+            ++mNextZ;
+        }
+    }
+
+  private:
+    std::string describe() const {
+        const SliceHeader& first = mSlices.front();
+        const PixelLayout& layout = first.layout;
+        std::string text =
+            "DICOM series " + fileName(mFolder) + " (" + std::to_string(mSlices.size()) +
+            " slices" + (first.modality.empty() ? "" : ", " + first.modality) + "), " +
+            (layout.isSigned ? "int" : "uint") + std::to_string(layout.bitsAllocated) + " (" +
+            std::to_string(layout.bitsStored) + " bits stored)";
+        const std::string stored(voxelTypeName(mInfo.type));
+        const bool uniform = std::all_of(mSlices.begin(), mSlices.end(), [&](const auto& s) {
+            return s.slope == first.slope && s.intercept == first.intercept;
+        });
+        if (!uniform) return text + " rescaled per slice to " + stored;
+        if (first.slope != 1.0 || first.intercept != 0.0)
+            return text + " rescaled by slope " + numberText(first.slope) + ", intercept " +
+                   numberText(first.intercept) + " to " + stored;
+        return text + (mInfo.type == VoxelType::F32 ? " converted to f32" : " as " + stored);
+    }
+
+    void readSlice(const SliceHeader& slice, std::span<std::byte> out) {
+        gdcm::ImageReader reader;
+        reader.SetFileName(slice.path.c_str());
+        if (!reader.Read())
+            throw FormatError(slice.path, "PixelData", "gdcm cannot read or decode the image");
+        const gdcm::Image& image = reader.GetImage();
+        const gdcm::PixelFormat& format = image.GetPixelFormat();
+        if (image.GetColumns() != mInfo.dims[0] || image.GetRows() != mInfo.dims[1] ||
+            format.GetBitsAllocated() != slice.layout.bitsAllocated ||
+            format.GetSamplesPerPixel() != 1)
+            throw FormatError(slice.path, "PixelData",
+                              "the decoded image does not match the header's Rows, Columns, "
+                              "Bits Allocated or Samples per Pixel");
+        const std::size_t wordBytes = slice.layout.bitsAllocated / 8,
+                          voxels = std::size_t(mInfo.dims[0] * mInfo.dims[1]);
+        if (image.GetBufferLength() != voxels * wordBytes)
+            throw FormatError(slice.path, "PixelData",
+                              "holds " + std::to_string(image.GetBufferLength()) +
+                                  " bytes, not the " + std::to_string(voxels * wordBytes) +
+                                  " that Rows x Columns x Bits Allocated need");
+        mPixels.resize(voxels * wordBytes);
+        if (!image.GetBuffer(reinterpret_cast<char*>(mPixels.data())))
+            throw FormatError(slice.path, "PixelData", "gdcm cannot decode the pixel data");
+        switch (wordBytes) {
+        case 1:
+            decodeSlice<std::uint8_t>(mPixels.data(), voxels, slice, mInfo.type, out.data());
+            break;
+        case 2:
+            decodeSlice<std::uint16_t>(mPixels.data(), voxels, slice, mInfo.type, out.data());
+            break;
+        default:
+            decodeSlice<std::uint32_t>(mPixels.data(), voxels, slice, mInfo.type, out.data());
+            break;
+        }
+    }
+
+    std::string mFolder;
+    std::vector<SliceHeader> mSlices; ///< sorted along the slice normal
+    VolumeInfo mInfo;
+    std::vector<std::byte> mPixels; ///< one decoded slice, reused
+    std::uint64_t mNextZ = 0;
+};
+
+} // namespace
+
+std::unique_ptr<VolumeSource> openDicomSeries(const std::string& folder) {
+    return std::make_unique<DicomSeries>(folder, readFolder(folder));
+}
+
+} // namespace bc::brickstore
