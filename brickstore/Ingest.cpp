@@ -101,9 +101,14 @@ void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job, std::
         rec.range = detail::brickRange(s.type, std::span(job.voxels).first(vb));
         return;
     }
-    rec.range = detail::brickRange(s.type, job.voxels);
-    auto leaves = detail::encodeLeafTable(
-        detail::leafRanges(s.type, job.voxels, s.layout.geometry()));
+    // The leaf windows together cover the whole stored brick: its range is theirs.
+    auto leafRanges = detail::leafRanges(s.type, job.voxels, s.layout.geometry());
+    rec.range = leafRanges.front();
+    for (const auto& r : leafRanges) {
+        rec.range.min = std::min(rec.range.min, r.min);
+        rec.range.max = std::max(rec.range.max, r.max);
+    }
+    auto leaves = detail::encodeLeafTable(leafRanges);
     buf.resize(ZSTD_compressBound(job.voxels.size()) + leaves.size());
     std::size_t n = zstdCheck(ZSTD_compress2(cctx, buf.data(), buf.size() - leaves.size(),
                                              job.voxels.data(), job.voxels.size()),
@@ -141,6 +146,7 @@ std::vector<std::uint64_t> buildHistogram(IngestState& s, std::uint32_t bins, do
     const std::uint32_t a = s.layout.geometry().apronVoxels, edge = s.layout.storedEdge();
     std::vector<std::vector<std::uint64_t>> partial(threads, std::vector<std::uint64_t>(bins));
     std::atomic<std::uint64_t> next{0};
+    const detail::HistogramBinner binner(s.type, lo, hi, bins);
     auto worker = [&](unsigned t) {
         std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> dctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
         std::vector<std::byte> frame, voxels(s.layout.storedVoxels() * voxelBytes(s.type));
@@ -155,7 +161,7 @@ std::vector<std::uint64_t> buildHistogram(IngestState& s, std::uint32_t bins, do
             s.file.readAt(r.offset, frame);
             zstdCheck(ZSTD_decompressDCtx(dctx.get(), voxels.data(), voxels.size(), frame.data(), frame.size()),
                       "decompress for histogram");
-            detail::accumulateHistogram(s.type, voxels, edge, {a, a, a}, extent, lo, hi, partial[t]);
+            binner.add(voxels, edge, {a, a, a}, extent, partial[t]);
         }
     };
     {

@@ -1,13 +1,15 @@
 #include "brickstore/StoreLayout.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <stdexcept>
 
 namespace bc::brickstore {
 
 std::string BrickKey::toString() const {
-    return "L" + std::to_string(level) + " (" + std::to_string(pos[0]) + "," +
-           std::to_string(pos[1]) + "," + std::to_string(pos[2]) + ")";
+    char text[64];
+    std::snprintf(text, sizeof text, "L%u (%u,%u,%u)", level, pos[0], pos[1], pos[2]);
+    return text;
 }
 
 StoreLayout::StoreLayout(const std::array<std::uint64_t, 3>& dims, const BrickGeometry& g)

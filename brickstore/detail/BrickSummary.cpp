@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 namespace bc::brickstore::detail {
 namespace {
@@ -29,29 +30,54 @@ template <typename T> ValueRange rangeOf(const T* v, std::size_t n) {
     return {static_cast<float>(lo), static_cast<float>(hi)};
 }
 
+template <typename T> struct MinMax {
+    T min, max;
+};
+
+/// Min/max of v[begin, end) (a plain loop the compiler vectorises).
+template <typename T> MinMax<T> rowRange(const T* v, std::uint32_t begin, std::uint32_t end) {
+    T mn = v[begin], mx = v[begin];
+    for (std::uint32_t i = begin + 1; i < end; ++i) {
+        mn = v[i] < mn ? v[i] : mn;
+        mx = v[i] > mx ? v[i] : mx;
+    }
+    return {mn, mx};
+}
+
+/// Leaf ranges by separable reduction: windows along x per row, then along y, then along z.
+/// Leaf i's window along an axis is stored [i*l, min((i+1)*l, b) + 2a): its payload voxels
+/// widened by the apron reach `a` on each side.
 template <typename T>
 void leafRangesT(const T* v, std::uint32_t edge, const BrickGeometry& g, std::vector<ValueRange>& out) {
     const std::uint32_t b = g.brickVoxels, a = g.apronVoxels, l = g.leafVoxels;
     const std::uint32_t n = (b + l - 1) / l;
-    out.resize(std::size_t(n) * n * n);
-    // Leaf payload [i*l, min((i+1)*l, b)) in payload coordinates is [i*l + a, ...) stored;
-    // samples inside read `a` more on each side: stored [i*l, min((i+1)*l, b) + 2a).
     auto lo = [&](std::uint32_t i) { return i * l; };
     auto hi = [&](std::uint32_t i) { return std::min((i + 1) * l, b) + 2 * a; };
-    for (std::uint32_t lz = 0; lz < n; ++lz)
+    auto merge = [](MinMax<T>& m, const MinMax<T>& o) {
+        m.min = std::min(m.min, o.min);
+        m.max = std::max(m.max, o.max);
+    };
+    // x: per (z, y) row, n windows.
+    std::vector<MinMax<T>> rows(std::size_t(edge) * edge * n);
+    for (std::size_t zy = 0; zy < std::size_t(edge) * edge; ++zy)
+        for (std::uint32_t lx = 0; lx < n; ++lx) rows[zy * n + lx] = rowRange(v + zy * edge, lo(lx), hi(lx));
+    // y: per z, n x n.
+    std::vector<MinMax<T>> planes(std::size_t(edge) * n * n);
+    for (std::uint32_t z = 0; z < edge; ++z)
         for (std::uint32_t ly = 0; ly < n; ++ly)
             for (std::uint32_t lx = 0; lx < n; ++lx) {
-                T mn = std::numeric_limits<T>::max(), mx = std::numeric_limits<T>::lowest();
-                for (std::uint32_t z = lo(lz); z < hi(lz); ++z)
-                    for (std::uint32_t y = lo(ly); y < hi(ly); ++y) {
-                        const T* row = v + (std::size_t(z) * edge + y) * edge;
-                        for (std::uint32_t x = lo(lx); x < hi(lx); ++x) {
-                            mn = std::min(mn, row[x]);
-                            mx = std::max(mx, row[x]);
-                        }
-                    }
-                out[(std::size_t(lz) * n + ly) * n + lx] = {float(mn), float(mx)};
+                MinMax<T> m = rows[(std::size_t(z) * edge + lo(ly)) * n + lx];
+                for (std::uint32_t y = lo(ly) + 1; y < hi(ly); ++y) merge(m, rows[(std::size_t(z) * edge + y) * n + lx]);
+                planes[(std::size_t(z) * n + ly) * n + lx] = m;
             }
+    // z: n x n x n.
+    out.resize(std::size_t(n) * n * n);
+    for (std::uint32_t lz = 0; lz < n; ++lz)
+        for (std::uint32_t j = 0; j < n * n; ++j) {
+            MinMax<T> m = planes[std::size_t(lo(lz)) * n * n + j];
+            for (std::uint32_t z = lo(lz) + 1; z < hi(lz); ++z) merge(m, planes[std::size_t(z) * n * n + j]);
+            out[std::size_t(lz) * n * n + j] = {float(m.min), float(m.max)};
+        }
 }
 
 template <typename T> T mean8(double sum) {
@@ -151,18 +177,39 @@ std::size_t histogramBin(double v, double lo, double hi, std::size_t n) {
     return std::min<std::size_t>(static_cast<std::size_t>(f), n - 1);
 }
 
-void accumulateHistogram(VoxelType type, std::span<const std::byte> brick, std::uint32_t edge,
-                         const std::array<std::uint32_t, 3>& o,
-                         const std::array<std::uint64_t, 3>& e, double lo, double hi,
-                         std::span<std::uint64_t> bins) {
+HistogramBinner::HistogramBinner(VoxelType type, double lo, double hi, std::size_t bins)
+    : mType(type), mLo(lo), mHi(hi), mBins(bins) {
+    // 8- and 16-bit voxels look their bin up in a table of every possible value.
     dispatch(type, [&](auto t) {
+        using T = decltype(t);
+        if constexpr (sizeof(T) <= 2 && std::is_integral_v<T>) {
+            mTable.resize(std::size_t(1) << (8 * sizeof(T)));
+            for (std::size_t i = 0; i < mTable.size(); ++i) {
+                T value;
+                auto raw = static_cast<std::make_unsigned_t<T>>(i);
+                std::memcpy(&value, &raw, sizeof(T));
+                mTable[i] = static_cast<std::uint32_t>(histogramBin(double(value), lo, hi, bins));
+            }
+        }
+        return 0;
+    });
+}
+
+void HistogramBinner::add(std::span<const std::byte> brick, std::uint32_t edge,
+                          const std::array<std::uint32_t, 3>& o, const std::array<std::uint64_t, 3>& e,
+                          std::span<std::uint64_t> counts) const {
+    dispatch(mType, [&](auto t) {
         using T = decltype(t);
         const T* v = as<T>(brick.data());
         for (std::uint64_t z = 0; z < e[2]; ++z)
             for (std::uint64_t y = 0; y < e[1]; ++y) {
                 const T* row = v + ((z + o[2]) * edge + (y + o[1])) * edge + o[0];
-                for (std::uint64_t x = 0; x < e[0]; ++x)
-                    ++bins[histogramBin(double(row[x]), lo, hi, bins.size())];
+                for (std::uint64_t x = 0; x < e[0]; ++x) {
+                    if constexpr (sizeof(T) <= 2 && std::is_integral_v<T>)
+                        ++counts[mTable[static_cast<std::make_unsigned_t<T>>(row[x])]];
+                    else
+                        ++counts[histogramBin(double(row[x]), mLo, mHi, mBins)];
+                }
             }
         return 0;
     });

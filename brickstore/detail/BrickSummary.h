@@ -33,12 +33,21 @@ void downsampleSlices(VoxelType type, const std::byte* z0, const std::byte* z1, 
 /// Fills `out` with `value` converted to the native type.
 void fillConstant(VoxelType type, double value, std::span<std::byte> out);
 
-/// Adds the voxels of box [origin, origin+extent) of a stored brick (edge `edge`) to the
-/// histogram of `bins.size()` bins over [lo, hi].
-void accumulateHistogram(VoxelType type, std::span<const std::byte> brick, std::uint32_t edge,
-                         const std::array<std::uint32_t, 3>& origin,
-                         const std::array<std::uint64_t, 3>& extent, double lo, double hi,
-                         std::span<std::uint64_t> bins);
+/// Counts voxels into `bins` equal bins over [lo, hi] (8/16-bit types through a table).
+class HistogramBinner {
+public:
+    HistogramBinner(VoxelType type, double lo, double hi, std::size_t bins);
+    /// Adds the voxels of box [origin, origin+extent) of a stored brick of edge `edge`.
+    void add(std::span<const std::byte> brick, std::uint32_t edge, const std::array<std::uint32_t, 3>& origin,
+             const std::array<std::uint64_t, 3>& extent, std::span<std::uint64_t> counts) const;
+
+private:
+    VoxelType mType;
+    double mLo, mHi;
+    std::size_t mBins;
+    std::vector<std::uint32_t> mTable;
+};
+
 /// The histogram bin of `value` (clamped into range).
 std::size_t histogramBin(double value, double lo, double hi, std::size_t binCount);
 
