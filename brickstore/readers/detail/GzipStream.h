@@ -1,6 +1,5 @@
 #pragma once
-// A gzip (or zlib) stream inflated on the fly, over any ByteStream. Defined in NrrdReader.cpp
-// (the build globs readers/*.cpp only).
+// A gzip (or zlib) stream inflated on the fly, over any ByteStream (GzipStream.cpp).
 #include "brickstore/readers/detail/RawStream.h"
 
 #include <memory>

@@ -1,8 +1,8 @@
 #pragma once
 // Forward-only byte streams under the raw and NRRD readers (a plain file, a zstd stream), and
 // the slice source that turns such a stream of raw voxels into a VolumeSource. Defined in
-// RawReader.cpp (the build globs readers/*.cpp only). A stream never holds more than one
-// bounded input buffer, so the volume never sits in memory whole.
+// RawStream.cpp. A stream never holds more than one bounded input buffer, so the volume never
+// sits in memory whole.
 #include "brickstore/Readers.h"
 
 #include <cstddef>

@@ -1,0 +1,252 @@
+// The byte streams of detail/RawStream.h: a plain file, a zstd stream, and the slice source
+// over raw voxels. Everything reads forwards in bounded chunks: a 100 GB input costs one
+// zstd input buffer and the caller's slice buffer, never the volume.
+#include "brickstore/Error.h"
+#include "brickstore/Readers.h"
+#include "brickstore/readers/detail/RawStream.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <new>
+#include <stdexcept>
+#include <vector>
+
+#include <sys/types.h>
+#include <zstd.h>
+
+namespace bc::brickstore::detail {
+
+namespace {
+
+/// Bytes read and checked at a time within one readSlices call (a multiple of every voxel size).
+constexpr std::size_t kChunkBytes = std::size_t(1) << 20;
+/// Longest zstd frame header (ZSTD_FRAMEHEADERSIZE_MAX, which zstd.h keeps static-only).
+constexpr std::size_t kZstdFrameHeaderMaxBytes = 18;
+
+/// The one place zstd error codes become exceptions.
+std::size_t zstdCheck(std::size_t code, const std::string& file) {
+    if (ZSTD_isError(code))
+        throw FormatError(file, "data", std::string("zstd: ") + ZSTD_getErrorName(code));
+    return code;
+}
+
+struct FileCloser {
+    void operator()(std::FILE* f) const { std::fclose(f); }
+};
+
+class FileStream final : public ByteStream {
+  public:
+    FileStream(const std::string& path, std::uint64_t offsetBytes)
+        : mPath(path), mFile(std::fopen(path.c_str(), "rb")) {
+        if (!mFile)
+            throw FormatError(path, "path", std::string("cannot open: ") + std::strerror(errno));
+        if (offsetBytes > std::uint64_t(std::numeric_limits<off_t>::max()) ||
+            ::fseeko(mFile.get(), off_t(offsetBytes), SEEK_SET) != 0)
+            throw FormatError(path, "path", "cannot seek to byte " + std::to_string(offsetBytes));
+    }
+
+    std::size_t read(std::span<std::byte> out) override {
+        std::size_t n = std::fread(out.data(), 1, out.size(), mFile.get());
+        if (n < out.size() && std::ferror(mFile.get()))
+            throw FormatError(mPath, "data", std::string("read error: ") + std::strerror(errno));
+        return n;
+    }
+
+    void expectEnd() override {
+        if (std::fgetc(mFile.get()) != EOF)
+            throw FormatError(mPath, "size",
+                              "file holds more bytes than declared (it grew while read?)");
+    }
+
+    const char* kind() const override { return "file"; }
+
+  private:
+    std::string mPath;
+    std::unique_ptr<std::FILE, FileCloser> mFile;
+};
+
+struct DCtxDeleter {
+    void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); }
+};
+
+class ZstdStream final : public ByteStream {
+  public:
+    ZstdStream(std::unique_ptr<ByteStream> compressed, const std::string& file)
+        : mCompressed(std::move(compressed)), mFile(file), mCtx(ZSTD_createDCtx()),
+          mInput(ZSTD_DStreamInSize()) {
+        if (!mCtx) throw std::bad_alloc();
+    }
+
+    std::size_t read(std::span<std::byte> out) override {
+        ZSTD_outBuffer dst{out.data(), out.size(), 0};
+        while (dst.pos < dst.size) {
+            if (mIn.pos == mIn.size && !mInputEnded) refill();
+            const std::size_t inBefore = mIn.pos, outBefore = dst.pos;
+            std::size_t hint = zstdCheck(ZSTD_decompressStream(mCtx.get(), &dst, &mIn), mFile);
+            const bool progressed = mIn.pos != inBefore || dst.pos != outBefore;
+            // 0: a frame is complete and flushed, so the stream may end here. A call that
+            // moves nothing says nothing (it asks for the next frame's header).
+            if (progressed || hint == 0) mBetweenFrames = hint == 0;
+            if (progressed || mIn.pos != mIn.size || !mInputEnded) continue;
+            if (!mBetweenFrames)
+                throw FormatError(mFile, "data",
+                                  "zstd stream ends inside a frame (file truncated)");
+            break;
+        }
+        mDeliveredBytes += dst.pos;
+        return dst.pos;
+    }
+
+    void expectEnd() override {
+        std::uint64_t declared = mDeliveredBytes;
+        std::byte extra{};
+        if (read({&extra, 1}) != 0)
+            throw FormatError(mFile, "size",
+                              "zstd stream holds more than the declared " +
+                                  std::to_string(declared) + " bytes");
+    }
+
+    const char* kind() const override { return "zstd stream"; }
+
+  private:
+    void refill() {
+        std::size_t n = mCompressed->read(mInput);
+        mIn = ZSTD_inBuffer{mInput.data(), n, 0};
+        mInputEnded = n == 0;
+    }
+
+    std::unique_ptr<ByteStream> mCompressed;
+    std::string mFile;
+    std::unique_ptr<ZSTD_DCtx, DCtxDeleter> mCtx;
+    std::vector<std::byte> mInput;
+    ZSTD_inBuffer mIn{nullptr, 0, 0};
+    bool mInputEnded = false;
+    bool mBetweenFrames = false; ///< false until a first frame completes
+    std::uint64_t mDeliveredBytes = 0;
+};
+
+/// Reverses the bytes of each `voxelBytes`-byte voxel in place.
+void swapVoxelBytes(std::span<std::byte> bytes, std::size_t voxelBytes) {
+    if (voxelBytes == 2) {
+        for (std::size_t i = 0; i + 2 <= bytes.size(); i += 2)
+            std::swap(bytes[i], bytes[i + 1]);
+    } else if (voxelBytes == 4) {
+        for (std::size_t i = 0; i + 4 <= bytes.size(); i += 4) {
+            std::uint32_t v;
+            std::memcpy(&v, bytes.data() + i, 4);
+            v = __builtin_bswap32(v);
+            std::memcpy(bytes.data() + i, &v, 4);
+        }
+    }
+}
+
+class RawVoxelSource final : public VolumeSource {
+  public:
+    RawVoxelSource(std::unique_ptr<ByteStream> voxels, const VolumeInfo& info, Endian endian,
+                   const std::string& file, const std::string& sizeClaim)
+        : mInfo(info), mVoxels(std::move(voxels)), mFile(file), mSizeClaim(sizeClaim),
+          mSwap(voxelBytes(info.type) > 1 &&
+                (endian == Endian::Big) != (std::endian::native == std::endian::big)),
+          mTotalBytes(info.voxelCount() * voxelBytes(info.type)) {}
+
+    const VolumeInfo& info() const override { return mInfo; }
+
+    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
+        if (count > mInfo.dims[2] - mNextZ)
+            throw std::out_of_range("RawVoxelSource::readSlices: read past the last slice of " +
+                                    mFile);
+        if (out.size() != count * mInfo.sliceBytes())
+            throw std::invalid_argument(
+                "RawVoxelSource::readSlices: buffer size does not match the slice count");
+        for (std::size_t done = 0; done < out.size();) {
+            std::size_t n = std::min(kChunkBytes, out.size() - done);
+            readChunk(out.subspan(done, n));
+            done += n;
+        }
+        mNextZ += count;
+        if (count > 0 && mNextZ == mInfo.dims[2]) mVoxels->expectEnd();
+    }
+
+  private:
+    void readChunk(std::span<std::byte> chunk) {
+        std::size_t n = mVoxels->read(chunk);
+        if (n < chunk.size())
+            throw FormatError(mFile, "size",
+                              mSizeClaim + " " + std::to_string(mTotalBytes) + " bytes, " +
+                                  mVoxels->kind() + " ends after " +
+                                  std::to_string(mDoneBytes + n));
+        if (mSwap) swapVoxelBytes(chunk, voxelBytes(mInfo.type));
+        if (mInfo.type == VoxelType::F32) checkFinite(chunk);
+        mDoneBytes += n;
+    }
+
+    /// NaN or infinity would poison every min/max and average the store keeps.
+    void checkFinite(std::span<const std::byte> chunk) const {
+        for (std::size_t i = 0; i + 4 <= chunk.size(); i += 4) {
+            float v;
+            std::memcpy(&v, chunk.data() + i, 4);
+            if (std::isfinite(v)) continue;
+            std::uint64_t voxel = (mDoneBytes + i) / 4;
+            std::uint64_t x = voxel % mInfo.dims[0], y = voxel / mInfo.dims[0] % mInfo.dims[1];
+            std::uint64_t z = voxel / (mInfo.dims[0] * mInfo.dims[1]);
+            throw FormatError(mFile, "data",
+                              "voxel (" + std::to_string(x) + "," + std::to_string(y) + "," +
+                                  std::to_string(z) + ") is " +
+                                  (std::isnan(v) ? "NaN" : "infinite") +
+                                  "; float volumes must be finite");
+        }
+    }
+
+    VolumeInfo mInfo;
+    std::unique_ptr<ByteStream> mVoxels;
+    std::string mFile;
+    std::string mSizeClaim;
+    bool mSwap;
+    std::uint64_t mTotalBytes;
+    std::uint64_t mDoneBytes = 0;
+    std::uint64_t mNextZ = 0;
+};
+
+} // namespace
+
+std::unique_ptr<ByteStream> openFileStream(const std::string& path, std::uint64_t offsetBytes) {
+    return std::make_unique<FileStream>(path, offsetBytes);
+}
+
+std::unique_ptr<ByteStream> openZstdStream(std::unique_ptr<ByteStream> compressed,
+                                           const std::string& file) {
+    return std::make_unique<ZstdStream>(std::move(compressed), file);
+}
+
+std::optional<std::uint64_t> zstdFirstFrameBytes(const std::string& path) {
+    std::array<std::byte, kZstdFrameHeaderMaxBytes> head{};
+    std::size_t n = FileStream(path, 0).read(head);
+    unsigned long long size = ZSTD_getFrameContentSize(head.data(), n);
+    if (size == ZSTD_CONTENTSIZE_ERROR)
+        throw FormatError(path, "data", "not a zstd stream (no valid frame header at its start)");
+    if (size == ZSTD_CONTENTSIZE_UNKNOWN) return std::nullopt;
+    return size;
+}
+
+std::uint64_t fileBytes(const std::string& path) {
+    std::error_code ec;
+    std::uint64_t size = std::filesystem::file_size(path, ec);
+    if (ec) throw FormatError(path, "path", "cannot read size: " + ec.message());
+    return size;
+}
+
+std::unique_ptr<VolumeSource> makeRawVoxelSource(std::unique_ptr<ByteStream> voxels,
+                                                 const VolumeInfo& info, Endian endian,
+                                                 const std::string& file,
+                                                 const std::string& sizeClaim) {
+    return std::make_unique<RawVoxelSource>(std::move(voxels), info, endian, file, sizeClaim);
+}
+
+} // namespace bc::brickstore::detail
