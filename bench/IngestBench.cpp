@@ -42,6 +42,10 @@ std::vector<Dataset> datasets(const std::string& dir) {
     add("headsq quarter (raw u16)", at("vtk_headsq_quarter_64x64x93_uint16.raw"), {3.2, 3.2, 1.5});
     for (auto& x : d)
         if (x.spec.input.find(".raw") == std::string::npos) x.spec.spacingMm.reset();
+    // The bricking literature's way to a gigabyte test volume: a real scan tiled N x M x K.
+    SourceSpec mosaic = d.front().spec;
+    mosaic.mosaic = {4, 4, 4};
+    d.push_back({"cthead mosaic 4x4x4 (u16)", mosaic});
     return d;
 }
 

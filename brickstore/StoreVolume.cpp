@@ -30,19 +30,19 @@ public:
 
     const VolumeInfo& info() const override { return mInfo; }
 
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
+private:
+    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         const std::uint64_t sliceBytes = mInfo.sliceBytes();
         const std::uint32_t b = mStore.layout().geometry().brickVoxels;
-        if (out.size() != count * sliceBytes || mNext + count > mInfo.dims[2])
-            throw std::invalid_argument("readSlices: past the end of the level or wrong buffer size");
-        for (std::uint64_t i = 0; i < count; ++i, ++mNext) {
-            std::uint32_t row = static_cast<std::uint32_t>(mNext / b);
+        for (std::uint64_t i = 0; i < count; ++i) {
+            const std::uint64_t z = nextSlice() + i;
+            std::uint32_t row = static_cast<std::uint32_t>(z / b);
             if (row != mSlabRow) loadRow(row);
-            std::memcpy(out.data() + i * sliceBytes, mSlab.data() + (mNext % b) * sliceBytes, sliceBytes);
+            std::memcpy(out.data() + i * sliceBytes, mSlab.data() + (z % b) * sliceBytes,
+                        sliceBytes);
         }
     }
 
-private:
     /// Decompresses brick row `bz` and copies its payloads into the slab.
     void loadRow(std::uint32_t bz) {
         const auto& layout = mStore.layout();
@@ -92,7 +92,6 @@ private:
     VolumeInfo mInfo;
     std::vector<std::byte> mSlab;
     std::uint32_t mSlabRow = ~0u;
-    std::uint64_t mNext = 0;
 };
 
 } // namespace

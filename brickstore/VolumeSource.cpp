@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 namespace bc::brickstore {
 
@@ -44,6 +45,21 @@ void validateVolumeInfo(const VolumeInfo& info, const std::string& file) {
                               std::string("spacing along ") + kAxis[a] + " is " +
                                   std::to_string(s) + "; it must be finite and positive");
     }
+}
+
+void VolumeSource::readSlices(std::uint64_t count, std::span<std::byte> out) {
+    const VolumeInfo& volume = info();
+    if (out.size() != count * volume.sliceBytes())
+        throw std::invalid_argument("readSlices: a buffer of " + std::to_string(out.size()) +
+                                    " bytes for " + std::to_string(count) + " slices of " +
+                                    std::to_string(volume.sliceBytes()) + " bytes of " +
+                                    volume.description);
+    if (count > volume.dims[2] - mNextSlice)
+        throw std::out_of_range("readSlices: " + std::to_string(count) + " slices from slice " +
+                                std::to_string(mNextSlice) + " read past the last slice of " +
+                                volume.description);
+    readNextSlices(count, out);
+    mNextSlice += count;
 }
 
 } // namespace bc::brickstore

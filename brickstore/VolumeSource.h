@@ -37,19 +37,33 @@ constexpr std::uint64_t kMaxVolumeBytes = 1ull << 50;
 /// spacing (finite, positive). @throw FormatError naming `file` and the field at fault.
 void validateVolumeInfo(const VolumeInfo& info, const std::string& file);
 
-/// dims[0]*dims[1]*dims[2]*bytes, or nullopt-like 0 on 64-bit overflow (checked helper).
+/// Sets `out` to dims[0]*dims[1]*dims[2]*bytesPerVoxel; false (out untouched) on 64-bit overflow.
 bool checkedVolumeBytes(const std::array<std::uint64_t, 3>& dims, std::size_t bytesPerVoxel,
                         std::uint64_t& out);
 
+/// Non-virtual interface: readSlices checks the arguments and keeps the slice cursor, so a
+/// reader implements only readNextSlices and may rely on its arguments being in range.
 class VolumeSource {
 public:
     virtual ~VolumeSource() = default;
     /// Dims, type, spacing; valid from construction on.
     virtual const VolumeInfo& info() const = 0;
     /// Reads the next `count` z-slices into `out` (x fastest, native type, host byte order,
-    /// out.size() == count * info().sliceBytes()).
+    /// out.size() == count * info().sliceBytes()) and advances nextSlice() by `count`.
+    /// @throw std::invalid_argument when out.size() != count * info().sliceBytes().
+    /// @throw std::out_of_range when fewer than `count` slices remain.
     /// @throw FormatError when the input ends early or holds values it must not (NaN).
-    virtual void readSlices(std::uint64_t count, std::span<std::byte> out) = 0;
+    void readSlices(std::uint64_t count, std::span<std::byte> out);
+    /// Index of the slice the next readSlices call starts at (0 to info().dims[2]).
+    std::uint64_t nextSlice() const { return mNextSlice; }
+
+protected:
+    /// Reads slices nextSlice() .. nextSlice() + count - 1 into `out`, whose size readSlices
+    /// has checked; nextSlice() advances only after this returns.
+    virtual void readNextSlices(std::uint64_t count, std::span<std::byte> out) = 0;
+
+private:
+    std::uint64_t mNextSlice = 0;
 };
 
 } // namespace bc::brickstore

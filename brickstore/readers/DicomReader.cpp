@@ -25,7 +25,6 @@
 #include <limits>
 #include <optional>
 #include <set>
-#include <stdexcept>
 #include <vector>
 
 namespace bc::brickstore {
@@ -420,20 +419,13 @@ class DicomSeries final : public VolumeSource {
 
     const VolumeInfo& info() const override { return mInfo; }
 
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        if (out.size() != count * mInfo.sliceBytes())
-            throw std::invalid_argument(
-                "DicomSeries::readSlices: buffer size does not match the slice count");
-        if (count > mInfo.dims[2] - mNextZ)
-            throw std::out_of_range("DicomSeries::readSlices: read past the last slice of " +
-                                    mFolder);
-        for (std::uint64_t i = 0; i < count; ++i) {
-            readSlice(mSlices[mNextZ], out.subspan(i * mInfo.sliceBytes(), mInfo.sliceBytes()));
-            ++mNextZ;
-        }
+  private:
+    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
+        for (std::uint64_t i = 0; i < count; ++i)
+            readSlice(mSlices[nextSlice() + i],
+                      out.subspan(i * mInfo.sliceBytes(), mInfo.sliceBytes()));
     }
 
-  private:
     std::string describe() const {
         const SliceHeader& first = mSlices.front();
         const PixelLayout& layout = first.layout;
@@ -493,7 +485,6 @@ class DicomSeries final : public VolumeSource {
     std::vector<SliceHeader> mSlices; ///< sorted along the slice normal
     VolumeInfo mInfo;
     std::vector<std::byte> mPixels; ///< one decoded slice, reused
-    std::uint64_t mNextZ = 0;
 };
 
 } // namespace

@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <cstring>
-#include <stdexcept>
 #include <vector>
 
 namespace bc::brickstore {
@@ -46,13 +45,8 @@ public:
 
     const VolumeInfo& info() const override { return mInfo; }
 
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        if (out.size() != count * mInfo.sliceBytes())
-            throw std::invalid_argument(
-                "MosaicVolume::readSlices: buffer size does not match the slice count");
-        if (count > mInfo.dims[2] - mNextZ)
-            throw std::out_of_range("MosaicVolume::readSlices: read past the last slice of " +
-                                    mInfo.description);
+private:
+    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         const std::uint64_t sourceSliceBytes = mSourceInfo.sliceBytes();
         const std::uint64_t batchLimit =
             std::max<std::uint64_t>(1, kScratchBytes / sourceSliceBytes);
@@ -66,12 +60,10 @@ public:
             for (std::uint64_t i = 0; i < batch; ++i, dst += mInfo.sliceBytes())
                 tileSlice(mScratch.data() + i * sourceSliceBytes, dst);
             mSourceZ += batch;
-            mNextZ += batch;
             count -= batch;
         }
     }
 
-private:
     std::unique_ptr<VolumeSource> openSource() {
         std::unique_ptr<VolumeSource> source = mOpen();
         if (!source)
@@ -113,7 +105,6 @@ private:
     VolumeInfo mInfo;
     std::vector<std::byte> mScratch; ///< at most kScratchBytes (or one source slice)
     std::uint64_t mSourceZ = 0;      ///< next slice of mSource
-    std::uint64_t mNextZ = 0;        ///< next output slice
 };
 
 } // namespace

@@ -17,7 +17,6 @@
 #include <fstream>
 #include <limits>
 #include <memory>
-#include <stdexcept>
 #include <vector>
 
 // After the standard headers: nifti1.h redefines DT_UNKNOWN, which <dirent.h> also declares.
@@ -341,13 +340,8 @@ class NiftiVolume final : public VolumeSource {
 
     const VolumeInfo& info() const override { return mInfo; }
 
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        if (out.size() != count * mInfo.sliceBytes())
-            throw std::invalid_argument(
-                "NiftiVolume::readSlices: buffer size does not match the slice count");
-        if (count > mInfo.dims[2] - mNextZ)
-            throw std::out_of_range("NiftiVolume::readSlices: read past the last slice of " +
-                                    mPath);
+  private:
+    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         const std::size_t voxels = std::size_t(count * mInfo.dims[0] * mInfo.dims[1]);
         if (isNative()) {
             readExact(out.data(), out.size());
@@ -356,10 +350,8 @@ class NiftiVolume final : public VolumeSource {
             readConverted(voxels, out.data());
         }
         if (mInfo.type == VoxelType::F32) checkFinite(out.data(), voxels);
-        mNextZ += count;
     }
 
-  private:
     /// A natively stored input whose scaling is not an exact integer map into i16 keeps its
     /// type: the scaling is recorded in VolumeInfo (valueScale/valueOffset) instead of
     /// applied, so CT_AVM's u8 voxels stay u8 rather than growing into f32.
@@ -413,8 +405,8 @@ class NiftiVolume final : public VolumeSource {
             if (got != want)
                 throw FormatError(
                     mPath, "data",
-                    "the voxels end early, at or after slice " + std::to_string(mNextZ) + " of " +
-                        std::to_string(mInfo.dims[2]) + " (truncated or corrupt file)");
+                    "the voxels end early, at or after slice " + std::to_string(nextSlice()) +
+                        " of " + std::to_string(mInfo.dims[2]) + " (truncated or corrupt file)");
             dst += got;
             bytes -= got;
         }
@@ -437,7 +429,7 @@ class NiftiVolume final : public VolumeSource {
             if (std::isfinite(load<float>(data, i))) continue;
             const std::uint64_t sliceVoxels = mInfo.dims[0] * mInfo.dims[1];
             const std::uint64_t x = i % mInfo.dims[0], y = (i % sliceVoxels) / mInfo.dims[0];
-            const std::uint64_t z = mNextZ + i / sliceVoxels;
+            const std::uint64_t z = nextSlice() + i / sliceVoxels;
             throw FormatError(mPath, "data",
                               "voxel (" + std::to_string(x) + "," + std::to_string(y) + "," +
                                   std::to_string(z) + ") is " + numberText(load<float>(data, i)) +
@@ -452,7 +444,6 @@ class NiftiVolume final : public VolumeSource {
     VolumeInfo mInfo;
     ZnzPtr mFile;
     std::vector<std::byte> mStaging; ///< one chunk of file-typed voxels awaiting conversion
-    std::uint64_t mNextZ = 0;
 };
 
 } // namespace

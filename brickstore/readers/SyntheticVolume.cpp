@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstring>
 #include <numbers>
-#include <stdexcept>
 #include <vector>
 
 namespace bc::brickstore {
@@ -56,22 +55,10 @@ Vec3 normalize(const Vec3& a) {
     return scale(a, 1.0 / std::sqrt(dot(a, a)));
 }
 
-/// Common slice bookkeeping; subclasses paint one slice at a time.
+/// Common info and slice loop; subclasses paint one slice at a time.
 class SyntheticVolume : public VolumeSource {
 public:
     const VolumeInfo& info() const override { return mInfo; }
-
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        if (out.size() != count * mInfo.sliceBytes())
-            throw std::invalid_argument(
-                "SyntheticVolume::readSlices: buffer size does not match the slice count");
-        if (count > mInfo.dims[2] - mNextZ)
-            throw std::out_of_range("SyntheticVolume::readSlices: read past the last slice of " +
-                                    mInfo.description);
-        for (std::uint64_t i = 0; i < count; ++i)
-            paintSlice(mNextZ + i, out.data() + i * mInfo.sliceBytes());
-        mNextZ += count;
-    }
 
 protected:
     SyntheticVolume(const std::string& kind, VoxelType type,
@@ -89,7 +76,10 @@ protected:
     VolumeInfo mInfo;
 
 private:
-    std::uint64_t mNextZ = 0;
+    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
+        for (std::uint64_t i = 0; i < count; ++i)
+            paintSlice(nextSlice() + i, out.data() + i * mInfo.sliceBytes());
+    }
 };
 
 // ---------------------------------------------------------------------------------------------

@@ -13,7 +13,6 @@
 #include <cstring>
 #include <filesystem>
 #include <mutex>
-#include <stdexcept>
 #include <vector>
 
 namespace bc::brickstore {
@@ -91,15 +90,11 @@ public:
 
     const VolumeInfo& info() const override { return mInfo; }
 
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        if (out.size() != count * mInfo.sliceBytes())
-            throw std::invalid_argument(
-                "VdbVolume::readSlices: buffer size does not match the slice count");
-        if (count > mInfo.dims[2] - mNextZ)
-            throw std::out_of_range("VdbVolume::readSlices: read past the last slice of " + mPath);
+private:
+    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         if (count == 0) return;
         fillBackground(out);
-        const int z0 = mBox.min().z() + static_cast<int>(mNextZ);
+        const int z0 = mBox.min().z() + static_cast<int>(nextSlice());
         const int z1 = z0 + static_cast<int>(count); // exclusive
         auto first =
             std::lower_bound(mLeaves.begin(), mLeaves.end(), z0 - int(LeafT::DIM) + 1,
@@ -108,10 +103,8 @@ public:
             paintLeaf(**it, z0, z1, out.data());
         for (const ActiveTile& tile : mTiles)
             paintTile(tile, z0, z1, out.data());
-        mNextZ += count;
     }
 
-private:
     struct ActiveTile {
         openvdb::CoordBBox box;
         float value;
@@ -238,7 +231,6 @@ private:
     float mBackground = 0.0f;
     std::vector<const LeafT*> mLeaves; ///< sorted by origin z, for slab look-ups
     std::vector<ActiveTile> mTiles;
-    std::uint64_t mNextZ = 0;
 };
 
 } // namespace

@@ -2,6 +2,7 @@
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "tests/TestSupport.h"
+#include "tests/brickstore/VolumeTestSupport.h"
 
 #include <gtest/gtest.h>
 
@@ -11,36 +12,7 @@ namespace bc::brickstore {
 namespace {
 
 using Dims = std::array<std::uint64_t, 3>;
-
-/// Serves a volume from a byte vector, forwards only, like a file reader would.
-class MemoryVolume final : public VolumeSource {
-public:
-    MemoryVolume(VolumeInfo info, std::shared_ptr<const std::vector<std::byte>> bytes)
-        : mInfo(std::move(info)), mBytes(std::move(bytes)) {}
-    const VolumeInfo& info() const override { return mInfo; }
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        ASSERT_EQ(out.size(), count * mInfo.sliceBytes());
-        ASSERT_LE(mNextZ + count, mInfo.dims[2]);
-        std::memcpy(out.data(), mBytes->data() + mNextZ * mInfo.sliceBytes(), out.size());
-        mNextZ += count;
-    }
-
-private:
-    VolumeInfo mInfo;
-    std::shared_ptr<const std::vector<std::byte>> mBytes;
-    std::uint64_t mNextZ = 0;
-};
-
-std::vector<std::byte> readAll(VolumeSource& source, std::uint64_t chunk) {
-    const VolumeInfo& info = source.info();
-    std::vector<std::byte> bytes(info.voxelCount() * voxelBytes(info.type));
-    for (std::uint64_t z = 0; z < info.dims[2]; z += chunk) {
-        const std::uint64_t n = std::min(chunk, info.dims[2] - z);
-        source.readSlices(n,
-                          std::span(bytes).subspan(z * info.sliceBytes(), n * info.sliceBytes()));
-    }
-    return bytes;
-}
+using test::readAllSlices;
 
 /// Every output voxel (x,y,z) equals source voxel (x%dx, y%dy, z%dz).
 void expectTiled(const std::vector<std::byte>& tiled, const std::vector<std::byte>& source,
@@ -60,7 +32,7 @@ void expectTiled(const std::vector<std::byte>& tiled, const std::vector<std::byt
 
 TEST(MosaicVolumeTest, TilesAGeneratedVolumeAndOpensOneSourcePerZRepetition) {
     const Dims dims{13, 11, 7}, tiles{2, 3, 2};
-    const auto source = readAll(*makeSynthetic(SynthKind::Vessels, dims, 5), 7);
+    const auto source = readAllSlices(*makeSynthetic(SynthKind::Vessels, dims, 5), 7);
     int opens = 0;
     auto mosaic = makeMosaic(
         [&] {
@@ -73,7 +45,7 @@ TEST(MosaicVolumeTest, TilesAGeneratedVolumeAndOpensOneSourcePerZRepetition) {
     EXPECT_NE(mosaic->info().description.find("mosaic 2x3x2 of synthetic vessels"),
               std::string::npos)
         << mosaic->info().description;
-    const auto tiled = readAll(*mosaic, 3); // chunks that straddle the z seam
+    const auto tiled = readAllSlices(*mosaic, 3); // chunks that straddle the z seam
     expectTiled(tiled, source, dims, tiles, 1);
     EXPECT_EQ(opens, 2);
 }
@@ -82,27 +54,29 @@ TEST(MosaicVolumeTest, TilesARealScanServedFromMemory) {
     const std::string name = "vtk_headsq_quarter_64x64x93_uint16.raw";
     if (!test::haveData(name)) GTEST_SKIP() << "no " << name;
     const auto raw = test::readFile(test::dataPath(name));
-    auto bytes = std::make_shared<std::vector<std::byte>>(raw.size());
-    std::memcpy(bytes->data(), raw.data(), raw.size());
+    std::vector<std::byte> bytes(raw.size());
+    std::memcpy(bytes.data(), raw.data(), raw.size());
     VolumeInfo info;
     info.dims = {64, 64, 93};
     info.type = VoxelType::U16;
     info.spacingMm = {3.2, 3.2, 1.5};
     info.description = "headsq quarter";
-    ASSERT_EQ(bytes->size(), info.voxelCount() * 2);
+    ASSERT_EQ(bytes.size(), info.voxelCount() * 2);
 
     const Dims tiles{2, 3, 2};
-    auto mosaic = makeMosaic([&] { return std::make_unique<MemoryVolume>(info, bytes); }, tiles);
+    auto mosaic =
+        makeMosaic([&] { return std::make_unique<test::VectorSource>(info, bytes); }, tiles);
     EXPECT_EQ(mosaic->info().dims, (Dims{128, 192, 186}));
     EXPECT_EQ(mosaic->info().type, VoxelType::U16);
     EXPECT_EQ(mosaic->info().spacingMm, info.spacingMm);
-    expectTiled(readAll(*mosaic, 10), *bytes, info.dims, tiles, 2);
+    expectTiled(readAllSlices(*mosaic, 10), bytes, info.dims, tiles, 2);
 }
 
 TEST(MosaicVolumeTest, OneByOneByOneIsTheSourceItself) {
     const Dims dims{9, 10, 11};
     auto mosaic = makeMosaic([&] { return makeSynthetic(SynthKind::Phantom, dims, 2); }, {1, 1, 1});
-    EXPECT_EQ(readAll(*mosaic, 4), readAll(*makeSynthetic(SynthKind::Phantom, dims, 2), 11));
+    EXPECT_EQ(readAllSlices(*mosaic, 4),
+              readAllSlices(*makeSynthetic(SynthKind::Phantom, dims, 2), 11));
 }
 
 TEST(MosaicVolumeTest, RejectsZeroTilesAndOverflowingDims) {

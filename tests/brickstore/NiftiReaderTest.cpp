@@ -3,6 +3,7 @@
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "tests/TestSupport.h"
+#include "tests/brickstore/VolumeTestSupport.h"
 
 #include <algorithm>
 #include <cmath>
@@ -21,16 +22,7 @@ using bc::test::TempDir;
 
 /// Reads the whole volume through the reader in uneven steps (1, 7, 32, ... slices).
 std::vector<std::byte> readAllSlices(VolumeSource& source) {
-    const VolumeInfo& info = source.info();
-    std::vector<std::byte> all(info.voxelCount() * voxelBytes(info.type));
-    const std::uint64_t steps[] = {1, 7, 32};
-    std::uint64_t z = 0;
-    for (int i = 0; z < info.dims[2]; ++i) {
-        const std::uint64_t n = std::min(steps[i % 3], info.dims[2] - z);
-        source.readSlices(n, std::span(all).subspan(z * info.sliceBytes(), n * info.sliceBytes()));
-        z += n;
-    }
-    return all;
+    return test::readAllSlices(source, {1, 7, 32});
 }
 
 /// A valid single-file header: `dims` voxels of `datatype`, 1 mm spacing, voxels at byte 352.

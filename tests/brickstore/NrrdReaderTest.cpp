@@ -4,10 +4,10 @@
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "tests/TestSupport.h"
+#include "tests/brickstore/RawTestSupport.h"
 
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -23,40 +23,14 @@
 namespace bc::brickstore {
 namespace {
 
-using Bytes = std::vector<std::uint8_t>;
+using test::Bytes;
+using test::expectFormatError;
+using test::patternVoxels;
+using test::readAllBytes;
+using test::swapped;
 
 constexpr std::array<std::uint64_t, 3> kDims{6, 5, 4};
 constexpr std::uint64_t kVoxels = kDims[0] * kDims[1] * kDims[2];
-
-/// Host-order bytes of a volume whose voxels differ in both bytes of multi-byte types.
-Bytes patternVoxels(VoxelType type, std::uint64_t count) {
-    Bytes out(count * voxelBytes(type));
-    for (std::uint64_t i = 0; i < count; ++i) {
-        std::uint8_t* p = out.data() + i * voxelBytes(type);
-        if (type == VoxelType::U8) {
-            p[0] = static_cast<std::uint8_t>(i * 37 + 11);
-        } else if (type == VoxelType::U16) {
-            auto v = static_cast<std::uint16_t>(i * 1237 + 5);
-            std::memcpy(p, &v, 2);
-        } else if (type == VoxelType::I16) {
-            auto v = static_cast<std::int16_t>(static_cast<std::int64_t>(i * 997) - 20000);
-            std::memcpy(p, &v, 2);
-        } else {
-            float v = static_cast<float>(i) * 0.25f - 3.5f;
-            std::memcpy(p, &v, 4);
-        }
-    }
-    return out;
-}
-
-/// The same voxels with each one's bytes reversed (big-endian on this little-endian host).
-Bytes swapped(const Bytes& host, VoxelType type) {
-    Bytes out = host;
-    const std::size_t n = voxelBytes(type);
-    for (std::size_t i = 0; i + n <= out.size(); i += n)
-        std::reverse(out.begin() + i, out.begin() + i + n);
-    return out;
-}
 
 /// One gzip member (deflate with the gzip wrapper, windowBits 15 + 16), as teem writes.
 Bytes gzip(const Bytes& data) {
@@ -87,40 +61,9 @@ void writeAttached(const std::string& path, const std::string& head, const Bytes
     test::writeFile(path, file.data(), file.size());
 }
 
-/// Reads the whole volume, `counts` slices at a time (cycling through the list).
-Bytes readAll(VolumeSource& source, const std::vector<std::uint64_t>& counts = {1}) {
-    const VolumeInfo& info = source.info();
-    Bytes out(info.voxelCount() * voxelBytes(info.type));
-    std::uint64_t z = 0;
-    for (std::size_t k = 0; z < info.dims[2]; ++k) {
-        std::uint64_t n = std::min(counts[k % counts.size()], info.dims[2] - z);
-        auto* at = reinterpret_cast<std::byte*>(out.data() + z * info.sliceBytes());
-        source.readSlices(n, {at, n * info.sliceBytes()});
-        z += n;
-    }
-    return out;
-}
-
 Bytes readNrrd(const std::string& path, const std::vector<std::uint64_t>& counts = {1}) {
     auto source = openNrrd(path);
-    return readAll(*source, counts);
-}
-
-/// Runs `f`, which must throw FormatError whose what() names the file (by its name) and `field`.
-template <class F>
-std::string expectFormatError(F&& f, const std::string& path, const std::string& field) {
-    try {
-        f();
-        ADD_FAILURE() << "no FormatError for " << path << " (field " << field << ")";
-    } catch (const FormatError& e) {
-        std::string what = e.what();
-        std::string name = std::filesystem::path(path).filename().string();
-        EXPECT_NE(what.find(name), std::string::npos) << what;
-        EXPECT_NE(what.find(field), std::string::npos) << what;
-        EXPECT_EQ(e.field(), field) << what;
-        return what;
-    }
-    return {};
+    return readAllBytes(*source, counts);
 }
 
 struct TypeCase {
@@ -148,7 +91,7 @@ TEST_P(NrrdTypeTest, ReadsAttachedRawExactly) {
     auto source = openNrrd(mDir.file("vol.nrrd"));
     EXPECT_EQ(source->info().dims, kDims);
     EXPECT_EQ(source->info().type, GetParam().type);
-    EXPECT_EQ(readAll(*source), host());
+    EXPECT_EQ(readAllBytes(*source), host());
 }
 
 TEST_P(NrrdTypeTest, ReadsAttachedGzipExactly) {
@@ -334,7 +277,8 @@ TEST(NrrdReaderTest, GzipDataInflatingPastTheDeclaredSizeThrows) {
     writeAttached(dir.file("more.nrrd"), header("uchar", "encoding: gzip\n"),
                   gzip(patternVoxels(VoxelType::U8, kVoxels + 1)));
     auto source = openNrrd(dir.file("more.nrrd"));
-    std::string what = expectFormatError([&] { readAll(*source); }, dir.file("more.nrrd"), "data");
+    std::string what =
+        expectFormatError([&] { readAllBytes(*source); }, dir.file("more.nrrd"), "data");
     EXPECT_NE(what.find("gzip data inflates past the declared 120 bytes"), std::string::npos)
         << what;
 }
@@ -458,7 +402,8 @@ TEST(NrrdReaderTest, NanVoxelThrowsNamingItsPosition) {
     writeAttached(dir.file("nan.nrrd"), header("float", "encoding: gzip\nendian: big\n"),
                   gzip(swapped(host, VoxelType::F32)));
     auto source = openNrrd(dir.file("nan.nrrd"));
-    std::string what = expectFormatError([&] { readAll(*source); }, dir.file("nan.nrrd"), "data");
+    std::string what =
+        expectFormatError([&] { readAllBytes(*source); }, dir.file("nan.nrrd"), "data");
     EXPECT_NE(what.find("(4,3,2)"), std::string::npos) << what;
 }
 

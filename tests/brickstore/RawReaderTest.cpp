@@ -3,6 +3,7 @@
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "tests/TestSupport.h"
+#include "tests/brickstore/RawTestSupport.h"
 
 #include <gtest/gtest.h>
 
@@ -20,39 +21,13 @@
 namespace bc::brickstore {
 namespace {
 
-using Bytes = std::vector<std::uint8_t>;
+using test::Bytes;
+using test::expectFormatError;
+using test::patternVoxels;
+using test::readAllBytes;
+using test::swapped;
 
 constexpr std::array<std::uint64_t, 3> kDims{5, 4, 6};
-
-/// Host-order bytes of a volume whose voxels differ in both bytes of multi-byte types.
-Bytes patternVoxels(VoxelType type, std::uint64_t count) {
-    Bytes out(count * voxelBytes(type));
-    for (std::uint64_t i = 0; i < count; ++i) {
-        std::uint8_t* p = out.data() + i * voxelBytes(type);
-        if (type == VoxelType::U8) {
-            p[0] = static_cast<std::uint8_t>(i * 37 + 11);
-        } else if (type == VoxelType::U16) {
-            auto v = static_cast<std::uint16_t>(i * 1237 + 5);
-            std::memcpy(p, &v, 2);
-        } else if (type == VoxelType::I16) {
-            auto v = static_cast<std::int16_t>(static_cast<std::int64_t>(i * 997) - 20000);
-            std::memcpy(p, &v, 2);
-        } else {
-            float v = static_cast<float>(i) * 0.25f - 3.5f;
-            std::memcpy(p, &v, 4);
-        }
-    }
-    return out;
-}
-
-/// The same voxels with each one's bytes reversed (big-endian on this little-endian host).
-Bytes swapped(const Bytes& host, VoxelType type) {
-    Bytes out = host;
-    const std::size_t n = voxelBytes(type);
-    for (std::size_t i = 0; i + n <= out.size(); i += n)
-        std::reverse(out.begin() + i, out.begin() + i + n);
-    return out;
-}
 
 Bytes zstdCompress(const Bytes& data) {
     Bytes out(ZSTD_compressBound(data.size()));
@@ -85,39 +60,10 @@ RawLayout layoutOf(VoxelType type, Endian endian, std::array<std::uint64_t, 3> d
     return layout;
 }
 
-/// Reads the whole volume, `counts` slices at a time (cycling through the list).
-Bytes readAll(VolumeSource& source, const std::vector<std::uint64_t>& counts = {1}) {
-    const VolumeInfo& info = source.info();
-    Bytes out(info.voxelCount() * voxelBytes(info.type));
-    std::uint64_t z = 0;
-    for (std::size_t k = 0; z < info.dims[2]; ++k) {
-        std::uint64_t n = std::min(counts[k % counts.size()], info.dims[2] - z);
-        auto* at = reinterpret_cast<std::byte*>(out.data() + z * info.sliceBytes());
-        source.readSlices(n, {at, n * info.sliceBytes()});
-        z += n;
-    }
-    return out;
-}
-
 Bytes readRaw(const std::string& path, const RawLayout& layout,
               const std::vector<std::uint64_t>& counts = {1}) {
     auto source = openRaw(path, layout);
-    return readAll(*source, counts);
-}
-
-/// Runs `f`, which must throw FormatError naming the file (by its name) and `field`.
-template <class F>
-void expectFormatError(F&& f, const std::string& path, const std::string& field) {
-    try {
-        f();
-        ADD_FAILURE() << "no FormatError for " << path << " (field " << field << ")";
-    } catch (const FormatError& e) {
-        std::string what = e.what();
-        std::string name = std::filesystem::path(path).filename().string();
-        EXPECT_NE(what.find(name), std::string::npos) << what;
-        EXPECT_NE(what.find(field), std::string::npos) << what;
-        EXPECT_EQ(e.field(), field) << what;
-    }
+    return readAllBytes(*source, counts);
 }
 
 class RawTypeTest : public ::testing::TestWithParam<std::tuple<VoxelType, Endian>> {};
@@ -132,7 +78,7 @@ TEST_P(RawTypeTest, ReadsVoxelsExactlyInHostByteOrder) {
     EXPECT_EQ(source->info().dims, kDims);
     EXPECT_EQ(source->info().type, type);
     EXPECT_EQ(source->info().spacingMm, (std::array<double, 3>{0.5, 0.75, 2.0}));
-    EXPECT_EQ(readAll(*source), host);
+    EXPECT_EQ(readAllBytes(*source), host);
 }
 
 TEST_P(RawTypeTest, ReadsZstdCompressedVoxelsExactly) {
@@ -276,7 +222,7 @@ TEST(RawReaderTest, ZstdStreamHoldingMoreBytesThrowsAtTheLastSlice) {
         zstdCompressUnsized(patternVoxels(VoxelType::U8, kDims[0] * kDims[1] * kDims[2] + 1));
     test::writeFile(dir.file("more.zst"), packed.data(), packed.size());
     auto source = openRaw(dir.file("more.zst"), layoutOf(VoxelType::U8, Endian::Little));
-    expectFormatError([&] { readAll(*source); }, dir.file("more.zst"), "size");
+    expectFormatError([&] { readAllBytes(*source); }, dir.file("more.zst"), "size");
 }
 
 TEST(RawReaderTest, ZstdStreamHoldingFewerBytesThrows) {
@@ -327,7 +273,7 @@ TEST(RawReaderTest, NanVoxelThrowsNamingItsPosition) {
     test::writeFile(dir.file("nan.raw"), host.data(), host.size());
     auto source = openRaw(dir.file("nan.raw"), layoutOf(VoxelType::F32, Endian::Little, dims));
     try {
-        readAll(*source, {20});
+        readAllBytes(*source, {20});
         FAIL() << "NaN voxel accepted";
     } catch (const FormatError& e) {
         EXPECT_EQ(e.field(), "data");
@@ -344,7 +290,7 @@ TEST(RawReaderTest, InfiniteBigEndianVoxelThrows) {
     Bytes big = swapped(host, VoxelType::F32);
     test::writeFile(dir.file("inf.raw"), big.data(), big.size());
     auto source = openRaw(dir.file("inf.raw"), layoutOf(VoxelType::F32, Endian::Big));
-    expectFormatError([&] { readAll(*source); }, dir.file("inf.raw"), "data");
+    expectFormatError([&] { readAllBytes(*source); }, dir.file("inf.raw"), "data");
 }
 
 TEST(RawReaderTest, MissingFileThrows) {

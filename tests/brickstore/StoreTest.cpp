@@ -4,6 +4,7 @@
 #include "brickstore/Ingest.h"
 #include "brickstore/StoreVolume.h"
 #include "tests/TestSupport.h"
+#include "tests/brickstore/VolumeTestSupport.h"
 
 #include <algorithm>
 #include <cmath>
@@ -16,21 +17,7 @@
 namespace bc::brickstore {
 namespace {
 
-/// A volume held in memory, served as a slice stream (the test double for every reader).
-class VectorSource final : public VolumeSource {
-public:
-    VectorSource(VolumeInfo info, std::vector<std::byte> voxels) : mInfo(std::move(info)), mVoxels(std::move(voxels)) {}
-    const VolumeInfo& info() const override { return mInfo; }
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        std::memcpy(out.data(), mVoxels.data() + mNext * mInfo.sliceBytes(), count * mInfo.sliceBytes());
-        mNext += count;
-    }
-
-private:
-    VolumeInfo mInfo;
-    std::vector<std::byte> mVoxels;
-    std::uint64_t mNext = 0;
-};
+using test::VectorSource;
 
 template <typename T>
 std::vector<std::byte> randomVolume(const std::array<std::uint64_t, 3>& d, std::uint32_t seed, double lo, double hi) {
@@ -61,15 +48,7 @@ VolumeInfo makeInfo(const std::array<std::uint64_t, 3>& dims, VoxelType type) {
 
 std::vector<std::byte> readLevel(const BrickStore& store, std::uint32_t level) {
     auto src = openStoreLevel(store, level);
-    std::vector<std::byte> out(src->info().voxelCount() * voxelBytes(src->info().type));
-    // Uneven chunks on purpose.
-    std::uint64_t z = 0, sb = src->info().sliceBytes();
-    for (std::uint64_t n = 1; z < src->info().dims[2]; n = n % 5 + 1) {
-        n = std::min(n, src->info().dims[2] - z);
-        src->readSlices(n, std::span(out).subspan(z * sb, n * sb));
-        z += n;
-    }
-    return out;
+    return test::readAllSlices(*src, {1, 2, 3, 4, 5}); // uneven chunks on purpose
 }
 
 struct Ingested {
@@ -338,13 +317,12 @@ TEST(StoreTest, FailedIngestLeavesTheExistingStoreUntouched) {
     public:
         FailingSource() { mInfo.dims = {32, 32, 32}; }
         const VolumeInfo& info() const override { return mInfo; }
-        void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-            if (mNext + count > 16) throw FormatError("failing.raw", "size", "file ends early");
+        void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
+            if (nextSlice() + count > 16)
+                throw FormatError("failing.raw", "size", "file ends early");
             std::fill(out.begin(), out.end(), std::byte{7});
-            mNext += count;
         }
         VolumeInfo mInfo;
-        std::uint64_t mNext = 0;
     } failing;
     IngestConfig config;
     config.geometry = {16, 2, 8};
@@ -365,12 +343,12 @@ TEST(StoreTest, IngestKilledMidwayLeavesNoValidLookingStore) {
         public:
             SlowSource() { mInfo.dims = {128, 128, 4096}; }
             const VolumeInfo& info() const override { return mInfo; }
-            void readSlices(std::uint64_t, std::span<std::byte> out) override {
-                for (auto& b : out) b = std::byte(mNext++ * 2654435761u >> 24);
+            void readNextSlices(std::uint64_t, std::span<std::byte> out) override {
+                for (auto& b : out) b = std::byte(mBytesPainted++ * 2654435761u >> 24);
                 ::usleep(2000);
             }
             VolumeInfo mInfo;
-            std::uint32_t mNext = 0;
+            std::uint32_t mBytesPainted = 0; ///< a byte counter: the pattern runs across slices
         } slow;
         IngestConfig config;
         config.geometry = {32, 2, 8};

@@ -2,6 +2,7 @@
 #include "brickstore/Readers.h"
 
 #include "tests/TestSupport.h"
+#include "tests/brickstore/VolumeTestSupport.h"
 
 #include <chrono>
 #include <cstring>
@@ -13,22 +14,11 @@ namespace {
 constexpr std::uint64_t kCheckerPeriod = 8; // kCheckerPeriodVoxels of the generator
 
 using Dims = std::array<std::uint64_t, 3>;
-
-/// Reads the whole volume, `chunk` slices at a time (the last chunk may be shorter).
-std::vector<std::byte> readAll(VolumeSource& source, std::uint64_t chunk) {
-    const VolumeInfo& info = source.info();
-    std::vector<std::byte> bytes(info.voxelCount() * voxelBytes(info.type));
-    for (std::uint64_t z = 0; z < info.dims[2]; z += chunk) {
-        const std::uint64_t n = std::min(chunk, info.dims[2] - z);
-        source.readSlices(n,
-                          std::span(bytes).subspan(z * info.sliceBytes(), n * info.sliceBytes()));
-    }
-    return bytes;
-}
+using test::readAllSlices;
 
 std::vector<std::byte> generate(SynthKind kind, const Dims& dims, std::uint64_t seed,
                                 std::uint64_t chunk = 1) {
-    return readAll(*makeSynthetic(kind, dims, seed), chunk);
+    return readAllSlices(*makeSynthetic(kind, dims, seed), chunk);
 }
 
 std::uint16_t u16At(const std::vector<std::byte>& bytes, const Dims& d, std::uint64_t x,
@@ -95,6 +85,19 @@ TEST(SyntheticVolumeTest, ReadingPastTheLastSliceThrows) {
     std::vector<std::byte> slab(5 * 64);
     EXPECT_THROW(source->readSlices(5, slab), std::out_of_range);
     EXPECT_THROW(source->readSlices(2, slab), std::invalid_argument);
+}
+
+TEST(SyntheticVolumeTest, NextSliceAdvancesOnlyOnAcceptedReads) {
+    auto source = makeSynthetic(SynthKind::Checker, {8, 8, 4}, 1);
+    std::vector<std::byte> slab(5 * 64);
+    EXPECT_THROW(source->readSlices(2, slab), std::invalid_argument);
+    EXPECT_EQ(source->nextSlice(), 0u);
+    source->readSlices(3, std::span(slab).first(3 * 64));
+    EXPECT_EQ(source->nextSlice(), 3u);
+    EXPECT_THROW(source->readSlices(2, std::span(slab).first(2 * 64)), std::out_of_range);
+    EXPECT_EQ(source->nextSlice(), 3u);
+    source->readSlices(1, std::span(slab).first(64));
+    EXPECT_EQ(source->nextSlice(), 4u);
 }
 
 TEST(SyntheticVolumeTest, VesselOccupancyIsBetweenOneAndFivePercent) {

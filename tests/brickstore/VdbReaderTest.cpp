@@ -3,6 +3,7 @@
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "tests/TestSupport.h"
+#include "tests/brickstore/VolumeTestSupport.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/io/File.h>
@@ -14,6 +15,8 @@
 
 namespace bc::brickstore {
 namespace {
+
+using test::readAllSlices;
 
 const char* const kSmoke = "gaffer_smoke.vdb";
 
@@ -35,17 +38,6 @@ float floatAt(const std::vector<std::byte>& bytes, std::uint64_t index) {
     float v;
     std::memcpy(&v, bytes.data() + index * sizeof(float), sizeof(float));
     return v;
-}
-
-std::vector<std::byte> readAll(VolumeSource& source, std::uint64_t chunk) {
-    const VolumeInfo& info = source.info();
-    std::vector<std::byte> bytes(info.voxelCount() * voxelBytes(info.type));
-    for (std::uint64_t z = 0; z < info.dims[2]; z += chunk) {
-        const std::uint64_t n = std::min(chunk, info.dims[2] - z);
-        source.readSlices(n,
-                          std::span(bytes).subspan(z * info.sliceBytes(), n * info.sliceBytes()));
-    }
-    return bytes;
 }
 
 /// Runs `open` and returns the FormatError it throws (fails the test when it throws none).
@@ -80,7 +72,7 @@ TEST_F(VdbReaderTest, SmokeDensityStreamsEveryVoxelAsOpenVdbSeesIt) {
         EXPECT_NEAR(info.originMm[a], origin[a], 1e-9);
     EXPECT_EQ(info.background, double(grid->background()));
 
-    const auto bytes = readAll(*source, 5); // 5 does not divide 112: the last slab is short
+    const auto bytes = readAllSlices(*source, 5); // 5 does not divide 112: the last slab is short
     auto accessor = grid->getConstAccessor();
     std::uint64_t active = 0, index = 0;
     for (int z = box.min().z(); z <= box.max().z(); ++z)
@@ -111,10 +103,10 @@ TEST_F(VdbReaderTest, EmptyGridNamePicksTheFirstScalarGrid) {
 
     auto picked = openVdb(path, "");
     EXPECT_EQ(picked->info().dims, (std::array<std::uint64_t, 3>{1, 1, 1}));
-    EXPECT_EQ(floatAt(readAll(*picked, 1), 0), 5.0f);
+    EXPECT_EQ(floatAt(readAllSlices(*picked, 1), 0), 5.0f);
     auto named = openVdb(path, "second");
     EXPECT_EQ(named->info().dims, (std::array<std::uint64_t, 3>{2, 2, 1}));
-    const auto bytes = readAll(*named, 1);
+    const auto bytes = readAllSlices(*named, 1);
     EXPECT_EQ(floatAt(bytes, 0), 7.0f);
     EXPECT_EQ(floatAt(bytes, 1), 0.0f);
     EXPECT_EQ(floatAt(bytes, 3), 8.0f);
@@ -141,7 +133,7 @@ TEST_F(VdbReaderTest, DoubleGridWithInactiveValuesTilesAndScaledTransform) {
     EXPECT_DOUBLE_EQ(info.originMm[0], 10 - 16 * 0.25);
     EXPECT_DOUBLE_EQ(info.originMm[1], 20.0);
     EXPECT_DOUBLE_EQ(info.originMm[2], 30.0);
-    const auto bytes = readAll(*source, 4);
+    const auto bytes = readAllSlices(*source, 4);
     auto at = [&](int x, int y, int z) {
         return floatAt(bytes,
                        (std::uint64_t(z) * 16 + std::uint64_t(y)) * 22 + std::uint64_t(x + 16));
@@ -152,7 +144,7 @@ TEST_F(VdbReaderTest, DoubleGridWithInactiveValuesTilesAndScaledTransform) {
     EXPECT_EQ(at(-1, 0, 16), -1.5f);
     EXPECT_EQ(at(5, 3, 20), 4.5f);
     EXPECT_EQ(at(6, 3, 20), -1.5f);
-    EXPECT_EQ(readAll(*openVdb(path, "phi"), 1), bytes);
+    EXPECT_EQ(readAllSlices(*openVdb(path, "phi"), 1), bytes);
 }
 
 TEST_F(VdbReaderTest, FileWithoutScalarGridNamesTheGridsItHolds) {

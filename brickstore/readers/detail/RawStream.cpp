@@ -15,7 +15,6 @@
 #include <filesystem>
 #include <limits>
 #include <new>
-#include <stdexcept>
 #include <vector>
 
 #include <sys/types.h>
@@ -25,7 +24,7 @@ namespace bc::brickstore::detail {
 
 namespace {
 
-/// Bytes read and checked at a time within one readSlices call (a multiple of every voxel size).
+/// Bytes read and checked at a time within one readNextSlices (a multiple of every voxel size).
 constexpr std::size_t kChunkBytes = std::size_t(1) << 20;
 /// Longest zstd frame header (ZSTD_FRAMEHEADERSIZE_MAX, which zstd.h keeps static-only).
 constexpr std::size_t kZstdFrameHeaderMaxBytes = 18;
@@ -158,23 +157,16 @@ class RawVoxelSource final : public VolumeSource {
 
     const VolumeInfo& info() const override { return mInfo; }
 
-    void readSlices(std::uint64_t count, std::span<std::byte> out) override {
-        if (count > mInfo.dims[2] - mNextZ)
-            throw std::out_of_range("RawVoxelSource::readSlices: read past the last slice of " +
-                                    mFile);
-        if (out.size() != count * mInfo.sliceBytes())
-            throw std::invalid_argument(
-                "RawVoxelSource::readSlices: buffer size does not match the slice count");
+  private:
+    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         for (std::size_t done = 0; done < out.size();) {
             std::size_t n = std::min(kChunkBytes, out.size() - done);
             readChunk(out.subspan(done, n));
             done += n;
         }
-        mNextZ += count;
-        if (count > 0 && mNextZ == mInfo.dims[2]) mVoxels->expectEnd();
+        if (count > 0 && nextSlice() + count == mInfo.dims[2]) mVoxels->expectEnd();
     }
 
-  private:
     void readChunk(std::span<std::byte> chunk) {
         std::size_t n = mVoxels->read(chunk);
         if (n < chunk.size())
@@ -211,7 +203,6 @@ class RawVoxelSource final : public VolumeSource {
     bool mSwap;
     std::uint64_t mTotalBytes;
     std::uint64_t mDoneBytes = 0;
-    std::uint64_t mNextZ = 0;
 };
 
 } // namespace
