@@ -10,6 +10,8 @@ packages=(
   libzstd-dev zstd libxxhash-dev zlib1g-dev           # brick compression, checksums, gzip input
   libnifti2-dev libgdcm-dev                           # NIfTI-1 and DICOM readers
   nlohmann-json3-dev libcli11-dev                     # info --json, command line
+  libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri  # headless OpenGL 4.5 (llvmpipe without a GPU)
+  libglm-dev libpng-dev                               # vector maths, PNG images
   libgtest-dev                                        # tests
 )
 missing=()

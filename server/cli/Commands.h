@@ -21,6 +21,13 @@ void addInfoCommand(CLI::App& app);
 void addVerifyCommand(CLI::App& app);
 void addExtractCommand(CLI::App& app);
 void addDemoCommand(CLI::App& app);
+void addRenderCommand(CLI::App& app);
+void addCompareCommand(CLI::App& app);
+
+/// Renders one frame of a store on the GPU (or the CPU reference) and writes a PNG; prints
+/// the frame's summary line. @throw what the store, TF and renderer throw.
+void renderStoreToPng(const std::string& storePath, const std::string& output, const std::string& tfName,
+                      const std::string& orbit, const std::string& size, bool reference);
 
 /// "256,256,113" -> {256,256,113}. @throw std::invalid_argument naming `what`.
 std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what);

@@ -1,5 +1,6 @@
 // brickcast: ingest volumes into brick stores and inspect them (later: render, bench).
 #include "brickstore/Error.h"
+#include "render/Error.h"
 #include "server/cli/Commands.h"
 
 #include <CLI/CLI.hpp>
@@ -14,6 +15,8 @@ int main(int argc, char** argv) {
     bc::cli::addVerifyCommand(app);
     bc::cli::addExtractCommand(app);
     bc::cli::addDemoCommand(app);
+    bc::cli::addCompareCommand(app);
+    bc::cli::addRenderCommand(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -23,6 +26,9 @@ int main(int argc, char** argv) {
         return 1;
     } catch (const bc::brickstore::StoreCorrupt& e) {
         std::fprintf(stderr, "brickcast: corrupt store: %s\n", e.what());
+        return 1;
+    } catch (const bc::render::RenderInputError& e) {
+        std::fprintf(stderr, "brickcast: bad input: %s\n", e.what());
         return 1;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "brickcast: %s\n", e.what());

@@ -1,0 +1,64 @@
+#pragma once
+// Which bricks of a pyramid level a frame draws, and in which order: bricks outside the
+// view frustum are culled, bricks whose value range the transfer function maps to zero
+// opacity are skipped (first-stage skipping), and the rest are sorted front to back.
+#include "brickstore/StoreLayout.h"
+#include "render/Camera.h"
+#include "render/RenderTypes.h"
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace bc::brickstore {
+class BrickStore;
+}
+
+namespace bc::render {
+
+struct TransferFunctionTable;
+
+/// One pyramid level in world space. Every level spans the same world box as level 0 (its
+/// spacing is the box divided by its dims), so one camera frames every level alike.
+struct LevelGeometry {
+    std::uint32_t level = 0;
+    std::array<std::uint64_t, 3> dims{};
+    glm::dvec3 spacing{1.0};
+    std::uint32_t brickVoxels = 64;
+    std::uint32_t apronVoxels = 2;
+    std::array<std::uint32_t, 3> bricks{};
+    Box box;
+
+    static LevelGeometry of(const brickstore::BrickStore& store, std::uint32_t level);
+    double minSpacing() const;
+    std::uint64_t brickCount() const { return std::uint64_t(bricks[0]) * bricks[1] * bricks[2]; }
+    /// The world box of a brick's payload (clipped to the volume).
+    Box brickBox(const std::array<std::uint32_t, 3>& pos) const;
+};
+
+enum class BrickDraw : std::uint8_t { Culled, Skipped, Constant, Sampled };
+
+struct PlannedBrick {
+    std::uint64_t index = 0; ///< within the level, x fastest
+    brickstore::BrickKey key;
+    BrickDraw draw = BrickDraw::Sampled;
+    float constantValue = 0.0f; ///< for Constant: the brick's one value (native units)
+    std::int64_t order = 0;     ///< visibility key: never decreases along any ray
+};
+
+struct BrickPlan {
+    std::vector<PlannedBrick> drawn; ///< Constant and Sampled bricks, front to back
+    std::uint64_t total = 0, culled = 0, skipped = 0, constant = 0, sampled = 0;
+};
+
+/// Plans one frame. Conservative: a brick any ray of the frame can sample with non-zero
+/// opacity is never culled or skipped. The order is a valid front-to-back order for every
+/// ray, so batches of consecutive bricks composite correctly.
+BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& geometry,
+                     const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip);
+
+/// True when `box` lies wholly outside the view of `view` (side planes through the image
+/// corners, and behind the eye plane).
+bool outsideView(const Box& box, const ViewBasis& view);
+
+} // namespace bc::render

@@ -1,0 +1,283 @@
+#include "render/Raycaster.h"
+
+#include "brickstore/BrickCache.h"
+#include "brickstore/BrickStore.h"
+#include "render/BrickPlan.h"
+#include "render/Error.h"
+#include "render/TransferFunction.h"
+#include "render/detail/Gl.h"
+#include "render/detail/RaycastShader.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+
+namespace bc::render {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+constexpr std::uint32_t kTfEntries = 4096;
+
+} // namespace
+
+struct Raycaster::Gpu {
+    gl::Program program;
+    gl::VertexArray vao;
+    gl::Texture tf;
+    gl::Buffer pages, counters;
+    gl::Texture accum[2];
+    gl::Framebuffer fbo[2];
+    std::uint32_t width = 0, height = 0;
+
+    void ensureTargets(std::uint32_t w, std::uint32_t h) {
+        if (w == width && h == height) return;
+        for (int i = 0; i < 2; ++i) {
+            accum[i] = gl::createTexture(GL_TEXTURE_2D);
+            glTextureStorage2D(accum[i].get(), 1, GL_RGBA32F, GLsizei(w), GLsizei(h));
+            glTextureParameteri(accum[i].get(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+            glTextureParameteri(accum[i].get(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+            GLuint f = 0;
+            glCreateFramebuffers(1, &f);
+            fbo[i] = gl::Framebuffer(f);
+            glNamedFramebufferTexture(f, GL_COLOR_ATTACHMENT0, accum[i].get(), 0);
+            if (glCheckNamedFramebufferStatus(f, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+                throw RenderError("raycaster render target " + std::to_string(w) + "x" +
+                                  std::to_string(h) + " is incomplete");
+        }
+        width = w;
+        height = h;
+        gl::glCheck("allocating raycaster render targets");
+    }
+
+    void uploadTable(const TransferFunctionTable& table) {
+        if (!tf) {
+            tf = gl::createTexture(GL_TEXTURE_1D);
+            glTextureStorage1D(tf.get(), 1, GL_RGBA32F, GLsizei(kTfEntries));
+            glTextureParameteri(tf.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+            glTextureParameteri(tf.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+            glTextureParameteri(tf.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+        }
+        glTextureSubImage1D(tf.get(), 0, 0, GLsizei(table.entries), GL_RGBA, GL_FLOAT,
+                            table.rgba.data());
+        gl::glCheck("uploading the transfer function");
+    }
+};
+
+Raycaster::Raycaster(const RaycasterConfig& config)
+    : mConfig(config), mGpu(std::make_unique<Gpu>()) {
+    mGpu->program =
+        gl::buildProgram("raycast", detail::raycastVertexShader(), detail::raycastFragmentShader());
+    GLuint vao = 0;
+    glCreateVertexArrays(1, &vao);
+    mGpu->vao = gl::VertexArray(vao);
+    mGpu->pages = gl::createBuffer();
+    mGpu->counters = gl::createBuffer();
+    glNamedBufferStorage(mGpu->counters.get(), sizeof(std::uint32_t), nullptr,
+                         GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
+    gl::glCheck("creating the raycaster");
+}
+
+Raycaster::~Raycaster() = default;
+
+void Raycaster::ensurePool(const brickstore::BrickStore& store) {
+    const auto type = store.info().volume.type;
+    const std::uint32_t edge = store.layout().storedEdge();
+    if (mPool && mPool->type() == type && mPool->edge() == edge) {
+        if (mPoolStore != &store || mPoolStorePath != store.path()) mPool->clear();
+    } else {
+        mPool.reset(); // free the old texture before allocating the new one
+        mPool = std::make_unique<BrickPool>(type, edge, BrickPoolConfig{mConfig.gpuBudgetBytes});
+    }
+    mPoolStore = &store;
+    mPoolStorePath = store.path();
+}
+
+std::uint32_t Raycaster::chooseLevel(const brickstore::BrickStore& store,
+                                     const TransferFunction& tf, const Camera& camera,
+                                     const RenderOptions& options) {
+    const auto levels = std::uint32_t(store.layout().levels().size());
+    std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
+    if (!options.interactive) return level;
+    const auto table = tf.table(options.stepVoxels, kTfEntries);
+    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
+    for (; level + 1 < levels; ++level) {
+        const BrickPlan plan =
+            planBricks(store, LevelGeometry::of(store, level), table, view, options.skip);
+        if (plan.sampled <= mPool->capacity()) break;
+    }
+    return level;
+}
+
+namespace {
+
+/// Uniforms that stay the same for every batch of a frame.
+void setFrameUniforms(GLuint p, const LevelGeometry& g, const ViewBasis& v, const RenderOptions& o,
+                      const TransferFunctionTable& table, const BrickPool& pool) {
+    auto vec3 = [&](const char* name, const glm::dvec3& x) {
+        glProgramUniform3f(p, glGetUniformLocation(p, name), float(x.x), float(x.y), float(x.z));
+    };
+    auto i1 = [&](const char* name, int x) {
+        glProgramUniform1i(p, glGetUniformLocation(p, name), x);
+    };
+    auto f1 = [&](const char* name, double x) {
+        glProgramUniform1f(p, glGetUniformLocation(p, name), float(x));
+    };
+    glProgramUniform2f(p, glGetUniformLocation(p, "uViewport"), float(o.width), float(o.height));
+    vec3("uEye", v.eye);
+    vec3("uForward", v.forward);
+    vec3("uRight", v.right);
+    vec3("uUp", v.upScaled);
+    i1("uOrtho", v.orthographic);
+    vec3("uInvSpacing", 1.0 / g.spacing);
+    vec3("uDims", glm::dvec3(double(g.dims[0]), double(g.dims[1]), double(g.dims[2])));
+    f1("uStepMm", o.stepVoxels * g.minSpacing());
+    i1("uBrick", int(g.brickVoxels));
+    i1("uApron", int(g.apronVoxels));
+    i1("uEdge", int(pool.edge()));
+    glProgramUniform3i(p, glGetUniformLocation(p, "uGrid"), int(g.bricks[0]), int(g.bricks[1]),
+                       int(g.bricks[2]));
+    const auto sg = pool.slotGrid();
+    glProgramUniform3i(p, glGetUniformLocation(p, "uSlotGrid"), int(sg[0]), int(sg[1]), int(sg[2]));
+    const auto ts = pool.textureSize();
+    vec3("uInvPoolSize", glm::dvec3(1.0 / ts[0], 1.0 / ts[1], 1.0 / ts[2]));
+    // texel t -> native v = t*scale + offset -> entry position (v - min)/(max - min) * (N - 1)
+    const TexelMapping m = pool.texelMapping();
+    const double span = table.domainMax - table.domainMin, n = table.entries;
+    f1("uTfScale", m.scale / span * (n - 1.0));
+    f1("uTfOffset", (m.offset - table.domainMin) / span * (n - 1.0));
+    i1("uTfEntries", int(table.entries));
+    f1("uErt", o.earlyTermination ? o.ertThreshold : 2.0);
+    i1("uShading", o.shading);
+    i1("uHardwareFilter", o.hardwareFilter);
+    const double perVoxel = 0.5 * m.scale / span * g.minSpacing();
+    vec3("uGradScale", perVoxel / g.spacing);
+    f1("uGradFade", ShadingModel::kGradientFade);
+    f1("uAmbient", ShadingModel::kAmbient);
+    f1("uDiffuse", ShadingModel::kDiffuse);
+    f1("uSpecular", ShadingModel::kSpecular);
+    f1("uShininess", ShadingModel::kShininess);
+    gl::glCheck("setting raycaster uniforms");
+}
+
+} // namespace
+
+Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
+                        const TransferFunction& tf, const Camera& camera,
+                        const RenderOptions& options, FrameStats& stats) {
+    const auto frameStart = Clock::now();
+    options.validate();
+    stats = FrameStats{};
+    ensurePool(store);
+    const std::uint32_t level = chooseLevel(store, tf, camera, options);
+    const LevelGeometry g = LevelGeometry::of(store, level);
+    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
+    const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
+    const BrickPlan plan = planBricks(store, g, table, view, options.skip);
+    stats.level = level;
+    stats.bricksTotal = plan.total;
+    stats.bricksCulled = plan.culled;
+    stats.bricksSkipped = plan.skipped;
+    stats.bricksVisited = plan.drawn.size();
+    stats.bricksConstant = plan.constant;
+
+    mGpu->ensureTargets(options.width, options.height);
+    mGpu->uploadTable(table);
+    const GLuint program = mGpu->program.get();
+    setFrameUniforms(program, g, view, options, table, *mPool);
+    const std::uint32_t zero = 0;
+    glNamedBufferSubData(mGpu->counters.get(), 0, sizeof zero, &zero);
+    const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
+    const std::uint64_t uploadsBefore = mPool->stats().uploads,
+                        bytesBefore = mPool->stats().bytesUploaded;
+
+    std::vector<std::int32_t> pages(2 * g.brickCount(), detail::kPageAbsent);
+    if (pages.empty()) pages.assign(2, detail::kPageAbsent);
+    if (GLsizeiptr(pages.size() * 4) > 0) {
+        mGpu->pages = gl::createBuffer();
+        glNamedBufferStorage(mGpu->pages.get(), GLsizeiptr(pages.size() * 4), nullptr,
+                             GL_DYNAMIC_STORAGE_BIT);
+    }
+    const TexelMapping mapping = mPool->texelMapping();
+    std::size_t next = 0;
+    int pass = 0;
+    glUseProgram(program);
+    glBindVertexArray(mGpu->vao.get());
+    glBindTextureUnit(0, mPool->texture());
+    glBindTextureUnit(1, mGpu->tf.get());
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, mGpu->pages.get());
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, mGpu->counters.get());
+    glViewport(0, 0, GLsizei(options.width), GLsizei(options.height));
+    do {
+        // One batch: consecutive bricks of the front-to-back order while slots last.
+        const auto uploadStart = Clock::now();
+        std::vector<std::uint64_t> batch;
+        for (; next < plan.drawn.size(); ++next) {
+            const PlannedBrick& b = plan.drawn[next];
+            if (b.draw == BrickDraw::Constant) {
+                const float texel =
+                    float((double(b.constantValue) - mapping.offset) / mapping.scale);
+                pages[2 * b.index] = detail::kPageConstant;
+                std::memcpy(&pages[2 * b.index + 1], &texel, 4);
+                batch.push_back(b.index);
+                continue;
+            }
+            brickstore::BrickPin pin;
+            auto slot = mPool->acquire(levelFirst + b.index, [&] {
+                pin = cache.pin(b.key);
+                return pin.data();
+            });
+            if (!slot) break; // pool full of this batch's bricks
+            pages[2 * b.index] = std::int32_t(*slot);
+            batch.push_back(b.index);
+        }
+        if (next < plan.drawn.size() && batch.empty())
+            throw RenderError("GPU brick pool has no free slot for a batch");
+        glNamedBufferSubData(mGpu->pages.get(), 0, GLsizeiptr(pages.size() * 4), pages.data());
+        glFinish();
+        stats.uploadMs += msSince(uploadStart);
+
+        const auto renderStart = Clock::now();
+        const int target = (pass + 1) % 2;
+        glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[target].get());
+        glBindTextureUnit(2, mGpu->accum[pass % 2].get());
+        glProgramUniform1i(program, glGetUniformLocation(program, "uFirstPass"), pass == 0);
+        glDrawArrays(GL_TRIANGLES, 0, 3);
+        glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_FRAMEBUFFER_BARRIER_BIT);
+        glFinish();
+        gl::glCheck("raycasting a batch");
+        stats.renderMs += msSince(renderStart);
+
+        for (std::uint64_t i : batch)
+            pages[2 * i] = detail::kPageAbsent;
+        mPool->unpinAll();
+        ++pass;
+    } while (next < plan.drawn.size());
+    stats.batches = std::uint32_t(pass);
+
+    const auto readStart = Clock::now();
+    Image image(options.width, options.height);
+    std::vector<float> rows(std::size_t(options.width) * options.height * 4);
+    glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[pass % 2].get());
+    glReadPixels(0, 0, GLsizei(options.width), GLsizei(options.height), GL_RGBA, GL_FLOAT,
+                 rows.data());
+    std::uint32_t samples = 0;
+    glGetNamedBufferSubData(mGpu->counters.get(), 0, sizeof samples, &samples);
+    gl::glCheck("reading the frame back");
+    const std::size_t rowFloats = std::size_t(options.width) * 4;
+    for (std::uint32_t y = 0; y < options.height; ++y) // GL rows go bottom-up
+        std::transform(rows.begin() + std::ptrdiff_t((options.height - 1 - y) * rowFloats),
+                       rows.begin() + std::ptrdiff_t((options.height - y) * rowFloats),
+                       image.pixel(0, y), [](float v) { return std::clamp(v, 0.0f, 1.0f); });
+    stats.readbackMs = msSince(readStart);
+    stats.samples = samples;
+    stats.bricksUploaded = mPool->stats().uploads - uploadsBefore;
+    stats.bytesUploaded = mPool->stats().bytesUploaded - bytesBefore;
+    stats.totalMs = msSince(frameStart);
+    return image;
+}
+
+} // namespace bc::render

@@ -1,0 +1,59 @@
+#pragma once
+// The GPU raycaster: bricks of one pyramid level, drawn front to back in batches that fit
+// the GPU brick pool, each batch one full-screen pass that marches every ray through the
+// brick grid (DDA), sampling only the batch's bricks and compositing onto the previous
+// pass's result. With a pool large enough for the view there is one pass. Needs a current
+// EglContext on the calling thread; render thread only.
+#include "render/BrickPool.h"
+#include "render/Camera.h"
+#include "render/Image.h"
+#include "render/RenderTypes.h"
+
+#include <memory>
+
+namespace bc::brickstore {
+class BrickStore;
+class BrickCache;
+} // namespace bc::brickstore
+
+namespace bc::render {
+
+class TransferFunction;
+struct LevelGeometry;
+
+struct RaycasterConfig {
+    std::uint64_t gpuBudgetBytes = 512ull << 20; ///< brick pool bytes
+};
+
+class Raycaster {
+  public:
+    /// @throw RenderError if the shaders do not build on this context.
+    explicit Raycaster(const RaycasterConfig& config = {});
+    ~Raycaster();
+    Raycaster(const Raycaster&) = delete;
+    Raycaster& operator=(const Raycaster&) = delete;
+
+    /// Renders one frame of `store` (bricks come through `cache`). Fills `stats`.
+    /// @throw std::invalid_argument on bad options or camera; StoreCorrupt naming a brick
+    /// that fails its checksum; RenderError on a GL failure.
+    Image render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
+                 const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
+                 FrameStats& stats);
+
+    /// The pool of the last frame (nullptr before the first); its counters span all frames.
+    const BrickPool* pool() const { return mPool.get(); }
+
+  private:
+    struct Gpu;
+    void ensurePool(const brickstore::BrickStore& store);
+    std::uint32_t chooseLevel(const brickstore::BrickStore& store, const TransferFunction& tf,
+                              const Camera& camera, const RenderOptions& options);
+
+    RaycasterConfig mConfig;
+    std::unique_ptr<Gpu> mGpu;
+    std::unique_ptr<BrickPool> mPool;
+    const brickstore::BrickStore* mPoolStore = nullptr;
+    std::string mPoolStorePath;
+};
+
+} // namespace bc::render

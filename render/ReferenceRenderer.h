@@ -1,0 +1,47 @@
+#pragma once
+// The CPU reference renderer: the raycaster's optical model (render/OPTICS.md) in double
+// precision, with no skipping of any kind and no early termination, at any step size, on
+// all cores. It is the yardstick every accuracy and speed claim is measured against.
+#include "render/Camera.h"
+#include "render/Image.h"
+#include "render/RenderTypes.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace bc::brickstore {
+class BrickStore;
+}
+
+namespace bc::render {
+
+class TransferFunction;
+
+/// One pyramid level held whole in host memory (float is exact for every stored type).
+class ReferenceVolume {
+  public:
+    /// Reads level `level` of `store` through its extract stream. @throw StoreCorrupt.
+    ReferenceVolume(const brickstore::BrickStore& store, std::uint32_t level);
+
+    /// Trilinear value at continuous voxel position p (voxel centres at i + 0.5), clamped
+    /// to the edge outside the volume, computed in double.
+    double sample(double px, double py, double pz) const;
+    const std::array<std::uint64_t, 3>& dims() const { return mDims; }
+
+  private:
+    std::array<std::uint64_t, 3> mDims{};
+    std::vector<float> mVoxels;
+};
+
+struct ReferenceConfig {
+    unsigned threads = 0; ///< 0 = all cores
+};
+
+/// Renders with options.width/height/stepVoxels/shading/level; ignores skip and early
+/// termination (the reference does neither). Fills stats.samples, level and totalMs.
+Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume& volume,
+                      const TransferFunction& tf, const Camera& camera,
+                      const RenderOptions& options, FrameStats& stats,
+                      const ReferenceConfig& config = {});
+
+} // namespace bc::render

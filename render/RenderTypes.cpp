@@ -1,0 +1,40 @@
+#include "render/RenderTypes.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace bc::render {
+
+SkipMode parseSkipMode(const std::string& text) {
+    if (text == "none") return SkipMode::None;
+    if (text == "bricks") return SkipMode::Bricks;
+    if (text == "all") return SkipMode::All;
+    throw std::invalid_argument("skip mode '" + text + "' is not one of none, bricks, all");
+}
+
+const char* toString(SkipMode mode) {
+    switch (mode) {
+    case SkipMode::None:
+        return "none";
+    case SkipMode::Bricks:
+        return "bricks";
+    case SkipMode::All:
+        return "all";
+    }
+    return "?";
+}
+
+void RenderOptions::validate() const {
+    constexpr std::uint32_t kMaxEdge = 16384;
+    if (width == 0 || height == 0 || width > kMaxEdge || height > kMaxEdge)
+        throw std::invalid_argument("size: " + std::to_string(width) + "x" +
+                                    std::to_string(height) + " is outside 1.." +
+                                    std::to_string(kMaxEdge));
+    if (!(stepVoxels >= 0.01 && stepVoxels <= 64.0))
+        throw std::invalid_argument("step: must lie in [0.01, 64] voxels");
+    if (!(ertThreshold > 0.0 && ertThreshold <= 1.0))
+        throw std::invalid_argument("ert: threshold must lie in (0, 1]");
+    if (level < 0) throw std::invalid_argument("level: must not be negative");
+}
+
+} // namespace bc::render

@@ -1,0 +1,66 @@
+#pragma once
+// What a frame is asked for and what it reports, shared by the GPU raycaster and the CPU
+// reference so both follow one optical model (see render/OPTICS.md).
+#include <array>
+#include <cstdint>
+#include <string>
+
+namespace bc::render {
+
+/// Which empty space is skipped. `All` adds the per-brick octrees of issue 4 when present;
+/// until then it equals `Bricks`.
+enum class SkipMode { None, Bricks, All };
+
+/// "none" | "bricks" | "all" -> SkipMode; std::invalid_argument otherwise.
+SkipMode parseSkipMode(const std::string& text);
+const char* toString(SkipMode mode);
+
+struct RenderOptions {
+    std::uint32_t width = 256;
+    std::uint32_t height = 256;
+    double stepVoxels = 1.0; ///< sample distance in units of the smallest spacing
+    bool earlyTermination = true;
+    double ertThreshold = 0.99; ///< stop a ray once its opacity reaches this
+    SkipMode skip = SkipMode::Bricks;
+    bool shading = true;      ///< Blinn-Phong from central-difference gradients
+    std::int32_t level = 0;   ///< pyramid level; see `interactive`
+    bool interactive = false; ///< may draw a coarser level when level 0 exceeds the GPU budget
+    /// GPU only: one filtered texture fetch per sample instead of 8 exact ones. Faster, but
+    /// the hardware's 8-bit interpolation weights cost accuracy and make a sample depend on
+    /// its brick's place in the pool (so skipping no longer gives bit-identical images).
+    bool hardwareFilter = false;
+
+    /// Throws std::invalid_argument naming the field when a value is out of range.
+    void validate() const;
+};
+
+/// Shading constants (headlight Blinn-Phong; the light sits at the eye).
+struct ShadingModel {
+    static constexpr double kAmbient = 0.3;
+    static constexpr double kDiffuse = 0.7;
+    static constexpr double kSpecular = 0.25;
+    static constexpr double kShininess = 24.0;
+    /// Gradients (TF-domain units per voxel of the smallest spacing) below this fade to
+    /// unshaded colour, so flat regions have no noisy normals and nothing divides by zero.
+    static constexpr double kGradientFade = 2e-3;
+};
+
+/// Per-frame statistics (DESIGN.md: every frame carries them).
+struct FrameStats {
+    std::uint32_t level = 0;          ///< pyramid level drawn
+    std::uint64_t samples = 0;        ///< volume samples classified
+    std::uint64_t bricksTotal = 0;    ///< bricks of the level
+    std::uint64_t bricksCulled = 0;   ///< outside the view frustum
+    std::uint64_t bricksSkipped = 0;  ///< transparent under the TF (never uploaded nor sampled)
+    std::uint64_t bricksVisited = 0;  ///< drawn: sampled from the pool or constant
+    std::uint64_t bricksConstant = 0; ///< of those, one value throughout (drawn without a texture)
+    std::uint64_t bricksUploaded = 0; ///< host -> GPU uploads this frame
+    std::uint64_t bytesUploaded = 0;
+    std::uint32_t batches = 0; ///< front-to-back passes (> 1 when the budget is short)
+    double uploadMs = 0.0;
+    double renderMs = 0.0;
+    double readbackMs = 0.0;
+    double totalMs = 0.0;
+};
+
+} // namespace bc::render

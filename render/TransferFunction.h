@@ -1,0 +1,131 @@
+#pragma once
+// Transfer functions: the piecewise-linear map from a sample's value (native stored units) to
+// straight RGBA, and the table both renderers classify through (see render/OPTICS.md).
+//
+// File format (configs/tf/README.md has the full text):
+//   {"name": "ct-bone", "description": "...", "shading": true,
+//    "points": [{"percentile": 90, "rgba": [1, 1, 1, 0]},
+//               {"fraction": 0.5, "rgba": [1, 0.9, 0.8, 0.4]},
+//               {"value": 1200, "rgba": [1, 1, 1, 0.9]}]}
+// - A point is placed by exactly one of "value" (native units), "fraction" (0..1 of
+//   [valueMin, valueMax]) or "percentile" (0..100 of the level-0 voxels ABOVE the most
+//   populated histogram bin, linear inside a bin; of all voxels when none lie above it).
+// - "rgba": straight colour and opacity per unit step (one voxel of the smallest spacing),
+//   each in [0, 1]. "shading" (optional) is the file's preferred default.
+// - Points are sorted by value (stable); two points at one value make a step (the later one
+//   holds at and above it). Linear between points, the end points' RGBA beyond them.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace bc::brickstore {
+struct StoreInfo;
+}
+
+namespace bc::render {
+
+/// What placing points by fraction and percentile needs to know about a volume.
+struct VolumeValueStats {
+    double valueMin = 0.0;
+    double valueMax = 0.0;
+    std::vector<std::uint64_t> histogram; ///< level-0 voxels, equal bins over [valueMin, valueMax]
+
+    /// The store's level-0 value range and histogram.
+    static VolumeValueStats fromStore(const brickstore::StoreInfo& info);
+    /// Index of the most populated bin (the first of equals). @throw std::invalid_argument if
+    /// the histogram is empty.
+    std::size_t modeBin() const;
+    /// Value below which `percent` % of the voxels above the mode bin lie (linear inside a
+    /// bin); of all voxels when none lie above it. @throw std::invalid_argument if the
+    /// histogram is empty or holds no voxel, or `percent` is outside [0, 100].
+    double percentile(double percent) const;
+};
+
+/// One placed point of a transfer function.
+struct ControlPoint {
+    double value = 0.0;          ///< native stored units
+    std::array<float, 4> rgba{}; ///< straight colour, opacity per unit step
+};
+
+/// The sampled transfer function both renderers classify through. Entry i sits at value
+/// domainMin + i (domainMax - domainMin) / (entries - 1); opacities are corrected for the step.
+/// Built once by TransferFunction::table; `rgba` must not change afterwards (maxOpacity
+/// answers from a structure built over it). Immutable use is thread-safe.
+struct TransferFunctionTable {
+    /// Wraps `rgba` (entries * 4 floats, entries >= 2) and builds the range-max structure.
+    /// @throw std::invalid_argument on a bad size or domain (not finite, max <= min).
+    TransferFunctionTable(double domainMin, double domainMax, std::vector<float> rgba);
+
+    double domainMin = 0.0;
+    double domainMax = 1.0;
+    std::uint32_t entries = 0;
+    std::vector<float> rgba; ///< entries * 4: straight colour, step-corrected opacity
+
+    /// What a linear-filtered texture returns: u = (v - domainMin) / span * (entries - 1),
+    /// clamped, linear between the two neighbouring entries, in double. NaN reads entry 0.
+    std::array<float, 4> lookup(double value) const;
+    /// Maximum alpha of entries floor(u(lo)) .. ceil(u(hi)) (clamped): an upper bound of the
+    /// opacity of every value in [lo, hi], > 0 whenever any of them is not transparent.
+    /// O(1). Bounds in either order; a NaN bound answers for the whole table.
+    double maxOpacity(double lo, double hi) const;
+    /// True when every value in [lo, hi] classifies as fully transparent.
+    bool transparent(double lo, double hi) const { return maxOpacity(lo, hi) <= 0.0; }
+
+  private:
+    std::vector<float> mAlphaMax; ///< sparse table: level k, entry i = max alpha of [i, i + 2^k)
+};
+
+class TransferFunction {
+  public:
+    static constexpr std::uint32_t kDefaultTableEntries = 4096;
+    static constexpr std::uint32_t kMaxTableEntries = 1u << 20;
+
+    /// Parses a transfer-function document (format above) and places its points for a volume.
+    /// `sourceName` names the input in errors ("tf.json", "<preset ct-bone>").
+    /// @throw RenderInputError naming the source and the field at fault (e.g. points[3].rgba[1]).
+    static TransferFunction parse(const std::string& jsonText, const std::string& sourceName,
+                                  const VolumeValueStats& stats);
+    /// A preset name (no '/', no ".json") -> the embedded preset; anything else is a file.
+    /// @throw RenderInputError on an unreadable or bad file, or an unknown name (listing presets).
+    static TransferFunction load(const std::string& fileOrPreset, const VolumeValueStats& stats);
+    /// Names of the presets embedded from configs/tf at build time, sorted.
+    static std::vector<std::string> presetNames();
+
+    const std::string& name() const { return mName; }
+    const std::string& description() const { return mDescription; }
+    /// The document's "shading" default, if it gives one.
+    std::optional<bool> shading() const { return mShading; }
+    /// The placed points, sorted by value.
+    const std::vector<ControlPoint>& points() const { return mPoints; }
+    /// Table domain: the volume's [valueMin, valueMax], widened by 1 when they are equal.
+    double domainMin() const { return mDomainMin; }
+    double domainMax() const { return mDomainMax; }
+
+    /// The exact piecewise-linear function (straight RGBA, opacity per unit step).
+    std::array<float, 4> evaluate(double value) const;
+    /// Samples the function at `entries` values over the domain, opacity corrected for
+    /// `stepVoxels` (a' = 1 - (1 - a)^stepVoxels). Each entry is evaluate() at its value, except
+    /// that a point whose opacity exceeds both entries of its cell is copied onto the nearer
+    /// of the two (if higher), so no peak narrower than a cell vanishes.
+    /// @throw std::invalid_argument if stepVoxels is not finite and > 0, or entries is outside
+    /// [2, kMaxTableEntries].
+    TransferFunctionTable table(double stepVoxels,
+                                std::uint32_t entries = kDefaultTableEntries) const;
+
+    /// a' = 1 - (1 - a)^stepVoxels, accurate for small a; a' > 0 whenever a > 0.
+    static float correctOpacity(float alpha, double stepVoxels);
+
+  private:
+    TransferFunction() = default;
+    void snapPeaks(std::vector<float>& rgba, std::uint32_t entries) const;
+
+    std::string mName, mDescription;
+    std::optional<bool> mShading;
+    std::vector<ControlPoint> mPoints;
+    double mDomainMin = 0.0, mDomainMax = 1.0;
+};
+
+} // namespace bc::render

@@ -1,0 +1,105 @@
+#include "render/detail/Gl.h"
+
+#include "render/Error.h"
+
+#include <cstdio>
+#include <vector>
+
+namespace bc::render::gl {
+
+void glCheck(const char* what) {
+    GLenum first = glGetError();
+    if (first == GL_NO_ERROR) return;
+    while (glGetError() != GL_NO_ERROR) {
+    }
+    char buf[160];
+    const char* name = first == GL_OUT_OF_MEMORY       ? "GL_OUT_OF_MEMORY"
+                       : first == GL_INVALID_VALUE     ? "GL_INVALID_VALUE"
+                       : first == GL_INVALID_OPERATION ? "GL_INVALID_OPERATION"
+                       : first == GL_INVALID_ENUM      ? "GL_INVALID_ENUM"
+                       : first == GL_INVALID_FRAMEBUFFER_OPERATION
+                           ? "GL_INVALID_FRAMEBUFFER_OPERATION"
+                           : "GL error";
+    std::snprintf(buf, sizeof buf, "%s: %s (0x%x)", what, name, unsigned(first));
+    throw RenderError(buf);
+}
+
+void deleteTexture(GLuint n) {
+    glDeleteTextures(1, &n);
+}
+void deleteBuffer(GLuint n) {
+    glDeleteBuffers(1, &n);
+}
+void deleteFramebuffer(GLuint n) {
+    glDeleteFramebuffers(1, &n);
+}
+void deleteVertexArray(GLuint n) {
+    glDeleteVertexArrays(1, &n);
+}
+void deleteProgram(GLuint n) {
+    glDeleteProgram(n);
+}
+
+Texture createTexture(GLenum target) {
+    GLuint n = 0;
+    glCreateTextures(target, 1, &n);
+    return Texture(n);
+}
+
+Buffer createBuffer() {
+    GLuint n = 0;
+    glCreateBuffers(1, &n);
+    return Buffer(n);
+}
+
+namespace {
+
+GLuint compile(const std::string& name, GLenum stage, const std::string& source) {
+    GLuint shader = glCreateShader(stage);
+    const char* text = source.c_str();
+    glShaderSource(shader, 1, &text, nullptr);
+    glCompileShader(shader);
+    GLint ok = 0;
+    glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+    if (ok) return shader;
+    GLint length = 0;
+    glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &length);
+    std::vector<char> log(std::size_t(length) + 1, '\0');
+    glGetShaderInfoLog(shader, length, nullptr, log.data());
+    glDeleteShader(shader);
+    throw RenderError("shader " + name + (stage == GL_VERTEX_SHADER ? " (vertex)" : " (fragment)") +
+                      " does not compile: " + log.data());
+}
+
+} // namespace
+
+Program buildProgram(const std::string& name, const std::string& vertexSource,
+                     const std::string& fragmentSource) {
+    Program program(glCreateProgram());
+    GLuint vs = compile(name, GL_VERTEX_SHADER, vertexSource);
+    GLuint fs = 0;
+    try {
+        fs = compile(name, GL_FRAGMENT_SHADER, fragmentSource);
+    } catch (...) {
+        glDeleteShader(vs);
+        throw;
+    }
+    glAttachShader(program.get(), vs);
+    glAttachShader(program.get(), fs);
+    glLinkProgram(program.get());
+    glDeleteShader(vs);
+    glDeleteShader(fs);
+    GLint ok = 0;
+    glGetProgramiv(program.get(), GL_LINK_STATUS, &ok);
+    if (!ok) {
+        GLint length = 0;
+        glGetProgramiv(program.get(), GL_INFO_LOG_LENGTH, &length);
+        std::vector<char> log(std::size_t(length) + 1, '\0');
+        glGetProgramInfoLog(program.get(), length, nullptr, log.data());
+        throw RenderError("shader " + name + " does not link: " + log.data());
+    }
+    glCheck(("building shader " + name).c_str());
+    return program;
+}
+
+} // namespace bc::render::gl

@@ -1,0 +1,63 @@
+#pragma once
+// OpenGL for the render module's own sources: the core-profile prototypes (GLVND's
+// libOpenGL), move-only owners of GL objects, and the one place GL errors become exceptions.
+// Every object is created and destroyed on the thread that owns the context.
+#define GL_GLEXT_PROTOTYPES 1
+#include <GL/glcorearb.h>
+
+#include <string>
+#include <utility>
+
+namespace bc::render::gl {
+
+/// Throws RenderError naming `what` if glGetError reports anything (clears all pending errors).
+void glCheck(const char* what);
+
+/// Move-only owner of one GL name; Deleter is a function deleting one name.
+template <void (*Deleter)(GLuint)> class Handle {
+  public:
+    Handle() = default;
+    explicit Handle(GLuint name) : mName(name) {}
+    Handle(Handle&& o) noexcept : mName(std::exchange(o.mName, 0)) {}
+    Handle& operator=(Handle&& o) noexcept {
+        if (this != &o) {
+            reset();
+            mName = std::exchange(o.mName, 0);
+        }
+        return *this;
+    }
+    Handle(const Handle&) = delete;
+    Handle& operator=(const Handle&) = delete;
+    ~Handle() { reset(); }
+    GLuint get() const { return mName; }
+    explicit operator bool() const { return mName != 0; }
+    void reset() {
+        if (mName) Deleter(mName);
+        mName = 0;
+    }
+
+  private:
+    GLuint mName = 0;
+};
+
+void deleteTexture(GLuint n);
+void deleteBuffer(GLuint n);
+void deleteFramebuffer(GLuint n);
+void deleteVertexArray(GLuint n);
+void deleteProgram(GLuint n);
+
+using Texture = Handle<deleteTexture>;
+using Buffer = Handle<deleteBuffer>;
+using Framebuffer = Handle<deleteFramebuffer>;
+using VertexArray = Handle<deleteVertexArray>;
+using Program = Handle<deleteProgram>;
+
+Texture createTexture(GLenum target);
+Buffer createBuffer();
+
+/// Compiles and links a program from vertex and fragment (or a single compute) source.
+/// @throw RenderError with the driver's log, naming `name`.
+Program buildProgram(const std::string& name, const std::string& vertexSource,
+                     const std::string& fragmentSource);
+
+} // namespace bc::render::gl

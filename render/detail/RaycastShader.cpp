@@ -1,0 +1,163 @@
+#include "render/detail/RaycastShader.h"
+
+namespace bc::render::detail {
+
+const std::string& raycastVertexShader() {
+    static const std::string s = R"(#version 450 core
+void main() {
+    vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+)";
+    return s;
+}
+
+// The optical model is render/OPTICS.md; ReferenceRenderer.cpp is its double-precision twin.
+const std::string& raycastFragmentShader() {
+    static const std::string s = R"(#version 450 core
+layout(binding = 0) uniform sampler3D uPool;
+layout(binding = 1) uniform sampler1D uTf;
+layout(binding = 2) uniform sampler2D uPrev;
+layout(std430, binding = 0) readonly buffer Pages { ivec2 page[]; };
+layout(std430, binding = 1) buffer Counters { uint sampleCount; };
+
+uniform vec2 uViewport;
+uniform vec3 uEye, uForward, uRight, uUp;
+uniform bool uOrtho;
+uniform vec3 uInvSpacing;     // voxels per mm
+uniform vec3 uDims;           // voxels of the level
+uniform float uStepMm;
+uniform int uBrick, uApron, uEdge;
+uniform ivec3 uGrid;          // bricks per axis
+uniform ivec3 uSlotGrid;      // slots per axis of the pool
+uniform vec3 uInvPoolSize;
+uniform float uTfScale, uTfOffset;   // texel value -> TF entry position u (N - 1)
+uniform int uTfEntries;
+uniform float uErt;           // > 1 disables early termination
+uniform bool uShading, uFirstPass, uHardwareFilter;
+uniform vec3 uGradScale;      // texel difference -> TF-domain units per voxel of the smallest spacing
+uniform float uGradFade;
+uniform float uAmbient, uDiffuse, uSpecular, uShininess;
+
+out vec4 outColor;
+
+// Linear between the two neighbouring table entries, with full-precision weights (texture
+// filtering hardware may quantise them, which would blend in entries the skip test excluded).
+vec4 classify(float texelValue) {
+    float u = clamp(texelValue * uTfScale + uTfOffset, 0.0, float(uTfEntries - 1));
+    int i = min(int(u), uTfEntries - 2);
+    return mix(texelFetch(uTf, i, 0), texelFetch(uTf, i + 1, 0), u - float(i));
+}
+
+ivec3 slotOrigin(int slot) {
+    return ivec3(slot % uSlotGrid.x, (slot / uSlotGrid.x) % uSlotGrid.y, slot / (uSlotGrid.x * uSlotGrid.y)) * uEdge;
+}
+
+// Trilinear interpolation at q, a position in slot texel space less one half (so voxel j of
+// the stored brick sits at q = j), clamped to the slot. Positions stay slot-relative: adding
+// the slot's origin before splitting off the fraction would round q differently in each slot.
+// The weights are full precision from 8 texel fetches; filtering hardware quantises them (8
+// bits on llvmpipe and NVIDIA), so uHardwareFilter trades that exactness for one fetch.
+float fetch(vec3 q, ivec3 slot) {
+    q = clamp(q, vec3(0.0), vec3(float(uEdge - 1)));
+    if (uHardwareFilter) return texture(uPool, (vec3(slot) + q + 0.5) * uInvPoolSize).r;
+    vec3 b = floor(q);
+    vec3 f = q - b;
+    ivec3 i0 = slot + ivec3(b);
+    ivec3 i1 = slot + min(ivec3(b) + 1, ivec3(uEdge - 1));
+    float c00 = mix(texelFetch(uPool, i0, 0).r, texelFetch(uPool, ivec3(i1.x, i0.y, i0.z), 0).r, f.x);
+    float c10 = mix(texelFetch(uPool, ivec3(i0.x, i1.y, i0.z), 0).r, texelFetch(uPool, ivec3(i1.x, i1.y, i0.z), 0).r, f.x);
+    float c01 = mix(texelFetch(uPool, ivec3(i0.x, i0.y, i1.z), 0).r, texelFetch(uPool, ivec3(i1.x, i0.y, i1.z), 0).r, f.x);
+    float c11 = mix(texelFetch(uPool, ivec3(i0.x, i1.y, i1.z), 0).r, texelFetch(uPool, i1, 0).r, f.x);
+    return mix(mix(c00, c10, f.y), mix(c01, c11, f.y), f.z);
+}
+
+vec4 shade(vec4 c, vec3 q, ivec3 slot, vec3 dir) {
+    vec3 g = vec3(fetch(q + vec3(1, 0, 0), slot) - fetch(q - vec3(1, 0, 0), slot),
+                  fetch(q + vec3(0, 1, 0), slot) - fetch(q - vec3(0, 1, 0), slot),
+                  fetch(q + vec3(0, 0, 1), slot) - fetch(q - vec3(0, 0, 1), slot)) * uGradScale;
+    float len = length(g);
+    if (len <= 0.0) return c;
+    float diff = abs(dot(g / len, dir));
+    vec3 lit = c.rgb * (uAmbient + uDiffuse * diff) + uSpecular * pow(diff, uShininess);
+    return vec4(mix(c.rgb, lit, clamp(len / uGradFade, 0.0, 1.0)), c.a);
+}
+
+void composite(inout vec4 acc, vec4 c) {
+    acc.rgb += (1.0 - acc.a) * c.a * c.rgb;
+    acc.a += (1.0 - acc.a) * c.a;
+}
+
+void main() {
+    vec4 acc = uFirstPass ? vec4(0.0) : texelFetch(uPrev, ivec2(gl_FragCoord.xy), 0);
+    if (acc.a >= uErt) { outColor = acc; return; }
+    vec2 s = 2.0 * gl_FragCoord.xy / uViewport - 1.0;
+    vec3 o = uOrtho ? uEye + s.x * uRight + s.y * uUp : uEye;
+    vec3 d = uOrtho ? uForward : normalize(uForward + s.x * uRight + s.y * uUp);
+    vec3 ov = o * uInvSpacing, dv = d * uInvSpacing;   // voxel position at t mm: ov + t dv
+
+    // Box [0, dims] in voxel space; parallel rays inside a slab stay inside.
+    float t0 = 0.0, t1 = 3.0e38;
+    for (int a = 0; a < 3; ++a) {
+        if (dv[a] == 0.0) { if (ov[a] < 0.0 || ov[a] > uDims[a]) { outColor = acc; return; } continue; }
+        float ta = -ov[a] / dv[a], tb = (uDims[a] - ov[a]) / dv[a];
+        t0 = max(t0, min(ta, tb));
+        t1 = min(t1, max(ta, tb));
+    }
+    int total = int(ceil((t1 - t0) / uStepMm - 0.5));
+    if (total <= 0) { outColor = acc; return; }
+
+    // Brick DDA: sample k (at t0 + (k + 0.5) step) belongs to the brick whose interval holds it.
+    vec3 pin = ov + dv * t0;
+    ivec3 cell = clamp(ivec3(floor(pin / float(uBrick))), ivec3(0), uGrid - 1);
+    ivec3 stepDir = ivec3(sign(dv));
+    vec3 tDelta, tMax;
+    for (int a = 0; a < 3; ++a) {
+        if (stepDir[a] == 0) { tDelta[a] = 3.0e38; tMax[a] = 3.0e38; continue; }
+        tDelta[a] = float(uBrick) / abs(dv[a]);
+        float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * uBrick);
+        tMax[a] = (plane - ov[a]) / dv[a];
+    }
+    uint taken = 0u;
+    int k = 0;
+    while (k < total) {
+        float tOut = min(min(tMax.x, tMax.y), tMax.z);
+        int kEnd = min(total, int(ceil((tOut - t0) / uStepMm - 0.5)));
+        ivec2 e = page[(cell.z * uGrid.y + cell.y) * uGrid.x + cell.x];
+        if (e.x >= 0 && kEnd > k) {
+            ivec3 slot = slotOrigin(e.x);
+            vec3 rel = (ov - vec3(cell * uBrick)) + (float(uApron) - 0.5);
+            for (; k < kEnd; ++k) {
+                vec3 q = rel + dv * (t0 + (float(k) + 0.5) * uStepMm);
+                vec4 c = classify(fetch(q, slot));
+                ++taken;
+                if (c.a <= 0.0) continue;
+                if (uShading) c = shade(c, q, slot, d);
+                composite(acc, c);
+                if (acc.a >= uErt) break;
+            }
+        } else if (e.x == -2 && kEnd > k) {
+            vec4 c = classify(intBitsToFloat(e.y));
+            if (c.a <= 0.0) { taken += uint(kEnd - k); k = kEnd; }
+            for (; k < kEnd; ++k) {
+                ++taken;
+                if (c.a <= 0.0) continue;
+                composite(acc, c);
+                if (acc.a >= uErt) break;
+            }
+        }
+        if (acc.a >= uErt) break;
+        k = max(k, kEnd);
+        int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
+        cell[a] += stepDir[a];
+        tMax[a] += tDelta[a];
+        if (cell[a] < 0 || cell[a] >= uGrid[a]) break;
+    }
+    atomicAdd(sampleCount, taken);
+    outColor = acc;
+}
+)";
+    return s;
+}
+
+} // namespace bc::render::detail

@@ -1,0 +1,227 @@
+// brickcast render STORE -o OUT.png: one frame on the GPU raycaster (or the CPU reference).
+#include "brickstore/BrickCache.h"
+#include "brickstore/BrickStore.h"
+#include "render/BrickPlan.h"
+#include "render/Camera.h"
+#include "render/EglContext.h"
+#include "render/Image.h"
+#include "render/Raycaster.h"
+#include "render/ReferenceRenderer.h"
+#include "render/TransferFunction.h"
+#include "server/cli/Commands.h"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+
+namespace bc::cli {
+namespace {
+
+struct RenderCliOptions {
+    std::string store, output, size = "256,256", tf = "ct-skin", orbit, eye, target, up,
+                               ert = "0.99", skip = "bricks", statsPath;
+    double fov = 30.0, step = 1.0;
+    bool ortho = false, noShading = false, reference = false, interactive = false;
+    std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
+    std::int32_t level = 0;
+};
+
+std::vector<double> parseNumbers(const std::string& text, const std::string& what,
+                                 std::size_t minCount, std::size_t maxCount) {
+    std::vector<double> out;
+    std::size_t pos = 0;
+    while (pos <= text.size()) {
+        const std::size_t comma = std::min(text.find(',', pos), text.size());
+        const std::string part = text.substr(pos, comma - pos);
+        std::size_t used = 0;
+        double v = 0;
+        try {
+            v = std::stod(part, &used);
+        } catch (const std::exception&) {
+            used = 0;
+        }
+        if (used == 0 || used != part.size() || !std::isfinite(v))
+            throw std::invalid_argument(what + ": '" + part + "' is not a finite number");
+        out.push_back(v);
+        pos = comma + 1;
+    }
+    if (out.size() < minCount || out.size() > maxCount)
+        throw std::invalid_argument(what + ": expected " + std::to_string(minCount) +
+                                    (maxCount > minCount ? " to " + std::to_string(maxCount) : "") +
+                                    " numbers, got '" + text + "'");
+    return out;
+}
+
+glm::dvec3 vec3Of(const std::string& text, const std::string& what) {
+    const auto v = parseNumbers(text, what, 3, 3);
+    return {v[0], v[1], v[2]};
+}
+
+render::Camera cameraOf(const RenderCliOptions& o, const render::Box& box) {
+    render::Camera c;
+    if (!o.eye.empty() || !o.target.empty()) {
+        if (o.eye.empty() || o.target.empty())
+            throw std::invalid_argument("--eye and --target go together");
+        c.eye = vec3Of(o.eye, "--eye");
+        c.target = vec3Of(o.target, "--target");
+        c.up = o.up.empty() ? glm::dvec3(0, 0, 1) : vec3Of(o.up, "--up");
+        c.fovYDeg = o.fov;
+        c.orthoHeight = 2.0 * box.radius();
+    } else {
+        const auto v = parseNumbers(o.orbit.empty() ? "30,20" : o.orbit, "--orbit", 2, 3);
+        c = render::Camera::orbit(box, v[0], v[1], v.size() > 2 ? v[2] : 1.0, o.fov);
+    }
+    c.orthographic = o.ortho;
+    c.validate();
+    return c;
+}
+
+render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
+    render::RenderOptions r;
+    const auto wh = parseNumbers(o.size, "--size", 2, 2);
+    if (wh[0] < 1 || wh[1] < 1 || wh[0] > 16384 || wh[1] > 16384 || wh[0] != std::floor(wh[0]) ||
+        wh[1] != std::floor(wh[1]))
+        throw std::invalid_argument("--size: '" + o.size + "' must be two integers in 1..16384");
+    r.width = std::uint32_t(wh[0]);
+    r.height = std::uint32_t(wh[1]);
+    r.stepVoxels = o.step;
+    r.earlyTermination = o.ert != "off";
+    if (r.earlyTermination) r.ertThreshold = parseNumbers(o.ert, "--ert", 1, 1)[0];
+    r.skip = render::parseSkipMode(o.skip);
+    r.shading = !o.noShading;
+    r.level = o.level;
+    r.interactive = o.interactive;
+    r.validate();
+    return r;
+}
+
+nlohmann::json statsJson(const render::FrameStats& s, const std::string& renderer,
+                         const render::RenderOptions& o) {
+    const double pixels = double(o.width) * o.height;
+    return {{"renderer", renderer},
+            {"width", o.width},
+            {"height", o.height},
+            {"level", s.level},
+            {"samples", s.samples},
+            {"samplesPerPixel", double(s.samples) / pixels},
+            {"bricksTotal", s.bricksTotal},
+            {"bricksCulled", s.bricksCulled},
+            {"bricksSkipped", s.bricksSkipped},
+            {"bricksVisited", s.bricksVisited},
+            {"bricksConstant", s.bricksConstant},
+            {"bricksUploaded", s.bricksUploaded},
+            {"bytesUploaded", s.bytesUploaded},
+            {"batches", s.batches},
+            {"uploadMs", s.uploadMs},
+            {"renderMs", s.renderMs},
+            {"readbackMs", s.readbackMs},
+            {"totalMs", s.totalMs}};
+}
+
+void runRender(const RenderCliOptions& o) {
+    auto store = brickstore::BrickStore::open(o.store);
+    const render::RenderOptions options = renderOptionsOf(o);
+    const auto tf =
+        render::TransferFunction::load(o.tf, render::VolumeValueStats::fromStore(store->info()));
+    const render::Camera camera = cameraOf(o, render::LevelGeometry::of(*store, 0).box);
+    render::FrameStats stats;
+    render::Image image;
+    std::string renderer;
+    if (o.reference) {
+        const auto level = std::min<std::uint32_t>(
+            std::uint32_t(o.level), std::uint32_t(store->layout().levels().size() - 1));
+        render::ReferenceVolume volume(*store, level);
+        image = render::renderReference(*store, volume, tf, camera, options, stats);
+        renderer = "CPU reference (double)";
+    } else {
+        render::EglContext context;
+        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
+        render::Raycaster raycaster({o.gpuBudgetMb << 20});
+        image = raycaster.render(*store, cache, tf, camera, options, stats);
+        renderer = context.renderer() + " via EGL " + context.platform();
+    }
+    render::writePng(o.output, image);
+    std::printf(
+        "%s: %ux%u, level %u, %.1f ms (upload %.1f, render %.1f, readback %.1f), %.1f "
+        "samples/pixel, "
+        "bricks %llu visited / %llu skipped / %llu culled, %llu uploaded (%s), %u batch(es) [%s]\n",
+        o.output.c_str(), options.width, options.height, stats.level, stats.totalMs, stats.uploadMs,
+        stats.renderMs, stats.readbackMs,
+        double(stats.samples) / (double(options.width) * options.height),
+        (unsigned long long)stats.bricksVisited, (unsigned long long)stats.bricksSkipped,
+        (unsigned long long)stats.bricksCulled, (unsigned long long)stats.bricksUploaded,
+        formatBytes(double(stats.bytesUploaded)).c_str(), stats.batches, renderer.c_str());
+    if (!o.statsPath.empty()) {
+        std::ofstream f(o.statsPath);
+        f << statsJson(stats, renderer, options).dump(2) << "\n";
+        if (!f) throw std::runtime_error(o.statsPath + ": cannot write the stats");
+    }
+}
+
+} // namespace
+
+void renderStoreToPng(const std::string& storePath, const std::string& output,
+                      const std::string& tfName, const std::string& orbit, const std::string& size,
+                      bool reference) {
+    RenderCliOptions o;
+    o.store = storePath;
+    o.output = output;
+    o.tf = tfName;
+    o.orbit = orbit;
+    o.size = size;
+    o.reference = reference;
+    runRender(o);
+}
+
+void addRenderCommand(CLI::App& app) {
+    auto o = std::make_shared<RenderCliOptions>();
+    auto* cmd = app.add_subcommand(
+        "render", "Render one frame of a store to PNG (GPU raycaster or CPU reference)");
+    cmd->add_option("STORE", o->store, "Store file")->required();
+    cmd->add_option("-o,--output", o->output, "PNG to write")->required();
+    cmd->add_option("--size", o->size, "Image W,H")->capture_default_str();
+    cmd->add_option(
+           "--tf", o->tf,
+           "Transfer function: a JSON file or a preset (" +
+               [] {
+                   std::string s;
+                   for (const auto& n : render::TransferFunction::presetNames())
+                       s += (s.empty() ? "" : ", ") + n;
+                   return s;
+               }() +
+               ")")
+        ->capture_default_str();
+    auto* orbit =
+        cmd->add_option("--orbit", o->orbit, "AZ,EL[,DIST] around the volume (default 30,20,1)");
+    auto* eye = cmd->add_option("--eye", o->eye, "Camera position X,Y,Z (mm)")->excludes(orbit);
+    cmd->add_option("--target", o->target, "Point looked at X,Y,Z (mm)")
+        ->excludes(orbit)
+        ->needs(eye);
+    cmd->add_option("--up", o->up, "Up vector X,Y,Z")->excludes(orbit)->needs(eye);
+    auto* fov = cmd->add_option("--fov", o->fov, "Vertical field of view in degrees")
+                    ->capture_default_str();
+    cmd->add_flag("--ortho", o->ortho, "Orthographic projection")->excludes(fov);
+    cmd->add_option("--step", o->step, "Sample distance in voxels of the smallest spacing")
+        ->capture_default_str();
+    cmd->add_option("--ert", o->ert, "Early ray termination threshold, or 'off'")
+        ->capture_default_str();
+    cmd->add_option("--skip", o->skip, "Empty-space skipping: none, bricks, all")
+        ->capture_default_str();
+    cmd->add_flag("--no-shading", o->noShading, "No gradient shading");
+    cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")
+        ->capture_default_str();
+    cmd->add_option("--host-budget-mb", o->hostBudgetMb, "Host brick cache budget")
+        ->capture_default_str();
+    cmd->add_option("--level", o->level, "Pyramid level (0 = full resolution)")
+        ->capture_default_str();
+    cmd->add_flag("--interactive", o->interactive,
+                  "Draw a coarser level when the view exceeds the GPU budget");
+    cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
+    cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");
+    cmd->callback([o] { runRender(*o); });
+}
+
+} // namespace bc::cli
