@@ -57,12 +57,15 @@ struct Technique {
     const char* name;
     render::SkipMode skip;
     bool ert;
+    bool hardwareFilter;
 };
 constexpr Technique kTechniques[] = {
-    {"plain", render::SkipMode::None, false},
-    {"+bricks", render::SkipMode::Bricks, false},
-    {"+bricks +ERT", render::SkipMode::Bricks, true},
+    {"plain", render::SkipMode::None, false, false},
+    {"+bricks", render::SkipMode::Bricks, false, false},
+    {"+bricks +ERT", render::SkipMode::Bricks, true, false},
+    {"+bricks +ERT, hardware filtering", render::SkipMode::Bricks, true, true},
 };
+constexpr int kTechniqueCount = int(std::size(kTechniques));
 
 struct Row {
     double medianMs = 0, samplesPerPixel = 0, psnr = 0, ssim = 0;
@@ -83,6 +86,7 @@ Row measure(brickstore::BrickStore& store, const render::TransferFunction& tf, c
     render::RenderOptions o = base;
     o.skip = t.skip;
     o.earlyTermination = t.ert;
+    o.hardwareFilter = t.hardwareFilter;
     Row row;
     std::vector<double> ms;
     double samples = 0;
@@ -117,13 +121,13 @@ std::unique_ptr<brickstore::BrickStore> ingestTemp(brickstore::VolumeSource& sou
 }
 
 void printTable(const std::string& title,
-                const std::vector<std::pair<std::string, std::array<Row, 3>>>& rows) {
+                const std::vector<std::pair<std::string, std::array<Row, kTechniqueCount>>>& rows) {
     std::printf("\n%s\n\n", title.c_str());
     std::printf(
         "| dataset / TF | technique | ms/frame | samples/pixel | speed-up | PSNR dB | SSIM |\n");
     std::printf("|---|---|---:|---:|---:|---:|---:|\n");
     for (const auto& [name, r] : rows)
-        for (int i = 0; i < 3; ++i)
+        for (int i = 0; i < kTechniqueCount; ++i)
             std::printf("| %s | %s | %.1f | %.1f | %.2fx | %.1f | %.4f |\n",
                         i == 0 ? name.c_str() : "", kTechniques[i].name, r[i].medianMs,
                         r[i].samplesPerPixel, r[0].medianMs / r[i].medianMs, r[i].psnr, r[i].ssim);
@@ -159,7 +163,7 @@ int main(int argc, char** argv) {
     std::filesystem::create_directories(tmp);
     render::RenderOptions base;
     base.width = base.height = std::uint32_t(size);
-    std::vector<std::pair<std::string, std::array<Row, 3>>> rows;
+    std::vector<std::pair<std::string, std::array<Row, kTechniqueCount>>> rows;
     for (const auto& d : datasets(data)) {
         auto source = brickstore::openSource(d.spec);
         auto store = ingestTemp(*source, tmp + "/scan.bcs", std::uint32_t(brick));
@@ -172,8 +176,8 @@ int main(int argc, char** argv) {
             render::Camera::orbit(render::LevelGeometry::of(*store, 0).box, 30.0, 20.0);
         const render::Image reference =
             render::renderReference(*store, volume, tf, camera0, ro, rs);
-        std::array<Row, 3> r;
-        for (int i = 0; i < 3; ++i)
+        std::array<Row, kTechniqueCount> r;
+        for (int i = 0; i < kTechniqueCount; ++i)
             r[i] = measure(*store, tf, kTechniques[i], base, frames, budgetMb << 20, &reference);
         rows.push_back({d.name + " / " + d.preset, r});
         std::fprintf(stderr, "done %s / %s (reference %.0f ms)\n", d.name.c_str(), d.preset.c_str(),
@@ -193,8 +197,8 @@ int main(int argc, char** argv) {
         auto store = ingestTemp(*source, tmp + "/big.bcs", 64);
         const auto tf = render::TransferFunction::load(
             "vessels", render::VolumeValueStats::fromStore(store->info()));
-        std::array<Row, 3> r;
-        for (int i = 0; i < 3; ++i)
+        std::array<Row, kTechniqueCount> r;
+        for (int i = 0; i < kTechniqueCount; ++i)
             r[i] = measure(*store, tf, kTechniques[i], base, frames, bigBudgetMb << 20, nullptr);
         const auto& dims = store->info().volume.dims;
         printTable("Generated vessels " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) +

@@ -73,6 +73,7 @@ render::Camera cameraOf(const RenderCliOptions& o, const render::Box& box) {
     } else {
         const auto v = parseNumbers(o.orbit.empty() ? "30,20" : o.orbit, "--orbit", 2, 3);
         c = render::Camera::orbit(box, v[0], v[1], v.size() > 2 ? v[2] : 1.0, o.fov);
+        if (!o.up.empty()) c.up = vec3Of(o.up, "--up");  // e.g. 0,0,-1 for scans stored head-down
     }
     c.orthographic = o.ortho;
     c.validate();
@@ -200,7 +201,7 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--target", o->target, "Point looked at X,Y,Z (mm)")
         ->excludes(orbit)
         ->needs(eye);
-    cmd->add_option("--up", o->up, "Up vector X,Y,Z")->excludes(orbit)->needs(eye);
+    cmd->add_option("--up", o->up, "Up vector X,Y,Z (default +z)");
     auto* fov = cmd->add_option("--fov", o->fov, "Vertical field of view in degrees")
                     ->capture_default_str();
     cmd->add_flag("--ortho", o->ortho, "Orthographic projection")->excludes(fov);

@@ -86,17 +86,17 @@ TEST(RaycasterOutOfCore, BudgetSmallerThanTheWorkingSetGivesTheSameImage) {
     const auto tf = TransferFunction::load("ct-skin", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 60, 30);
     RenderOptions o;
-    Raycaster unlimited({256ull << 20}), small({8ull << 20}); // 8 MiB: 30 slots of 36^3 u16
+    Raycaster unlimited({256ull << 20}), small({4ull << 20}); // 4 MiB: 44 slots of 36^3 u16
     FrameStats su, ss;
     const Image a = test::gpuFrame(*t, unlimited, tf, camera, o, &su);
     const Image b = test::gpuFrame(*t, small, tf, camera, o, &ss);
     EXPECT_EQ(su.batches, 1u);
-    EXPECT_GT(ss.batches, 2u);
+    EXPECT_GE(ss.batches, 3u);
     std::printf("[out-of-core] %llu sampled bricks in %u batches of <= %u slots\n",
                 (unsigned long long)(ss.bricksVisited - ss.bricksConstant), ss.batches,
                 small.pool()->capacity());
     const auto c = compareImages(a, b);
-    test::printComparison("cthead budget 8 MiB vs 256 MiB", c);
+    test::printComparison("cthead budget 4 MiB vs 256 MiB", c);
     EXPECT_LE(c.maxAbs, 1.0 / 255.0);
 }
 

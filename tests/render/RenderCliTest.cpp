@@ -1,0 +1,116 @@
+// `brickcast render`: end to end through the command line, bad input named, no usable EGL a
+// clear error (never a crash), and the interactive level choice reported.
+#include "RenderTestSupport.h"
+#include "render/Image.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <fstream>
+#include <sys/wait.h>
+
+namespace bc::render {
+namespace {
+
+struct Output {
+    int exitCode = -1;
+    std::string text;  ///< stdout and stderr together
+};
+
+Output brickcast(const std::string& args, const std::string& env = "") {
+    const std::string cmd = env + " " + std::string(BC_BRICKCAST_EXE) + " " + args + " 2>&1";
+    Output out;
+    FILE* p = ::popen(cmd.c_str(), "r");
+    if (!p) return out;
+    std::array<char, 4096> buf{};
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.text.append(buf.data(), n);
+    const int status = ::pclose(p);
+    out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return out;
+}
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+class RenderCli : public ::testing::Test {
+protected:
+    void SetUp() override {
+        store = dir.file("phantom.bcs");
+        auto r = brickcast("ingest synth:phantom --dims 64,64,48 --brick 16 -o " + store);
+        ASSERT_EQ(r.exitCode, 0) << r.text;
+    }
+    test::TempDir dir;
+    std::string store;
+};
+
+TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
+    const std::string gpu = dir.file("gpu.png"), ref = dir.file("ref.png"), stats = dir.file("s.json");
+    auto a = brickcast("render " + store + " -o " + gpu + " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --stats " + stats);
+    ASSERT_EQ(a.exitCode, 0) << a.text;
+    auto b = brickcast("render " + store + " -o " + ref + " --size 96,64 --tf ct-bone --orbit 40,25 --reference");
+    ASSERT_EQ(b.exitCode, 0) << b.text;
+    const Image ga = readPng(gpu), rb = readPng(ref);
+    EXPECT_EQ(ga.width, 96u);
+    EXPECT_EQ(ga.height, 64u);
+    EXPECT_LE(compareImages(ga, rb).maxAbs, 1.0 / 255.0 + 1e-6);
+    std::ifstream f(stats);
+    const auto j = nlohmann::json::parse(f);
+    EXPECT_GT(j.at("samples").get<double>(), 0.0);
+    EXPECT_EQ(j.at("level").get<int>(), 0);
+    EXPECT_EQ(j.at("batches").get<int>(), 1);
+    auto c = brickcast("compare " + gpu + " " + ref);
+    EXPECT_EQ(c.exitCode, 0) << c.text;
+}
+
+TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
+    const std::string out = dir.file("x.png");
+    auto size = brickcast("render " + store + " -o " + out + " --size 0,64");
+    EXPECT_NE(size.exitCode, 0);
+    EXPECT_TRUE(contains(size.text, "--size")) << size.text;
+    auto eye = brickcast("render " + store + " -o " + out + " --eye 1,2,nan --target 0,0,0");
+    EXPECT_NE(eye.exitCode, 0);
+    EXPECT_TRUE(contains(eye.text, "--eye")) << eye.text;
+    const std::string tf = dir.file("bad.json");
+    test::writeFile(tf, std::string(R"({"points":[{"value":1,"rgba":[1,1,1,2]}]})"));
+    auto bad = brickcast("render " + store + " -o " + out + " --tf " + tf);
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_TRUE(contains(bad.text, "bad.json") && contains(bad.text, "points[0].rgba[3]")) << bad.text;
+    auto preset = brickcast("render " + store + " -o " + out + " --tf no-such-preset");
+    EXPECT_NE(preset.exitCode, 0);
+    EXPECT_TRUE(contains(preset.text, "ct-bone")) << "lists the presets: " << preset.text;
+    auto skip = brickcast("render " + store + " -o " + out + " --skip sometimes");
+    EXPECT_NE(skip.exitCode, 0);
+    EXPECT_TRUE(contains(skip.text, "sometimes")) << skip.text;
+    EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// GLVND with no vendor library: EGL offers no display at all.
+TEST_F(RenderCli, NoUsableEglIsAClearErrorNotACrash) {
+    auto r = brickcast("render " + store + " -o " + dir.file("x.png"),
+                       "__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent.json EGL_PLATFORM=surfaceless");
+    EXPECT_EQ(r.exitCode, 1) << r.text;
+    EXPECT_TRUE(contains(r.text, "no usable EGL")) << r.text;
+}
+
+// Interactive mode draws a coarser level when level 0 does not fit the budget, and says so.
+TEST(RaycasterInteractive, DrawsACoarserLevelWhenTheViewExceedsTheBudgetAndReportsIt) {
+    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {128, 128, 96}, 2);
+    test::glContext();
+    auto t = test::ingestStore(*source, {16, 2, 8});
+    const auto tf = TransferFunction::load("ct-bone", t->stats);
+    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
+    Raycaster raycaster({1ull << 20});  // 1 MiB: 64 slots of 20^3 u8... fewer than level 0 needs
+    RenderOptions o;
+    o.width = o.height = 96;
+    FrameStats full, fast;
+    test::gpuFrame(*t, raycaster, tf, camera, o, &full);
+    o.interactive = true;
+    const Image coarse = test::gpuFrame(*t, raycaster, tf, camera, o, &fast);
+    EXPECT_EQ(full.level, 0u);
+    EXPECT_GT(full.batches, 1u);
+    EXPECT_GT(fast.level, 0u);
+    EXPECT_EQ(fast.batches, 1u);
+    EXPECT_TRUE(test::allFinite(coarse));
+}
+
+} // namespace
+} // namespace bc::render
