@@ -165,6 +165,98 @@ void setFrameUniforms(GLuint p, const LevelGeometry& g, const ViewBasis& v, cons
 
 } // namespace
 
+namespace {
+
+/// Unpins the pool's slots when a batch ends, also when a brick load throws mid-batch.
+struct BatchPins {
+    BrickPool& pool;
+    ~BatchPins() { pool.unpinAll(); }
+};
+
+void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats) {
+    stats.level = level;
+    stats.bricksTotal = plan.total;
+    stats.bricksCulled = plan.culled;
+    stats.bricksSkipped = plan.skipped;
+    stats.bricksVisited = plan.drawn.size();
+    stats.bricksConstant = plan.constant;
+}
+
+} // namespace
+
+std::vector<std::uint64_t> Raycaster::fillBatch(const BrickPlan& plan, std::size_t& next,
+                                                std::uint64_t levelFirst,
+                                                brickstore::BrickCache& cache,
+                                                std::vector<std::int32_t>& pages) {
+    const TexelMapping mapping = mPool->texelMapping();
+    std::vector<std::uint64_t> batch;
+    for (; next < plan.drawn.size(); ++next) {
+        const PlannedBrick& b = plan.drawn[next];
+        if (b.draw == BrickDraw::Constant) {
+            const float texel = float((double(b.constantValue) - mapping.offset) / mapping.scale);
+            pages[2 * b.index] = detail::kPageConstant;
+            std::memcpy(&pages[2 * b.index + 1], &texel, 4);
+            batch.push_back(b.index);
+            continue;
+        }
+        brickstore::BrickPin pin;
+        auto slot = mPool->acquire(levelFirst + b.index, [&] {
+            pin = cache.pin(b.key);
+            return pin.data();
+        });
+        if (!slot) break; // every slot holds a brick of this batch
+        pages[2 * b.index] = std::int32_t(*slot);
+        batch.push_back(b.index);
+    }
+    if (next < plan.drawn.size() && batch.empty())
+        throw RenderError("GPU brick pool has no free slot for a batch");
+    return batch;
+}
+
+void Raycaster::drawPass(int pass) {
+    const GLuint program = mGpu->program.get();
+    glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[(pass + 1) % 2].get());
+    glBindTextureUnit(2, mGpu->accum[pass % 2].get());
+    glProgramUniform1i(program, glGetUniformLocation(program, "uFirstPass"), pass == 0);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_FRAMEBUFFER_BARRIER_BIT);
+    glFinish();
+    gl::glCheck("raycasting a batch");
+}
+
+Image Raycaster::readBack(int passes, std::uint32_t width, std::uint32_t height,
+                          std::uint64_t& samples) {
+    Image image(width, height);
+    std::vector<float> rows(std::size_t(width) * height * 4);
+    glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[passes % 2].get());
+    glReadPixels(0, 0, GLsizei(width), GLsizei(height), GL_RGBA, GL_FLOAT, rows.data());
+    std::uint32_t counted = 0;
+    glGetNamedBufferSubData(mGpu->counters.get(), 0, sizeof counted, &counted);
+    gl::glCheck("reading the frame back");
+    samples = counted;
+    const std::size_t rowFloats = std::size_t(width) * 4;
+    for (std::uint32_t y = 0; y < height; ++y) // GL rows go bottom-up
+        std::transform(rows.begin() + std::ptrdiff_t((height - 1 - y) * rowFloats),
+                       rows.begin() + std::ptrdiff_t((height - y) * rowFloats), image.pixel(0, y),
+                       [](float v) { return std::clamp(v, 0.0f, 1.0f); });
+    return image;
+}
+
+void Raycaster::bindFrame(std::size_t pageInts, const RenderOptions& options) {
+    mGpu->pages = gl::createBuffer();
+    glNamedBufferStorage(mGpu->pages.get(), GLsizeiptr(pageInts * 4), nullptr,
+                         GL_DYNAMIC_STORAGE_BIT);
+    const std::uint32_t zero = 0;
+    glNamedBufferSubData(mGpu->counters.get(), 0, sizeof zero, &zero);
+    glUseProgram(mGpu->program.get());
+    glBindVertexArray(mGpu->vao.get());
+    glBindTextureUnit(0, mPool->texture());
+    glBindTextureUnit(1, mGpu->tf.get());
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, mGpu->pages.get());
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, mGpu->counters.get());
+    glViewport(0, 0, GLsizei(options.width), GLsizei(options.height));
+}
+
 Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
                         const TransferFunction& tf, const Camera& camera,
                         const RenderOptions& options, FrameStats& stats) {
@@ -177,103 +269,37 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
     const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
     const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
     const BrickPlan plan = planBricks(store, g, table, view, options.skip);
-    stats.level = level;
-    stats.bricksTotal = plan.total;
-    stats.bricksCulled = plan.culled;
-    stats.bricksSkipped = plan.skipped;
-    stats.bricksVisited = plan.drawn.size();
-    stats.bricksConstant = plan.constant;
+    recordPlan(plan, level, stats);
 
     mGpu->ensureTargets(options.width, options.height);
     mGpu->uploadTable(table);
-    const GLuint program = mGpu->program.get();
-    setFrameUniforms(program, g, view, options, table, *mPool);
-    const std::uint32_t zero = 0;
-    glNamedBufferSubData(mGpu->counters.get(), 0, sizeof zero, &zero);
-    const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
+    setFrameUniforms(mGpu->program.get(), g, view, options, table, *mPool);
     const std::uint64_t uploadsBefore = mPool->stats().uploads,
                         bytesBefore = mPool->stats().bytesUploaded;
-
-    std::vector<std::int32_t> pages(2 * g.brickCount(), detail::kPageAbsent);
-    if (pages.empty()) pages.assign(2, detail::kPageAbsent);
-    if (GLsizeiptr(pages.size() * 4) > 0) {
-        mGpu->pages = gl::createBuffer();
-        glNamedBufferStorage(mGpu->pages.get(), GLsizeiptr(pages.size() * 4), nullptr,
-                             GL_DYNAMIC_STORAGE_BIT);
-    }
-    const TexelMapping mapping = mPool->texelMapping();
+    std::vector<std::int32_t> pages(2 * std::max<std::uint64_t>(g.brickCount(), 1),
+                                    detail::kPageAbsent);
+    bindFrame(pages.size(), options);
     std::size_t next = 0;
     int pass = 0;
-    glUseProgram(program);
-    glBindVertexArray(mGpu->vao.get());
-    glBindTextureUnit(0, mPool->texture());
-    glBindTextureUnit(1, mGpu->tf.get());
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, mGpu->pages.get());
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, mGpu->counters.get());
-    glViewport(0, 0, GLsizei(options.width), GLsizei(options.height));
-    do {
-        // One batch: consecutive bricks of the front-to-back order while slots last.
+    do { // one batch: consecutive bricks of the front-to-back order while slots last
+        BatchPins pins{*mPool};
         const auto uploadStart = Clock::now();
-        std::vector<std::uint64_t> batch;
-        for (; next < plan.drawn.size(); ++next) {
-            const PlannedBrick& b = plan.drawn[next];
-            if (b.draw == BrickDraw::Constant) {
-                const float texel =
-                    float((double(b.constantValue) - mapping.offset) / mapping.scale);
-                pages[2 * b.index] = detail::kPageConstant;
-                std::memcpy(&pages[2 * b.index + 1], &texel, 4);
-                batch.push_back(b.index);
-                continue;
-            }
-            brickstore::BrickPin pin;
-            auto slot = mPool->acquire(levelFirst + b.index, [&] {
-                pin = cache.pin(b.key);
-                return pin.data();
-            });
-            if (!slot) break; // pool full of this batch's bricks
-            pages[2 * b.index] = std::int32_t(*slot);
-            batch.push_back(b.index);
-        }
-        if (next < plan.drawn.size() && batch.empty())
-            throw RenderError("GPU brick pool has no free slot for a batch");
+        const auto batch =
+            fillBatch(plan, next, store.layout().levels()[level].firstBrick, cache, pages);
         glNamedBufferSubData(mGpu->pages.get(), 0, GLsizeiptr(pages.size() * 4), pages.data());
         glFinish();
         stats.uploadMs += msSince(uploadStart);
-
         const auto renderStart = Clock::now();
-        const int target = (pass + 1) % 2;
-        glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[target].get());
-        glBindTextureUnit(2, mGpu->accum[pass % 2].get());
-        glProgramUniform1i(program, glGetUniformLocation(program, "uFirstPass"), pass == 0);
-        glDrawArrays(GL_TRIANGLES, 0, 3);
-        glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_FRAMEBUFFER_BARRIER_BIT);
-        glFinish();
-        gl::glCheck("raycasting a batch");
+        drawPass(pass++);
         stats.renderMs += msSince(renderStart);
-
         for (std::uint64_t i : batch)
             pages[2 * i] = detail::kPageAbsent;
-        mPool->unpinAll();
-        ++pass;
     } while (next < plan.drawn.size());
     stats.batches = std::uint32_t(pass);
 
     const auto readStart = Clock::now();
-    Image image(options.width, options.height);
-    std::vector<float> rows(std::size_t(options.width) * options.height * 4);
-    glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[pass % 2].get());
-    glReadPixels(0, 0, GLsizei(options.width), GLsizei(options.height), GL_RGBA, GL_FLOAT,
-                 rows.data());
-    std::uint32_t samples = 0;
-    glGetNamedBufferSubData(mGpu->counters.get(), 0, sizeof samples, &samples);
-    gl::glCheck("reading the frame back");
-    const std::size_t rowFloats = std::size_t(options.width) * 4;
-    for (std::uint32_t y = 0; y < options.height; ++y) // GL rows go bottom-up
-        std::transform(rows.begin() + std::ptrdiff_t((options.height - 1 - y) * rowFloats),
-                       rows.begin() + std::ptrdiff_t((options.height - y) * rowFloats),
-                       image.pixel(0, y), [](float v) { return std::clamp(v, 0.0f, 1.0f); });
+    Image image = readBack(pass, options.width, options.height, stats.samples);
     stats.readbackMs = msSince(readStart);
-    stats.samples = samples;
     stats.bricksUploaded = mPool->stats().uploads - uploadsBefore;
     stats.bytesUploaded = mPool->stats().bytesUploaded - bytesBefore;
     stats.totalMs = msSince(frameStart);

@@ -9,7 +9,9 @@
 #include "render/Image.h"
 #include "render/RenderTypes.h"
 
+#include <cstdint>
 #include <memory>
+#include <vector>
 
 namespace bc::brickstore {
 class BrickStore;
@@ -20,6 +22,7 @@ namespace bc::render {
 
 class TransferFunction;
 struct LevelGeometry;
+struct BrickPlan;
 
 struct RaycasterConfig {
     std::uint64_t gpuBudgetBytes = 512ull << 20; ///< brick pool bytes
@@ -46,6 +49,14 @@ class Raycaster {
   private:
     struct Gpu;
     void ensurePool(const brickstore::BrickStore& store);
+    /// Pins the next bricks of `plan` into pool slots and marks them in `pages`; returns their
+    /// indices.
+    std::vector<std::uint64_t> fillBatch(const BrickPlan& plan, std::size_t& next,
+                                         std::uint64_t levelFirst, brickstore::BrickCache& cache,
+                                         std::vector<std::int32_t>& pages);
+    void bindFrame(std::size_t pageInts, const RenderOptions& options);
+    void drawPass(int pass);
+    Image readBack(int passes, std::uint32_t width, std::uint32_t height, std::uint64_t& samples);
     std::uint32_t chooseLevel(const brickstore::BrickStore& store, const TransferFunction& tf,
                               const Camera& camera, const RenderOptions& options);
 
