@@ -1,6 +1,7 @@
 #include "render/BrickPlan.h"
 
 #include "brickstore/BrickStore.h"
+#include "render/Occupancy.h"
 #include "render/TransferFunction.h"
 
 #include <algorithm>
@@ -108,7 +109,8 @@ std::int64_t visibilityKey(const std::array<std::uint32_t, 3>& pos, const LevelG
 } // namespace
 
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
-                     const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip) {
+                     const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
+                     const OccupancyTrees* occupancy) {
     BrickPlan plan;
     plan.total = g.brickCount();
     std::uint64_t index = 0;
@@ -121,8 +123,10 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
                     continue;
                 }
                 const auto& record = store.record(key);
-                if (skip != SkipMode::None &&
-                    table.transparent(record.range.min, record.range.max)) {
+                const bool leavesEmpty = skip == SkipMode::All && occupancy &&
+                                         record.stored() && !occupancy->occupied(index, 0, {});
+                if (leavesEmpty || (skip != SkipMode::None &&
+                                    table.transparent(record.range.min, record.range.max))) {
                     ++plan.skipped;
                     continue;
                 }

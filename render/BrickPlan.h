@@ -17,6 +17,7 @@ class BrickStore;
 namespace bc::render {
 
 struct TransferFunctionTable;
+class OccupancyTrees;
 
 /// One pyramid level in world space. Every level spans the same world box as level 0 (its
 /// spacing is the box divided by its dims), so one camera frames every level alike.
@@ -53,9 +54,11 @@ struct BrickPlan {
 
 /// Plans one frame. Conservative: a brick any ray of the frame can sample with non-zero
 /// opacity is never culled or skipped. The order is a valid front-to-back order for every
-/// ray, so batches of consecutive bricks composite correctly.
+/// ray, so batches of consecutive bricks composite correctly. With `occupancy` (its octrees up
+/// to date for `table`), SkipMode::All also skips bricks none of whose leaves is visible.
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& geometry,
-                     const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip);
+                     const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
+                     const OccupancyTrees* occupancy = nullptr);
 
 /// True when `box` lies wholly outside the view of `view` (side planes through the image
 /// corners, and behind the eye plane).

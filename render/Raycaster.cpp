@@ -4,6 +4,7 @@
 #include "brickstore/BrickStore.h"
 #include "render/BrickPlan.h"
 #include "render/Error.h"
+#include "render/Occupancy.h"
 #include "render/TransferFunction.h"
 #include "render/detail/Gl.h"
 #include "render/detail/RaycastShader.h"
@@ -29,6 +30,8 @@ struct Raycaster::Gpu {
     gl::VertexArray vao;
     gl::Texture tf;
     gl::Buffer pages, counters;
+    gl::Buffer occupancy; ///< OccupancyTrees::words() of the level in mOccupancy
+    std::uint64_t occupancyWords = 0;
     gl::Texture accum[2];
     gl::Framebuffer fbo[2];
     std::uint32_t width = 0, height = 0;
@@ -76,7 +79,7 @@ Raycaster::Raycaster(const RaycasterConfig& config)
     mGpu->vao = gl::VertexArray(vao);
     mGpu->pages = gl::createBuffer();
     mGpu->counters = gl::createBuffer();
-    glNamedBufferStorage(mGpu->counters.get(), sizeof(std::uint32_t), nullptr,
+    glNamedBufferStorage(mGpu->counters.get(), 2 * sizeof(std::uint32_t), nullptr,
                          GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
     gl::glCheck("creating the raycaster");
 }
@@ -167,6 +170,18 @@ void setFrameUniforms(GLuint p, const LevelGeometry& g, const ViewBasis& v, cons
 
 namespace {
 
+void setOccupancyUniforms(GLuint p, const OccupancyTrees* occupancy) {
+    auto i1 = [&](const char* name, int x) {
+        glProgramUniform1i(p, glGetUniformLocation(p, name), x);
+    };
+    i1("uOctDepth", occupancy ? int(occupancy->depth()) : 0);
+    i1("uOccWords", occupancy ? int(occupancy->wordsPerBrick()) : 0);
+    i1("uLeafAxis", occupancy ? int(occupancy->leavesPerAxis()) : 1);
+    glProgramUniform1f(p, glGetUniformLocation(p, "uLeaf"),
+                       occupancy ? float(occupancy->leafVoxels()) : 1.0f);
+    gl::glCheck("setting occupancy uniforms");
+}
+
 /// Unpins the pool's slots when a batch ends, also when a brick load throws mid-batch.
 struct BatchPins {
     BrickPool& pool;
@@ -225,15 +240,16 @@ void Raycaster::drawPass(int pass) {
 }
 
 Image Raycaster::readBack(int passes, std::uint32_t width, std::uint32_t height,
-                          std::uint64_t& samples) {
+                          FrameStats& stats) {
     Image image(width, height);
     std::vector<float> rows(std::size_t(width) * height * 4);
     glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[passes % 2].get());
     glReadPixels(0, 0, GLsizei(width), GLsizei(height), GL_RGBA, GL_FLOAT, rows.data());
-    std::uint32_t counted = 0;
-    glGetNamedBufferSubData(mGpu->counters.get(), 0, sizeof counted, &counted);
+    std::uint32_t counted[2] = {0, 0};
+    glGetNamedBufferSubData(mGpu->counters.get(), 0, sizeof counted, counted);
     gl::glCheck("reading the frame back");
-    samples = counted;
+    stats.samples = counted[0];
+    stats.octreeLeaps = counted[1];
     const std::size_t rowFloats = std::size_t(width) * 4;
     for (std::uint32_t y = 0; y < height; ++y) // GL rows go bottom-up
         std::transform(rows.begin() + std::ptrdiff_t((height - 1 - y) * rowFloats),
@@ -246,15 +262,58 @@ void Raycaster::bindFrame(std::size_t pageInts, const RenderOptions& options) {
     mGpu->pages = gl::createBuffer();
     glNamedBufferStorage(mGpu->pages.get(), GLsizeiptr(pageInts * 4), nullptr,
                          GL_DYNAMIC_STORAGE_BIT);
-    const std::uint32_t zero = 0;
-    glNamedBufferSubData(mGpu->counters.get(), 0, sizeof zero, &zero);
+    const std::uint32_t zero[2] = {0, 0};
+    glNamedBufferSubData(mGpu->counters.get(), 0, sizeof zero, zero);
     glUseProgram(mGpu->program.get());
     glBindVertexArray(mGpu->vao.get());
     glBindTextureUnit(0, mPool->texture());
     glBindTextureUnit(1, mGpu->tf.get());
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, mGpu->pages.get());
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, mGpu->counters.get());
+    if (!mGpu->occupancy) { // the shader's binding 2 must name a buffer even when unused
+        mGpu->occupancy = gl::createBuffer();
+        glNamedBufferStorage(mGpu->occupancy.get(), 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
+        mGpu->occupancyWords = 0;
+    }
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, mGpu->occupancy.get());
     glViewport(0, 0, GLsizei(options.width), GLsizei(options.height));
+}
+
+const OccupancyTrees* Raycaster::prepareOccupancy(const brickstore::BrickStore& store,
+                                                   std::uint32_t level,
+                                                   const TransferFunctionTable& table,
+                                                   const RenderOptions& options,
+                                                   FrameStats& stats) {
+    // Leaf ranges reach the apron; without one they do not cover what border samples read.
+    if (options.skip != SkipMode::All || store.layout().geometry().apronVoxels == 0) return nullptr;
+    if (!mOccupancy || mOccupancyStore != &store || mOccupancyStorePath != store.path() ||
+        mOccupancy->level() != level) {
+        mOccupancy.reset();
+        mOccupancy = std::make_unique<OccupancyTrees>(store, level);
+        mOccupancyStore = &store;
+        mOccupancyStorePath = store.path();
+        mGpu->occupancyWords = 0; // the buffer holds another level's words
+    }
+    const OccupancyRebuild rebuild = mOccupancy->update(table, options.octree);
+    stats.octreeBricksRebuilt = rebuild.bricksRebuilt;
+    stats.octreeRebuildMs = rebuild.ms;
+    if (mOccupancy->depth() == 0) return mOccupancy.get(); // brick roots only, no bits
+    const auto& words = mOccupancy->words();
+    const std::uint32_t per = mOccupancy->wordsPerBrick();
+    if (mGpu->occupancyWords != words.size()) {
+        mGpu->occupancy = gl::createBuffer();
+        glNamedBufferStorage(mGpu->occupancy.get(), GLsizeiptr(words.size() * 4), words.data(),
+                             GL_DYNAMIC_STORAGE_BIT);
+        mGpu->occupancyWords = words.size();
+    } else if (rebuild.bricksRebuilt * 4 > words.size() / per) { // many changed: one upload
+        glNamedBufferSubData(mGpu->occupancy.get(), 0, GLsizeiptr(words.size() * 4), words.data());
+    } else {
+        for (std::uint64_t b : mOccupancy->changedBricks())
+            glNamedBufferSubData(mGpu->occupancy.get(), GLintptr(b * per * 4), GLsizeiptr(per * 4),
+                                 &words[b * per]);
+    }
+    gl::glCheck("uploading octree occupancy");
+    return mOccupancy.get();
 }
 
 Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
@@ -268,12 +327,14 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
     const LevelGeometry g = LevelGeometry::of(store, level);
     const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
     const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
-    const BrickPlan plan = planBricks(store, g, table, view, options.skip);
+    const OccupancyTrees* occupancy = prepareOccupancy(store, level, table, options, stats);
+    const BrickPlan plan = planBricks(store, g, table, view, options.skip, occupancy);
     recordPlan(plan, level, stats);
 
     mGpu->ensureTargets(options.width, options.height);
     mGpu->uploadTable(table);
     setFrameUniforms(mGpu->program.get(), g, view, options, table, *mPool);
+    setOccupancyUniforms(mGpu->program.get(), occupancy);
     const std::uint64_t uploadsBefore = mPool->stats().uploads,
                         bytesBefore = mPool->stats().bytesUploaded;
     std::vector<std::int32_t> pages(2 * std::max<std::uint64_t>(g.brickCount(), 1),
@@ -298,7 +359,7 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
     stats.batches = std::uint32_t(pass);
 
     const auto readStart = Clock::now();
-    Image image = readBack(pass, options.width, options.height, stats.samples);
+    Image image = readBack(pass, options.width, options.height, stats);
     stats.readbackMs = msSince(readStart);
     stats.bricksUploaded = mPool->stats().uploads - uploadsBefore;
     stats.bytesUploaded = mPool->stats().bytesUploaded - bytesBefore;

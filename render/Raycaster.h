@@ -21,8 +21,10 @@ class BrickCache;
 namespace bc::render {
 
 class TransferFunction;
+class OccupancyTrees;
 struct LevelGeometry;
 struct BrickPlan;
+struct TransferFunctionTable;
 
 struct RaycasterConfig {
     std::uint64_t gpuBudgetBytes = 512ull << 20; ///< brick pool bytes
@@ -55,8 +57,13 @@ class Raycaster {
                                          std::uint64_t levelFirst, brickstore::BrickCache& cache,
                                          std::vector<std::int32_t>& pages);
     void bindFrame(std::size_t pageInts, const RenderOptions& options);
+    /// The octrees of `level` brought up to `table` and uploaded, or nullptr when the frame
+    /// does not use the second stage.
+    const OccupancyTrees* prepareOccupancy(const brickstore::BrickStore& store,
+                                           std::uint32_t level, const TransferFunctionTable& table,
+                                           const RenderOptions& options, FrameStats& stats);
     void drawPass(int pass);
-    Image readBack(int passes, std::uint32_t width, std::uint32_t height, std::uint64_t& samples);
+    Image readBack(int passes, std::uint32_t width, std::uint32_t height, FrameStats& stats);
     std::uint32_t chooseLevel(const brickstore::BrickStore& store, const TransferFunction& tf,
                               const Camera& camera, const RenderOptions& options);
 
@@ -65,6 +72,9 @@ class Raycaster {
     std::unique_ptr<BrickPool> mPool;
     const brickstore::BrickStore* mPoolStore = nullptr;
     std::string mPoolStorePath;
+    std::unique_ptr<OccupancyTrees> mOccupancy;
+    const brickstore::BrickStore* mOccupancyStore = nullptr;
+    std::string mOccupancyStorePath;
 };
 
 } // namespace bc::render

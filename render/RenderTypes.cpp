@@ -35,6 +35,7 @@ void RenderOptions::validate() const {
     if (!(ertThreshold > 0.0 && ertThreshold <= 1.0))
         throw std::invalid_argument("ert: threshold must lie in (0, 1]");
     if (level < 0) throw std::invalid_argument("level: must not be negative");
+    octree.validate();
 }
 
 } // namespace bc::render

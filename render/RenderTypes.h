@@ -1,14 +1,18 @@
 #pragma once
 // What a frame is asked for and what it reports, shared by the GPU raycaster and the CPU
 // reference so both follow one optical model (see render/OPTICS.md).
+#include "render/Occupancy.h"
+
 #include <array>
 #include <cstdint>
 #include <string>
 
 namespace bc::render {
 
-/// Which empty space is skipped. `All` adds the per-brick octrees of issue 4 when present;
-/// until then it equals `Bricks`.
+/// Which empty space is skipped: `Bricks` is the first stage (bricks transparent over their
+/// value range are never uploaded nor sampled), `All` adds the second (empty nodes of the
+/// per-brick octrees are leapt inside bricks, and bricks whose every leaf is empty are
+/// skipped too).
 enum class SkipMode { None, Bricks, All };
 
 /// "none" | "bricks" | "all" -> SkipMode; std::invalid_argument otherwise.
@@ -21,7 +25,7 @@ struct RenderOptions {
     double stepVoxels = 1.0; ///< sample distance in units of the smallest spacing
     bool earlyTermination = true;
     double ertThreshold = 0.99; ///< stop a ray once its opacity reaches this
-    SkipMode skip = SkipMode::Bricks;
+    SkipMode skip = SkipMode::All;
     bool shading = true;      ///< Blinn-Phong from central-difference gradients
     std::int32_t level = 0;   ///< pyramid level; see `interactive`
     bool interactive = false; ///< may draw a coarser level when level 0 exceeds the GPU budget
@@ -29,6 +33,7 @@ struct RenderOptions {
     /// the hardware's 8-bit interpolation weights cost accuracy and make a sample depend on
     /// its brick's place in the pool (so skipping no longer gives bit-identical images).
     bool hardwareFilter = false;
+    OccupancyConfig octree; ///< second-stage traversal (SkipMode::All)
 
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;
@@ -57,6 +62,9 @@ struct FrameStats {
     std::uint64_t bricksUploaded = 0; ///< host -> GPU uploads this frame
     std::uint64_t bytesUploaded = 0;
     std::uint32_t batches = 0; ///< front-to-back passes (> 1 when the budget is short)
+    std::uint64_t octreeLeaps = 0;          ///< empty octree nodes leapt by rays
+    std::uint64_t octreeBricksRebuilt = 0;  ///< octrees rebuilt for this frame's TF (0: reused)
+    double octreeRebuildMs = 0.0;
     double uploadMs = 0.0;
     double renderMs = 0.0;
     double readbackMs = 0.0;

@@ -19,7 +19,9 @@ layout(binding = 0) uniform sampler3D uPool;
 layout(binding = 1) uniform sampler1D uTf;
 layout(binding = 2) uniform sampler2D uPrev;
 layout(std430, binding = 0) readonly buffer Pages { ivec2 page[]; };
-layout(std430, binding = 1) buffer Counters { uint sampleCount; };
+layout(std430, binding = 1) buffer Counters { uint sampleCount; uint leapCount; };
+// Per brick of the level, the occupancy bits of its octree levels 1..uOctDepth (OCCUPANCY.md).
+layout(std430, binding = 2) readonly buffer Occupancy { uint occ[]; };
 
 uniform vec2 uViewport;
 uniform vec3 uEye, uForward, uRight, uUp;
@@ -38,6 +40,10 @@ uniform bool uShading, uFirstPass, uHardwareFilter;
 uniform vec3 uGradScale;      // texel difference -> TF-domain units per voxel of the smallest spacing
 uniform float uGradFade;
 uniform float uAmbient, uDiffuse, uSpecular, uShininess;
+uniform int uOctDepth;        // octree levels below a brick; 0 switches the second stage off
+uniform int uOccWords;        // words per brick in occ[]
+uniform int uLeafAxis;        // leaves per brick axis
+uniform float uLeaf;          // leaf edge in voxels
 
 out vec4 outColor;
 
@@ -88,6 +94,29 @@ void composite(inout vec4 acc, vec4 c) {
     acc.a += (1.0 - acc.a) * c.a;
 }
 
+// The coarsest octree level (1..uOctDepth) whose node holding `leaf` is empty, or 0.
+int emptyLevel(int base, ivec3 leaf) {
+    int first = 0;
+    for (int l = 1; l <= uOctDepth; ++l) {
+        ivec3 n = leaf >> (uOctDepth - l);
+        int s = 1 << l;
+        int bit = first + (n.z * s + n.y) * s + n.x;
+        if (((occ[base + (bit >> 5)] >> uint(bit & 31)) & 1u) == 0u) return l;
+        first += s * s * s;
+    }
+    return 0;
+}
+
+// The ray parameter where p(t) = p0 + dv t leaves the axis-aligned box [lo, lo + size).
+float exitParameter(vec3 p0, vec3 dv, vec3 lo, float size) {
+    float t = 3.0e38;
+    for (int a = 0; a < 3; ++a) {
+        if (dv[a] > 0.0) t = min(t, (lo[a] + size - p0[a]) / dv[a]);
+        else if (dv[a] < 0.0) t = min(t, (lo[a] - p0[a]) / dv[a]);
+    }
+    return t;
+}
+
 void main() {
     vec4 acc = uFirstPass ? vec4(0.0) : texelFetch(uPrev, ivec2(gl_FragCoord.xy), 0);
     if (acc.a >= uErt) { outColor = acc; return; }
@@ -118,17 +147,39 @@ void main() {
         float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * uBrick);
         tMax[a] = (plane - ov[a]) / dv[a];
     }
-    uint taken = 0u;
+    uint taken = 0u, leaps = 0u;
     int k = 0;
     while (k < total) {
         float tOut = min(min(tMax.x, tMax.y), tMax.z);
         int kEnd = min(total, int(ceil((tOut - t0) / uStepMm - 0.5)));
-        ivec2 e = page[(cell.z * uGrid.y + cell.y) * uGrid.x + cell.x];
+        int brickIndex = (cell.z * uGrid.y + cell.y) * uGrid.x + cell.x;
+        ivec2 e = page[brickIndex];
         if (e.x >= 0 && kEnd > k) {
             ivec3 slot = slotOrigin(e.x);
-            vec3 rel = (ov - vec3(cell * uBrick)) + (float(uApron) - 0.5);
+            vec3 local = ov - vec3(cell * uBrick);   // brick-local voxel position at t = 0
+            vec3 rel = local + (float(uApron) - 0.5);
+            int base = brickIndex * uOccWords;
+            ivec3 checkedLeaf = ivec3(-1);           // the last leaf found to be sampled
             for (; k < kEnd; ++k) {
-                vec3 q = rel + dv * (t0 + (float(k) + 0.5) * uStepMm);
+                float t = t0 + (float(k) + 0.5) * uStepMm;
+                vec3 q = rel + dv * t;
+                if (uOctDepth > 0) {
+                    // Second stage: leap over the largest empty octree node holding the sample.
+                    ivec3 leaf = clamp(ivec3(floor((local + dv * t) / uLeaf)), ivec3(0), ivec3(uLeafAxis - 1));
+                    if (leaf != checkedLeaf) {
+                        int l = emptyLevel(base, leaf);
+                        if (l > 0) {
+                            float size = uLeaf * float(1 << (uOctDepth - l));
+                            vec3 lo = vec3(leaf >> (uOctDepth - l)) * size;
+                            float tExit = exitParameter(local, dv, lo, size);
+                            int kNext = int(ceil((tExit - t0) / uStepMm - 0.5));
+                            ++leaps;
+                            k = max(k, min(kNext, kEnd) - 1); // the loop's ++k reaches kNext
+                            continue;
+                        }
+                        checkedLeaf = leaf;
+                    }
+                }
                 vec4 c = classify(fetch(q, slot));
                 ++taken;
                 if (c.a <= 0.0) continue;
@@ -154,6 +205,7 @@ void main() {
         if (cell[a] < 0 || cell[a] >= uGrid[a]) break;
     }
     atomicAdd(sampleCount, taken);
+    if (leaps > 0u) atomicAdd(leapCount, leaps);
     outColor = acc;
 }
 )";

@@ -22,8 +22,9 @@ namespace {
 
 struct RenderCliOptions {
     std::string store, output, size = "256,256", tf = "ct-skin", orbit, eye, target, up,
-                               ert = "0.99", skip = "bricks", statsPath;
-    double fov = 30.0, step = 1.0;
+                               ert = "0.99", skip = "all", statsPath;
+    double fov = 30.0, step = 1.0, octreeRatio = 1.0;
+    std::uint32_t octreeLevelLimit = 32;
     bool ortho = false, noShading = false, reference = false, interactive = false;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
@@ -95,6 +96,8 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.shading = !o.noShading;
     r.level = o.level;
     r.interactive = o.interactive;
+    r.octree.ratioThreshold = o.octreeRatio;
+    r.octree.levelLimit = o.octreeLevelLimit;
     r.validate();
     return r;
 }
@@ -116,6 +119,9 @@ nlohmann::json statsJson(const render::FrameStats& s, const std::string& rendere
             {"bricksUploaded", s.bricksUploaded},
             {"bytesUploaded", s.bytesUploaded},
             {"batches", s.batches},
+            {"octreeLeaps", s.octreeLeaps},
+            {"octreeBricksRebuilt", s.octreeBricksRebuilt},
+            {"octreeRebuildMs", s.octreeRebuildMs},
             {"uploadMs", s.uploadMs},
             {"renderMs", s.renderMs},
             {"readbackMs", s.readbackMs},
@@ -209,7 +215,14 @@ void addRenderCommand(CLI::App& app) {
         ->capture_default_str();
     cmd->add_option("--ert", o->ert, "Early ray termination threshold, or 'off'")
         ->capture_default_str();
-    cmd->add_option("--skip", o->skip, "Empty-space skipping: none, bricks, all")
+    cmd->add_option("--skip", o->skip,
+                    "Empty-space skipping: none, bricks (first stage), all (+ per-brick octrees)")
+        ->capture_default_str();
+    cmd->add_option("--octree-ratio", o->octreeRatio,
+                    "Draw an octree node whole once this share of its leaves is non-empty")
+        ->capture_default_str();
+    cmd->add_option("--octree-level-limit", o->octreeLevelLimit,
+                    "Deepest octree level descended (0 = the brick)")
         ->capture_default_str();
     cmd->add_flag("--no-shading", o->noShading, "No gradient shading");
     cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")

@@ -1,0 +1,110 @@
+#pragma once
+// Second-stage empty-space skipping (Ruijters & Vilanova 2006, section 7): one octree per
+// brick over its leaf blocks, rebuilt from the store's per-leaf value ranges alone whenever
+// the transfer function changes; voxels are never read.
+//
+// A leaf is empty when the transfer function is transparent over the whole value range its
+// samples can read (FORMAT.md "Leaf table": payload voxels plus the apron reach), decided by
+// a prefix count of the table entries with non-zero opacity, so a peak between two voxel
+// values is never missed. A node's ratio is its share of non-empty leaves. Traversal (done
+// here once per rebuild, not per frame) draws a node whole when its ratio reaches the
+// threshold or it sits at the level limit; what is left is a hierarchy of occupancy bits
+// per brick that the raycaster walks to leap over empty nodes (see render/OCCUPANCY.md).
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace bc::brickstore {
+class BrickStore;
+}
+
+namespace bc::render {
+
+struct TransferFunctionTable;
+
+struct OccupancyConfig {
+    /// A non-empty node whose ratio of non-empty leaves reaches this is drawn whole (its
+    /// empty leaves are sampled, not leapt). 1 draws only full nodes whole; 0 draws every
+    /// non-empty node whole, leaving only empty nodes below the root to leap.
+    double ratioThreshold = 1.0;
+    /// Deepest octree level descended: 0 is the brick, depth() the leaves. A non-empty node
+    /// at the limit is drawn whole.
+    std::uint32_t levelLimit = 32;
+
+    /// Throws std::invalid_argument naming the field when a value is out of range.
+    void validate() const;
+    bool operator==(const OccupancyConfig&) const = default;
+};
+
+/// What one update did.
+struct OccupancyRebuild {
+    double ms = 0.0;
+    std::uint64_t bricksRebuilt = 0; ///< octrees rebuilt (stored bricks only)
+    std::uint64_t bricksStored = 0;  ///< stored bricks of the level (the others are constant)
+    bool full = false;               ///< every octree rebuilt (first build, new domain or config)
+};
+
+/// The octrees of one pyramid level of one store. Not thread-safe; render thread only.
+class OccupancyTrees {
+  public:
+    /// Reads the leaf table of every stored brick of `level` once (checksums verified). A
+    /// brick whose leaf table is corrupt gets an all-occupied octree (never leapt) and is
+    /// named in faults(); the others are unaffected.
+    OccupancyTrees(const brickstore::BrickStore& store, std::uint32_t level);
+
+    /// Brings every octree up to `table` and `config`. Incremental: only the bricks whose
+    /// value range meets the table entries whose emptiness changed are rebuilt, in parallel.
+    /// @throw std::invalid_argument on a bad config.
+    OccupancyRebuild update(const TransferFunctionTable& table, const OccupancyConfig& config);
+
+    std::uint32_t level() const { return mLevel; }
+    /// Octree levels below the root: ceil(log2(leaves per axis)).
+    std::uint32_t depth() const { return mDepth; }
+    std::uint32_t leavesPerAxis() const { return mLeaves; }
+    std::uint32_t leafVoxels() const { return mLeafVoxels; }
+    /// 32-bit words per brick in words().
+    std::uint32_t wordsPerBrick() const { return mWordsPerBrick; }
+    /// Per brick of the level (x fastest), the occupancy bits of octree levels 1..depth():
+    /// level l holds (2^l)^3 bits (x fastest), starting at bit sum_{m=1}^{l-1} 8^m. A set bit
+    /// means "sample here"; a clear one, "leap over this node". Constant bricks are all set.
+    const std::vector<std::uint32_t>& words() const { return mWords; }
+    /// Bricks whose words changed in the last update (indices within the level).
+    const std::vector<std::uint64_t>& changedBricks() const { return mChanged; }
+
+    /// Share of non-empty leaves of a node at octree level `octLevel` (0 = the brick), by its
+    /// coordinates at that level; leaves outside the brick's grid do not count.
+    double ratio(std::uint64_t brick, std::uint32_t octLevel,
+                 const std::array<std::uint32_t, 3>& node) const;
+    /// Whether the raycaster samples inside that node (its bit, or true for the root).
+    bool occupied(std::uint64_t brick, std::uint32_t octLevel,
+                  const std::array<std::uint32_t, 3>& node) const;
+    /// Leaf tables that failed their checksum, one line each naming the brick.
+    const std::vector<std::string>& faults() const { return mFaults; }
+
+  private:
+    void rebuildBrick(std::uint64_t brick, const std::vector<std::uint32_t>& prefix);
+    bool leafNonEmpty(std::uint64_t brick, std::uint32_t leaf) const;
+
+    std::uint32_t mLevel = 0, mLeaves = 0, mLeafVoxels = 0, mDepth = 0, mWordsPerBrick = 0;
+    std::uint64_t mBricks = 0;
+    std::vector<std::uint8_t> mStored;        ///< per brick: 1 when stored (has leaves)
+    std::vector<std::array<float, 2>> mBrickRange;
+    std::vector<std::array<float, 2>> mLeafRange; ///< per brick * leafCount
+    std::vector<std::array<std::uint32_t, 2>> mLeafEntries; ///< table entries [i, j] read
+    std::vector<std::uint8_t> mLeafFull;      ///< corrupt leaf table: always occupied
+    std::vector<std::uint8_t> mNonEmpty;      ///< per leaf, of the last update
+    std::vector<std::uint8_t> mRoot;          ///< per brick: any leaf non-empty
+    std::vector<std::uint32_t> mWords;
+    std::vector<std::uint64_t> mChanged;
+    std::vector<std::string> mFaults;
+
+    // What the last update was made for.
+    bool mBuilt = false;
+    double mDomainMin = 0.0, mDomainMax = 0.0;
+    std::uint32_t mEntries = 0;
+    OccupancyConfig mConfig;
+    std::vector<std::uint8_t> mVisible; ///< per table entry: opacity > 0
+};
+
+} // namespace bc::render
