@@ -58,12 +58,14 @@ struct Technique {
     render::SkipMode skip;
     bool ert;
     bool hardwareFilter;
+    bool frustums = false;
 };
 constexpr Technique kTechniques[] = {
     {"plain", render::SkipMode::None, false, false},
     {"+bricks", render::SkipMode::Bricks, false, false},
     {"+bricks +ERT", render::SkipMode::Bricks, true, false},
     {"+bricks +octree +ERT", render::SkipMode::All, true, false},
+    {"+bricks +octree +ERT +occlusion frustums", render::SkipMode::All, true, false, true},
     {"+bricks +octree +ERT, hardware filtering", render::SkipMode::All, true, true},
 };
 constexpr int kTechniqueCount = int(std::size(kTechniques));
@@ -71,7 +73,10 @@ constexpr int kTechniqueCount = int(std::size(kTechniques));
 struct Row {
     double medianMs = 0, samplesPerPixel = 0, psnr = 0, ssim = 0;
     std::uint64_t uploadedFirst = 0;
+    int frustumFrames = 0;
 };
+
+constexpr double kDegreesPerFrame = 2.0; // a slowly rotating object, as in the papers
 
 double median(std::vector<double> v) {
     std::sort(v.begin(), v.end());
@@ -88,13 +93,13 @@ Row measure(brickstore::BrickStore& store, const render::TransferFunction& tf, c
     o.skip = t.skip;
     o.earlyTermination = t.ert;
     o.hardwareFilter = t.hardwareFilter;
+    o.occlusionFrustums = t.frustums;
     Row row;
     std::vector<double> ms;
     double samples = 0;
     for (int f = 0; f <= frames; ++f) { // frame 0 warms the pool and is not timed
         render::FrameStats s;
-        const auto camera =
-            render::Camera::orbit(box, 30.0 + 360.0 * (f % std::max(frames, 1)) / frames, 20.0);
+        const auto camera = render::Camera::orbit(box, 30.0 + kDegreesPerFrame * f, 20.0);
         const render::Image image = raycaster.render(store, cache, tf, camera, o, s);
         if (f == 0) {
             row.uploadedFirst = s.bytesUploaded;
@@ -106,6 +111,7 @@ Row measure(brickstore::BrickStore& store, const render::TransferFunction& tf, c
             continue;
         }
         ms.push_back(s.totalMs);
+        row.frustumFrames += s.occlusionUsed;
         samples += double(s.samples) / (double(o.width) * o.height);
     }
     row.medianMs = median(ms);
@@ -127,10 +133,14 @@ void printTable(const std::string& title,
     std::printf(
         "| dataset / TF | technique | ms/frame | samples/pixel | speed-up | PSNR dB | SSIM |\n");
     std::printf("|---|---|---:|---:|---:|---:|---:|\n");
+    // (frames drawn with occlusion frustums are counted on stderr)
     for (const auto& [name, r] : rows)
         for (int i = 0; i < kTechniqueCount; ++i) {
             char error[64] = "n/a | n/a"; // no CPU reference for the generated volume
             if (r[i].ssim > 0.0) std::snprintf(error, sizeof error, "%.1f | %.4f", r[i].psnr, r[i].ssim);
+            if (kTechniques[i].frustums)
+                std::fprintf(stderr, "%s: occlusion frustums used in %d frames\n", name.c_str(),
+                             r[i].frustumFrames);
             std::printf("| %s | %s | %.1f | %.1f | %.2fx | %s |\n", i == 0 ? name.c_str() : "",
                         kTechniques[i].name, r[i].medianMs, r[i].samplesPerPixel,
                         r[0].medianMs / r[i].medianMs, error);
@@ -157,10 +167,10 @@ int main(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
 
     render::EglContext context;
-    std::printf("renderer: %s (%s, EGL %s); %dx%d, step 1 voxel, shaded, %d orbit frames (median), "
-                "bricks %d^3 + 2\n",
+    std::printf("renderer: %s (%s, EGL %s); %dx%d, step 1 voxel, shaded, %d orbit frames at %.0f deg "
+                "per frame (median), bricks %d^3 + 2\n",
                 context.renderer().c_str(), context.version().c_str(), context.platform().c_str(),
-                size, size, frames, brick);
+                size, size, frames, kDegreesPerFrame, brick);
     const std::string tmp =
         (std::filesystem::temp_directory_path() / ("bc-render-bench-" + std::to_string(getpid())))
             .string();

@@ -7,6 +7,7 @@
 #include "render/Occupancy.h"
 #include "render/TransferFunction.h"
 #include "render/detail/Gl.h"
+#include "render/detail/OcclusionFrustums.h"
 #include "render/detail/RaycastShader.h"
 
 #include <algorithm>
@@ -32,6 +33,7 @@ struct Raycaster::Gpu {
     gl::Buffer pages, counters;
     gl::Buffer occupancy; ///< OccupancyTrees::words() of the level in mOccupancy
     std::uint64_t occupancyWords = 0;
+    std::unique_ptr<detail::OcclusionFrustums> occlusion; ///< created on first use
     gl::Texture accum[2];
     gl::Framebuffer fbo[2];
     std::uint32_t width = 0, height = 0;
@@ -79,7 +81,7 @@ Raycaster::Raycaster(const RaycasterConfig& config)
     mGpu->vao = gl::VertexArray(vao);
     mGpu->pages = gl::createBuffer();
     mGpu->counters = gl::createBuffer();
-    glNamedBufferStorage(mGpu->counters.get(), 2 * sizeof(std::uint32_t), nullptr,
+    glNamedBufferStorage(mGpu->counters.get(), 3 * sizeof(std::uint32_t), nullptr,
                          GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
     gl::glCheck("creating the raycaster");
 }
@@ -234,7 +236,8 @@ void Raycaster::drawPass(int pass) {
     glBindTextureUnit(2, mGpu->accum[pass % 2].get());
     glProgramUniform1i(program, glGetUniformLocation(program, "uFirstPass"), pass == 0);
     glDrawArrays(GL_TRIANGLES, 0, 3);
-    glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_FRAMEBUFFER_BARRIER_BIT);
+    glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_FRAMEBUFFER_BARRIER_BIT |
+                    GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
     glFinish();
     gl::glCheck("raycasting a batch");
 }
@@ -245,11 +248,12 @@ Image Raycaster::readBack(int passes, std::uint32_t width, std::uint32_t height,
     std::vector<float> rows(std::size_t(width) * height * 4);
     glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[passes % 2].get());
     glReadPixels(0, 0, GLsizei(width), GLsizei(height), GL_RGBA, GL_FLOAT, rows.data());
-    std::uint32_t counted[2] = {0, 0};
+    std::uint32_t counted[3] = {0, 0, 0};
     glGetNamedBufferSubData(mGpu->counters.get(), 0, sizeof counted, counted);
     gl::glCheck("reading the frame back");
     stats.samples = counted[0];
     stats.octreeLeaps = counted[1];
+    stats.samplesSavedByStart = counted[2];
     const std::size_t rowFloats = std::size_t(width) * 4;
     for (std::uint32_t y = 0; y < height; ++y) // GL rows go bottom-up
         std::transform(rows.begin() + std::ptrdiff_t((height - 1 - y) * rowFloats),
@@ -262,7 +266,7 @@ void Raycaster::bindFrame(std::size_t pageInts, const RenderOptions& options) {
     mGpu->pages = gl::createBuffer();
     glNamedBufferStorage(mGpu->pages.get(), GLsizeiptr(pageInts * 4), nullptr,
                          GL_DYNAMIC_STORAGE_BIT);
-    const std::uint32_t zero[2] = {0, 0};
+    const std::uint32_t zero[3] = {0, 0, 0};
     glNamedBufferSubData(mGpu->counters.get(), 0, sizeof zero, zero);
     glUseProgram(mGpu->program.get());
     glBindVertexArray(mGpu->vao.get());
@@ -276,6 +280,11 @@ void Raycaster::bindFrame(std::size_t pageInts, const RenderOptions& options) {
         mGpu->occupancyWords = 0;
     }
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, mGpu->occupancy.get());
+    if (mGpu->occlusion) {
+        glBindImageTexture(0, mGpu->occlusion->firstHitTexture(), 0, GL_FALSE, 0, GL_READ_WRITE,
+                           GL_R32F);
+        glBindTextureUnit(3, mGpu->occlusion->startTexture());
+    }
     glViewport(0, 0, GLsizei(options.width), GLsizei(options.height));
 }
 
@@ -316,6 +325,56 @@ const OccupancyTrees* Raycaster::prepareOccupancy(const brickstore::BrickStore& 
     return mOccupancy.get();
 }
 
+std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint32_t level,
+                                  const TransferFunctionTable& table,
+                                  const RenderOptions& options) const {
+    // What the first hits depend on: the volume, the level, which values are visible, the
+    // skipping that decides "occupied", and the sample lattice.
+    std::uint64_t h = 1469598103934665603ull;
+    auto mix = [&](const void* data, std::size_t bytes) {
+        for (std::size_t i = 0; i < bytes; ++i)
+            h = (h ^ static_cast<const unsigned char*>(data)[i]) * 1099511628211ull;
+    };
+    mix(store.path().data(), store.path().size());
+    const void* address = &store;
+    mix(&address, sizeof address);
+    mix(&level, sizeof level);
+    for (std::uint32_t i = 0; i < table.entries; ++i) {
+        const bool visible = table.rgba[4 * std::size_t(i) + 3] > 0.0f;
+        mix(&visible, 1);
+    }
+    mix(&options.skip, sizeof options.skip);
+    mix(&options.octree.ratioThreshold, sizeof(double));
+    mix(&options.octree.levelLimit, sizeof(std::uint32_t));
+    mix(&options.stepVoxels, sizeof(double));
+    return h;
+}
+
+bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
+                                 std::uint64_t scene, const RenderOptions& options,
+                                 bool octree, FrameStats& stats) {
+    if (!options.occlusionFrustums) {
+        if (mGpu->occlusion) mGpu->occlusion->invalidate();
+        stats.occlusionReason = "off";
+        return false;
+    }
+    if (!mGpu->occlusion) mGpu->occlusion = std::make_unique<detail::OcclusionFrustums>();
+    const double voxels = options.skip == SkipMode::None ? 0.0
+                          : octree ? double(mOccupancy->leafVoxels())
+                                   : double(g.brickVoxels);
+    const double cellMm = voxels * std::min({g.spacing.x, g.spacing.y, g.spacing.z});
+    bool used = false;
+    if (options.skip == SkipMode::None) {
+        stats.occlusionReason = "no occupancy to find first hits with (skip none)";
+    } else {
+        used = mGpu->occlusion->prepare(view, options.width, options.height, g.box, scene, cellMm,
+                                        options.stepVoxels * g.minSpacing(), options.occlusion,
+                                        stats);
+    }
+    mGpu->occlusion->beginFrame(options.width, options.height);
+    return used;
+}
+
 Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
                         const TransferFunction& tf, const Camera& camera,
                         const RenderOptions& options, FrameStats& stats) {
@@ -333,8 +392,14 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
 
     mGpu->ensureTargets(options.width, options.height);
     mGpu->uploadTable(table);
+    const std::uint64_t scene = sceneKey(store, level, table, options);
+    const bool useStarts = prepareOcclusion(g, view, scene, options, occupancy != nullptr, stats);
     setFrameUniforms(mGpu->program.get(), g, view, options, table, *mPool);
     setOccupancyUniforms(mGpu->program.get(), occupancy);
+    const GLuint program = mGpu->program.get();
+    glProgramUniform1i(program, glGetUniformLocation(program, "uUseStart"), useStarts);
+    glProgramUniform1i(program, glGetUniformLocation(program, "uWriteFirstHit"),
+                       options.occlusionFrustums);
     const std::uint64_t uploadsBefore = mPool->stats().uploads,
                         bytesBefore = mPool->stats().bytesUploaded;
     std::vector<std::int32_t> pages(2 * std::max<std::uint64_t>(g.brickCount(), 1),
@@ -361,6 +426,13 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
     const auto readStart = Clock::now();
     Image image = readBack(pass, options.width, options.height, stats);
     stats.readbackMs = msSince(readStart);
+    if (options.occlusionFrustums) {
+        const auto captureStart = Clock::now();
+        const double all = double(stats.samples + stats.samplesSavedByStart);
+        mGpu->occlusion->capture(view, scene, all > 0 ? stats.samplesSavedByStart / all : 0.0,
+                                 useStarts, options.occlusion);
+        stats.occlusionBuildMs += msSince(captureStart);
+    }
     stats.bricksUploaded = mPool->stats().uploads - uploadsBefore;
     stats.bytesUploaded = mPool->stats().bytesUploaded - bytesBefore;
     stats.totalMs = msSince(frameStart);

@@ -5,6 +5,7 @@
 // pass's result. With a pool large enough for the view there is one pass. Needs a current
 // EglContext on the calling thread; render thread only.
 #include "render/BrickPool.h"
+#include "render/BrickPlan.h"
 #include "render/Camera.h"
 #include "render/Image.h"
 #include "render/RenderTypes.h"
@@ -63,6 +64,12 @@ class Raycaster {
                                            std::uint32_t level, const TransferFunctionTable& table,
                                            const RenderOptions& options, FrameStats& stats);
     void drawPass(int pass);
+    std::uint64_t sceneKey(const brickstore::BrickStore& store, std::uint32_t level,
+                           const TransferFunctionTable& table, const RenderOptions& options) const;
+    /// Builds this frame's ray starts from the last frame's occlusion frustums when allowed
+    /// (returns whether the raycaster uses them) and readies the first-hit image.
+    bool prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, std::uint64_t scene,
+                          const RenderOptions& options, bool octree, FrameStats& stats);
     Image readBack(int passes, std::uint32_t width, std::uint32_t height, FrameStats& stats);
     std::uint32_t chooseLevel(const brickstore::BrickStore& store, const TransferFunction& tf,
                               const Camera& camera, const RenderOptions& options);

@@ -36,6 +36,15 @@ void RenderOptions::validate() const {
         throw std::invalid_argument("ert: threshold must lie in (0, 1]");
     if (level < 0) throw std::invalid_argument("level: must not be negative");
     octree.validate();
+    occlusion.validate();
+}
+
+void OcclusionConfig::validate() const {
+    if (blockPixels < 1 || blockPixels > 64)
+        throw std::invalid_argument("occlusion block size must lie in 1..64 pixels, got " +
+                                    std::to_string(blockPixels));
+    if (!(minSavedShare >= 0.0 && minSavedShare <= 1.0))
+        throw std::invalid_argument("occlusion minimum saved share must lie in [0, 1]");
 }
 
 } // namespace bc::render

@@ -19,6 +19,16 @@ enum class SkipMode { None, Bricks, All };
 SkipMode parseSkipMode(const std::string& text);
 const char* toString(SkipMode mode);
 
+/// Occlusion-frustum ray starts (issue 4; render/OCCLUSION.md).
+struct OcclusionConfig {
+    std::uint32_t blockPixels = 4; ///< k: occlusion blocks of k x k pixels
+    /// Policy: after a frame whose proxies saved less than this share of the samples, the
+    /// next `offFrames` frames use the plain box (random jumps on dense data do not pay).
+    double minSavedShare = 0.03;
+    std::uint32_t offFrames = 8;
+    void validate() const;
+};
+
 struct RenderOptions {
     std::uint32_t width = 256;
     std::uint32_t height = 256;
@@ -34,6 +44,9 @@ struct RenderOptions {
     /// its brick's place in the pool (so skipping no longer gives bit-identical images).
     bool hardwareFilter = false;
     OccupancyConfig octree; ///< second-stage traversal (SkipMode::All)
+    /// Start rays at the previous frame's occlusion frustums (same raycaster, same scene).
+    bool occlusionFrustums = true;
+    OcclusionConfig occlusion;
 
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;
@@ -65,6 +78,12 @@ struct FrameStats {
     std::uint64_t octreeLeaps = 0;          ///< empty octree nodes leapt by rays
     std::uint64_t octreeBricksRebuilt = 0;  ///< octrees rebuilt for this frame's TF (0: reused)
     double octreeRebuildMs = 0.0;
+    bool occlusionUsed = false;            ///< ray starts came from occlusion frustums
+    const char* occlusionReason = "off";   ///< why not, when not used ("" when used)
+    std::uint64_t occlusionFrustums = 0;   ///< non-empty blocks extruded
+    std::uint64_t occlusionTriangles = 0;  ///< of the frustums and the outside pieces
+    double occlusionBuildMs = 0.0;
+    std::uint64_t samplesSavedByStart = 0; ///< samples before the ray starts (not taken)
     double uploadMs = 0.0;
     double renderMs = 0.0;
     double readbackMs = 0.0;

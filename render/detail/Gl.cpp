@@ -73,22 +73,22 @@ GLuint compile(const std::string& name, GLenum stage, const std::string& source)
 
 } // namespace
 
-Program buildProgram(const std::string& name, const std::string& vertexSource,
-                     const std::string& fragmentSource) {
+Program buildProgram(const std::string& name, const std::vector<ShaderStage>& stages) {
     Program program(glCreateProgram());
-    GLuint vs = compile(name, GL_VERTEX_SHADER, vertexSource);
-    GLuint fs = 0;
+    std::vector<GLuint> shaders;
     try {
-        fs = compile(name, GL_FRAGMENT_SHADER, fragmentSource);
+        for (const ShaderStage& stage : stages)
+            shaders.push_back(compile(name, stage.type, stage.source));
     } catch (...) {
-        glDeleteShader(vs);
+        for (GLuint sh : shaders)
+            glDeleteShader(sh);
         throw;
     }
-    glAttachShader(program.get(), vs);
-    glAttachShader(program.get(), fs);
+    for (GLuint sh : shaders)
+        glAttachShader(program.get(), sh);
     glLinkProgram(program.get());
-    glDeleteShader(vs);
-    glDeleteShader(fs);
+    for (GLuint sh : shaders)
+        glDeleteShader(sh);
     GLint ok = 0;
     glGetProgramiv(program.get(), GL_LINK_STATUS, &ok);
     if (!ok) {
@@ -100,6 +100,11 @@ Program buildProgram(const std::string& name, const std::string& vertexSource,
     }
     glCheck(("building shader " + name).c_str());
     return program;
+}
+
+Program buildProgram(const std::string& name, const std::string& vertexSource,
+                     const std::string& fragmentSource) {
+    return buildProgram(name, {{GL_VERTEX_SHADER, vertexSource}, {GL_FRAGMENT_SHADER, fragmentSource}});
 }
 
 } // namespace bc::render::gl

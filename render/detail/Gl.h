@@ -7,6 +7,7 @@
 
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace bc::render::gl {
 
@@ -55,8 +56,14 @@ using Program = Handle<deleteProgram>;
 Texture createTexture(GLenum target);
 Buffer createBuffer();
 
-/// Compiles and links a program from vertex and fragment (or a single compute) source.
+struct ShaderStage {
+    GLenum type; ///< GL_VERTEX_SHADER, GL_GEOMETRY_SHADER, GL_FRAGMENT_SHADER, GL_COMPUTE_SHADER
+    std::string source;
+};
+
+/// Compiles and links a program from its stages (vertex + fragment, + geometry, or compute).
 /// @throw RenderError with the driver's log, naming `name`.
+Program buildProgram(const std::string& name, const std::vector<ShaderStage>& stages);
 Program buildProgram(const std::string& name, const std::string& vertexSource,
                      const std::string& fragmentSource);
 

@@ -19,7 +19,11 @@ layout(binding = 0) uniform sampler3D uPool;
 layout(binding = 1) uniform sampler1D uTf;
 layout(binding = 2) uniform sampler2D uPrev;
 layout(std430, binding = 0) readonly buffer Pages { ivec2 page[]; };
-layout(std430, binding = 1) buffer Counters { uint sampleCount; uint leapCount; };
+layout(std430, binding = 1) buffer Counters { uint sampleCount; uint leapCount; uint savedCount; };
+// Occlusion frustums: ray starts from the last frame's proxies, and this frame's first hits.
+layout(binding = 3) uniform sampler2D uStart;
+layout(r32f, binding = 0) uniform image2D uFirstHit;
+uniform bool uUseStart, uWriteFirstHit;
 // Per brick of the level, the occupancy bits of its octree levels 1..uOctDepth (OCCUPANCY.md).
 layout(std430, binding = 2) readonly buffer Occupancy { uint occ[]; };
 
@@ -136,8 +140,19 @@ void main() {
     int total = int(ceil((t1 - t0) / uStepMm - 0.5));
     if (total <= 0) { outColor = acc; return; }
 
+    // Occlusion frustums: no sample before the proxies' nearest face can be non-empty. The
+    // lattice of sample positions stays that of the box entry; the start only drops samples.
+    int k = 0;
+    if (uUseStart) {
+        float ts = texelFetch(uStart, ivec2(gl_FragCoord.xy), 0).r;
+        k = ts >= 1.0e37 ? total : clamp(int(floor((ts - t0) / uStepMm - 0.5)) - 1, 0, total);
+        if (k > 0) atomicAdd(savedCount, uint(k));
+        if (k >= total) { outColor = acc; return; }
+    }
+    float tHit = 3.0e38; // this pass's first sample in an occupied leaf or brick
+
     // Brick DDA: sample k (at t0 + (k + 0.5) step) belongs to the brick whose interval holds it.
-    vec3 pin = ov + dv * t0;
+    vec3 pin = ov + dv * (t0 + float(k) * uStepMm);
     ivec3 cell = clamp(ivec3(floor(pin / float(uBrick))), ivec3(0), uGrid - 1);
     ivec3 stepDir = ivec3(sign(dv));
     vec3 tDelta, tMax;
@@ -148,7 +163,6 @@ void main() {
         tMax[a] = (plane - ov[a]) / dv[a];
     }
     uint taken = 0u, leaps = 0u;
-    int k = 0;
     while (k < total) {
         float tOut = min(min(tMax.x, tMax.y), tMax.z);
         int kEnd = min(total, int(ceil((tOut - t0) / uStepMm - 0.5)));
@@ -180,6 +194,7 @@ void main() {
                         checkedLeaf = leaf;
                     }
                 }
+                tHit = min(tHit, t);
                 vec4 c = classify(fetch(q, slot));
                 ++taken;
                 if (c.a <= 0.0) continue;
@@ -189,6 +204,7 @@ void main() {
             }
         } else if (e.x == -2 && kEnd > k) {
             vec4 c = classify(intBitsToFloat(e.y));
+            if (c.a > 0.0) tHit = min(tHit, t0 + (float(k) + 0.5) * uStepMm);
             if (c.a <= 0.0) { taken += uint(kEnd - k); k = kEnd; }
             for (; k < kEnd; ++k) {
                 ++taken;
@@ -203,6 +219,10 @@ void main() {
         cell[a] += stepDir[a];
         tMax[a] += tDelta[a];
         if (cell[a] < 0 || cell[a] >= uGrid[a]) break;
+    }
+    if (uWriteFirstHit && tHit < 1.0e37) {
+        ivec2 px = ivec2(gl_FragCoord.xy);
+        if (tHit < imageLoad(uFirstHit, px).r) imageStore(uFirstHit, px, vec4(tHit));
     }
     atomicAdd(sampleCount, taken);
     if (leaps > 0u) atomicAdd(leapCount, leaps);

@@ -21,14 +21,21 @@ struct Case {
 struct Technique {
     const char* name;
     SkipMode skip;
+    bool frustums;
 };
-constexpr Technique kTechniques[] = {{"bricks", SkipMode::Bricks}, {"bricks+octree", SkipMode::All}};
+constexpr Technique kTechniques[] = {{"bricks", SkipMode::Bricks, false},
+                                     {"bricks+octree", SkipMode::All, false},
+                                     {"bricks+frustums", SkipMode::Bricks, true},
+                                     {"bricks+octree+frustums", SkipMode::All, true}};
 
-RenderOptions options(SkipMode skip) {
+std::uint32_t gEdge = 64; // image edge of the invariant paths
+
+RenderOptions options(SkipMode skip, bool frustums = false) {
     RenderOptions o;
-    o.width = o.height = 64;
+    o.width = o.height = gEdge;
     o.earlyTermination = false;
     o.skip = skip;
+    o.occlusionFrustums = frustums;
     return o;
 }
 
@@ -43,34 +50,51 @@ std::vector<std::uint64_t> checkPath(TestStore& t, const TransferFunction& tf,
         accelerated.push_back(std::make_unique<Raycaster>());
     std::vector<std::uint64_t> samples(std::size(kTechniques) + 1, 0);
     std::vector<double> worst(std::size(kTechniques), 0.0);
+    std::vector<int> frustumFrames(std::size(kTechniques), 0);
     for (std::size_t f = 0; f < cameras.size(); ++f) {
         FrameStats s;
         const Image reference = test::gpuFrame(t, plain, tf, cameras[f], options(SkipMode::None), &s);
         samples[0] += s.samples;
         for (std::size_t i = 0; i < std::size(kTechniques); ++i) {
             const Image image = test::gpuFrame(t, *accelerated[i], tf, cameras[f],
-                                               options(kTechniques[i].skip), &s);
+                                               options(kTechniques[i].skip, kTechniques[i].frustums), &s);
             samples[i + 1] += s.samples;
+            frustumFrames[i] += s.occlusionUsed;
             const double maxAbs = compareImages(image, reference).maxAbs;
             worst[i] = std::max(worst[i], maxAbs);
             EXPECT_LE(maxAbs, kTolerance) << what << " frame " << f << ", " << kTechniques[i].name;
         }
     }
     for (std::size_t i = 0; i < std::size(kTechniques); ++i)
-        std::printf("[invariant] %-36s %-14s worst max abs %.1f/255, samples %.3f of plain\n",
+        std::printf("[invariant] %-36s %-22s worst max abs %.1f/255, samples %.3f of plain, "
+                    "frustums used in %d of %zu frames\n",
                     what.c_str(), kTechniques[i].name, worst[i] * 255.0,
-                    double(samples[i + 1]) / double(std::max<std::uint64_t>(samples[0], 1)));
+                    double(samples[i + 1]) / double(std::max<std::uint64_t>(samples[0], 1)),
+                    frustumFrames[i], cameras.size());
     return samples;
+}
+
+/// The store of a case's scan (32^3 bricks), or nullptr when the scan is missing.
+std::unique_ptr<TestStore> caseStore(const Case& c) {
+    auto spec = test::realScan(c.scan);
+    if (!spec) return nullptr;
+    test::glContext();
+    return test::ingestSpec(*spec, {32, 2, 8});
+}
+
+std::string caseName(const ::testing::TestParamInfo<Case>& info) {
+    std::string s = info.param.scan + "_" + info.param.preset;
+    for (char& ch : s)
+        if (ch == '-') ch = '_';
+    return s;
 }
 
 class SkippingInvariant : public ::testing::TestWithParam<Case> {};
 
 TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOverA72FrameOrbit) {
     const Case c = GetParam();
-    auto spec = test::realScan(c.scan);
-    if (!spec) GTEST_SKIP() << "missing scan " << c.scan;
-    test::glContext();
-    auto t = test::ingestSpec(*spec, {32, 2, 8});
+    auto t = caseStore(c);
+    if (!t) GTEST_SKIP() << "missing scan " << c.scan;
     const auto tf = TransferFunction::load(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     std::vector<Camera> path;
@@ -82,10 +106,8 @@ TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOverA72FrameOrbit) {
 
 TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver50RandomJumps) {
     const Case c = GetParam();
-    auto spec = test::realScan(c.scan);
-    if (!spec) GTEST_SKIP() << "missing scan " << c.scan;
-    test::glContext();
-    auto t = test::ingestSpec(*spec, {32, 2, 8});
+    auto t = caseStore(c);
+    if (!t) GTEST_SKIP() << "missing scan " << c.scan;
     const auto tf = TransferFunction::load(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     std::mt19937 rng(20261201);
@@ -102,12 +124,7 @@ INSTANTIATE_TEST_SUITE_P(RealScans, SkippingInvariant,
                                            Case{"pancreas", "ct-bone"}, Case{"Iguana", "ct-bone"},
                                            Case{"gaffer_smoke", "smoke"},
                                            Case{"hydrogen", "smoke"}, Case{"headsq", "mr"}),
-                         [](const auto& info) {
-                             std::string s = info.param.scan + "_" + info.param.preset;
-                             for (char& ch : s)
-                                 if (ch == '-') ch = '_';
-                             return s;
-                         });
+                         caseName);
 
 // Octrees leap over the empty space inside non-empty bricks of sparse angiography: fewer
 // samples than brick skipping alone, the same image.
@@ -138,6 +155,60 @@ TEST(OctreeSkipping, LeapsInsideBricksOfSparseAngiographyWithoutChangingAPixel) 
     test::gpuFrame(*t, octree, tf, camera, a, &sa);
     EXPECT_EQ(sa.octreeBricksRebuilt, 0u);
 }
+
+} // namespace
+} // namespace bc::render
+
+namespace bc::render {
+namespace {
+
+// Occlusion frustums need rays denser than the octree leaves (the policy refuses otherwise),
+// so their invariant runs at 128^2 on the scans where that holds.
+class FrustumInvariant : public ::testing::TestWithParam<Case> {};
+
+TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt128) {
+    const Case c = GetParam();
+    auto t = caseStore(c);
+    if (!t) GTEST_SKIP() << "missing scan " << c.scan;
+    const auto tf = TransferFunction::load(c.preset, t->stats);
+    const Box box = LevelGeometry::of(*t->store, 0).box;
+    gEdge = 128;
+    Raycaster plain, octree, frustums;
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> az(0, 360), el(-80, 80), dist(0.35, 1.6);
+    std::uint64_t sPlain = 0, sOctree = 0, sFrustums = 0;
+    int used = 0;
+    double worst = 0.0;
+    for (int f = 0; f < 72 + 20; ++f) {
+        // 72 orbit frames, then 20 random jumps
+        const Camera camera = f < 72 ? Camera::orbit(box, 5.0 * f, 20.0)
+                                     : Camera::orbit(box, az(rng), el(rng), dist(rng));
+        FrameStats sp, so, sf;
+        const Image a = test::gpuFrame(*t, plain, tf, camera, options(SkipMode::None), &sp);
+        test::gpuFrame(*t, octree, tf, camera, options(SkipMode::All), &so);
+        const Image b = test::gpuFrame(*t, frustums, tf, camera, options(SkipMode::All, true), &sf);
+        sPlain += sp.samples;
+        sOctree += so.samples;
+        sFrustums += sf.samples;
+        used += sf.occlusionUsed;
+        const double maxAbs = compareImages(a, b).maxAbs;
+        worst = std::max(worst, maxAbs);
+        EXPECT_LE(maxAbs, kTolerance) << c.scan << " frame " << f << " (frustums "
+                                      << (sf.occlusionUsed ? "used" : sf.occlusionReason) << ")";
+    }
+    gEdge = 64;
+    std::printf("[frustums] %s %s: worst max abs %.1f/255; samples octree %.3f, +frustums %.3f "
+                "of plain; frustums used in %d of 92 frames\n",
+                c.scan.c_str(), c.preset.c_str(), worst * 255.0, double(sOctree) / double(sPlain),
+                double(sFrustums) / double(sPlain), used);
+    EXPECT_GT(used, 36) << "the policy refused the frustums on most of the orbit";
+    EXPECT_LE(sFrustums, sOctree);
+}
+
+INSTANTIATE_TEST_SUITE_P(RealScans, FrustumInvariant,
+                         ::testing::Values(Case{"cthead", "ct-skin"}, Case{"CT_AVM", "vessels"},
+                                           Case{"frog", "mr"}),
+                         caseName);
 
 } // namespace
 } // namespace bc::render
