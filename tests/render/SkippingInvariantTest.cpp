@@ -206,8 +206,8 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
 }
 
 INSTANTIATE_TEST_SUITE_P(RealScans, FrustumInvariant,
-                         ::testing::Values(Case{"cthead", "ct-skin"}, Case{"CT_AVM", "vessels"},
-                                           Case{"frog", "mr"}),
+                         // frog at 128^2 has rays sparser than half a leaf: refused by policy
+                         ::testing::Values(Case{"cthead", "ct-skin"}, Case{"CT_AVM", "vessels"}),
                          caseName);
 
 } // namespace
