@@ -88,13 +88,16 @@ OccupancyRebuild OccupancyTrees::update(const TransferFunctionTable& table,
     std::vector<std::uint8_t> visible(table.entries);
     for (std::uint32_t i = 0; i < table.entries; ++i)
         visible[i] = table.rgba[4 * std::size_t(i) + 3] > 0.0f;
-    const bool full = !mBuilt || config != mConfig || table.entries != mEntries ||
-                      table.domainMin != mDomainMin || table.domainMax != mDomainMax;
-    if (full) { // entry spans depend on the domain alone: recompute them
+    const bool newDomain = !mBuilt || table.entries != mEntries ||
+                           table.domainMin != mDomainMin || table.domainMax != mDomainMax;
+    const bool full = newDomain || config != mConfig;
+    if (newDomain) { // entry spans depend on the domain alone
+        const std::uint64_t leafCount = std::uint64_t(mLeaves) * mLeaves * mLeaves;
         mLeafEntries.resize(mLeafRange.size());
-        for (std::size_t i = 0; i < mLeafRange.size(); ++i)
-            mLeafEntries[i] = entrySpan(mLeafRange[i][0], mLeafRange[i][1], table.domainMin,
-                                        table.domainMax, table.entries);
+        for (std::uint64_t b = 0; b < mBricks; ++b)
+            for (std::uint64_t i = b * leafCount; mStored[b] && i < (b + 1) * leafCount; ++i)
+                mLeafEntries[i] = entrySpan(mLeafRange[i][0], mLeafRange[i][1], table.domainMin,
+                                            table.domainMax, table.entries);
     }
     // The entries whose emptiness changed, as one span [changedLo, changedHi].
     std::uint32_t changedLo = 0, changedHi = table.entries - 1;

@@ -84,8 +84,11 @@ std::array<double, 4> shade(const RayContext& c, const std::array<double, 4>& rg
     return out;
 }
 
-/// Marches one ray; returns premultiplied RGBA and adds its samples to `samples`.
-std::array<double, 4> marchRay(const RayContext& c, const Ray& ray, std::uint64_t& samples) {
+/// Marches one ray; returns premultiplied RGBA and adds its samples to `samples`, and to
+/// `oracle` those with non-zero opacity taken before the ray's opacity reaches the early
+/// termination threshold (what an ideal skipping renderer would have to take).
+std::array<double, 4> marchRay(const RayContext& c, const Ray& ray, std::uint64_t& samples,
+                               std::uint64_t& oracle) {
     const LevelGeometry& g = c.geometry;
     const glm::dvec3 ov = ray.origin / g.spacing, dv = ray.direction / g.spacing;
     const Box voxelBox{glm::dvec3(0.0),
@@ -102,6 +105,7 @@ std::array<double, 4> marchRay(const RayContext& c, const Ray& ray, std::uint64_
         const auto f = c.table.lookup(c.volume.sample(p.x, p.y, p.z));
         std::array<double, 4> rgba{f[0], f[1], f[2], f[3]};
         if (rgba[3] <= 0.0) continue;
+        if (acc[3] < c.options.ertThreshold) ++oracle;
         if (c.options.shading) rgba = shade(c, rgba, p, ray.direction);
         const double w = (1.0 - acc[3]) * rgba[3];
         for (int i = 0; i < 3; ++i)
@@ -134,18 +138,20 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
 
     Image image(options.width, options.height);
     std::atomic<std::uint32_t> nextRow{0};
-    std::atomic<std::uint64_t> samples{0};
+    std::atomic<std::uint64_t> samples{0}, oracle{0};
     auto worker = [&] {
-        std::uint64_t mine = 0;
+        std::uint64_t mine = 0, mineOracle = 0;
         for (std::uint32_t y; (y = nextRow++) < options.height;)
             for (std::uint32_t x = 0; x < options.width; ++x) {
                 const auto acc =
-                    marchRay(context, view.ray(x, y, options.width, options.height), mine);
+                    marchRay(context, view.ray(x, y, options.width, options.height), mine,
+                             mineOracle);
                 float* px = image.pixel(x, y);
                 for (int i = 0; i < 4; ++i)
                     px[i] = float(std::clamp(acc[i], 0.0, 1.0));
             }
         samples += mine;
+        oracle += mineOracle;
     };
     unsigned threads =
         config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
@@ -157,6 +163,7 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
         t.join();
     stats.level = level;
     stats.samples = samples;
+    stats.oracleSamples = oracle;
     stats.totalMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return image;

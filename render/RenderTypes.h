@@ -67,6 +67,9 @@ struct ShadingModel {
 struct FrameStats {
     std::uint32_t level = 0;          ///< pyramid level drawn
     std::uint64_t samples = 0;        ///< volume samples classified
+    /// CPU reference only: samples with non-zero opacity before the ray reaches the early
+    /// termination threshold: the least any skipping renderer must take (the "oracle").
+    std::uint64_t oracleSamples = 0;
     std::uint64_t bricksTotal = 0;    ///< bricks of the level
     std::uint64_t bricksCulled = 0;   ///< outside the view frustum
     std::uint64_t bricksSkipped = 0;  ///< transparent under the TF (never uploaded nor sampled)

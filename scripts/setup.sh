@@ -13,6 +13,7 @@ packages=(
   libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri  # headless OpenGL 4.5 (llvmpipe without a GPU)
   libglm-dev libpng-dev                               # vector maths, PNG images
   libgtest-dev                                        # tests
+  gnuplot-nox                                         # brickcast bench --plot
 )
 missing=()
 for p in "${packages[@]}"; do

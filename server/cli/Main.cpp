@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
     bc::cli::addDemoCommand(app);
     bc::cli::addCompareCommand(app);
     bc::cli::addRenderCommand(app);
+    bc::cli::addBenchCommand(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -19,6 +19,32 @@ std::vector<std::string> splitComma(const std::string& text) {
 
 } // namespace
 
+std::vector<double> parseNumbers(const std::string& text, const std::string& what,
+                                 std::size_t minCount, std::size_t maxCount) {
+    std::vector<double> out;
+    std::size_t pos = 0;
+    while (pos <= text.size()) {
+        const std::size_t comma = std::min(text.find(',', pos), text.size());
+        const std::string part = text.substr(pos, comma - pos);
+        std::size_t used = 0;
+        double v = 0;
+        try {
+            v = std::stod(part, &used);
+        } catch (const std::exception&) {
+            used = 0;
+        }
+        if (used == 0 || used != part.size() || !std::isfinite(v))
+            throw std::invalid_argument(what + ": '" + part + "' is not a finite number");
+        out.push_back(v);
+        pos = comma + 1;
+    }
+    if (out.size() < minCount || out.size() > maxCount)
+        throw std::invalid_argument(what + ": expected " + std::to_string(minCount) +
+                                    (maxCount > minCount ? " to " + std::to_string(maxCount) : "") +
+                                    " numbers, got '" + text + "'");
+    return out;
+}
+
 std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what) {
     auto parts = splitComma(text);
     if (parts.size() != 3) throw std::invalid_argument(what + ": expected X,Y,Z, got '" + text + "'");

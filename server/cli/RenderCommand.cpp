@@ -3,6 +3,7 @@
 #include "brickstore/BrickStore.h"
 #include "render/BrickPlan.h"
 #include "render/Camera.h"
+#include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
 #include "render/Image.h"
 #include "render/Raycaster.h"
@@ -16,45 +17,20 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <thread>
 
 namespace bc::cli {
 namespace {
 
 struct RenderCliOptions {
     std::string store, output, size = "256,256", tf = "ct-skin", orbit, eye, target, up,
-                               ert = "0.99", skip = "all", statsPath;
+                               ert = "0.99", skip = "all", statsPath, renderer = "gpu";
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32;
     bool ortho = false, noShading = false, reference = false, interactive = false;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
 };
-
-std::vector<double> parseNumbers(const std::string& text, const std::string& what,
-                                 std::size_t minCount, std::size_t maxCount) {
-    std::vector<double> out;
-    std::size_t pos = 0;
-    while (pos <= text.size()) {
-        const std::size_t comma = std::min(text.find(',', pos), text.size());
-        const std::string part = text.substr(pos, comma - pos);
-        std::size_t used = 0;
-        double v = 0;
-        try {
-            v = std::stod(part, &used);
-        } catch (const std::exception&) {
-            used = 0;
-        }
-        if (used == 0 || used != part.size() || !std::isfinite(v))
-            throw std::invalid_argument(what + ": '" + part + "' is not a finite number");
-        out.push_back(v);
-        pos = comma + 1;
-    }
-    if (out.size() < minCount || out.size() > maxCount)
-        throw std::invalid_argument(what + ": expected " + std::to_string(minCount) +
-                                    (maxCount > minCount ? " to " + std::to_string(maxCount) : "") +
-                                    " numbers, got '" + text + "'");
-    return out;
-}
 
 glm::dvec3 vec3Of(const std::string& text, const std::string& what) {
     const auto v = parseNumbers(text, what, 3, 3);
@@ -143,12 +119,20 @@ void runRender(const RenderCliOptions& o) {
     render::FrameStats stats;
     render::Image image;
     std::string renderer;
+    if (o.renderer != "gpu" && o.renderer != "cpu")
+        throw std::invalid_argument("--renderer: '" + o.renderer + "' is not gpu or cpu");
     if (o.reference) {
         const auto level = std::min<std::uint32_t>(
             std::uint32_t(o.level), std::uint32_t(store->layout().levels().size() - 1));
         render::ReferenceVolume volume(*store, level);
         image = render::renderReference(*store, volume, tf, camera, options, stats);
         renderer = "CPU reference (double)";
+    } else if (o.renderer == "cpu") {
+        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
+        render::CpuRaycaster raycaster;
+        image = raycaster.render(*store, cache, tf, camera, options, stats);
+        renderer = "CPU raycaster (float, " + std::to_string(std::thread::hardware_concurrency()) +
+                   " threads)";
     } else {
         render::EglContext context;
         brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
@@ -239,6 +223,9 @@ void addRenderCommand(CLI::App& app) {
         ->capture_default_str();
     cmd->add_flag("--interactive", o->interactive,
                   "Draw a coarser level when the view exceeds the GPU budget");
+    cmd->add_option("--renderer", o->renderer,
+                    "gpu (EGL raycaster) or cpu (the CPU raycaster, fastest without a GPU)")
+        ->capture_default_str();
     cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
     cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");
     cmd->callback([o] { runRender(*o); });

@@ -61,6 +61,41 @@ TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
     EXPECT_EQ(c.exitCode, 0) << c.text;
 }
 
+// `brickcast bench` on the smallest real scan: every technique set of every path, speed-ups
+// over plain taken in the run, errors against the reference, a step sweep; bad lists named.
+TEST(BenchCli, PrintsEveryTechniqueSetWithErrorsAndASweepAndNamesBadInput) {
+    if (!test::realScan("hydrogen")) GTEST_SKIP() << "missing hydrogen";
+    test::TempDir dir;
+    const std::string csv = dir.file("bench.csv");
+    auto r = brickcast("bench --data " + std::string(BC_SHARED_DATA_DIR) +
+                       " --datasets hydrogen --sizes 32 --frames 2 --steps 1,2 --no-rebuild-512"
+                       " --no-generated --csv " + csv);
+    ASSERT_EQ(r.exitCode, 0) << r.text;
+    std::ifstream f(csv);
+    std::string line;
+    std::getline(f, line);
+    EXPECT_TRUE(contains(line, "samples_over_oracle")) << line;
+    int paths = 0, sweeps = 0, plain = 0;
+    while (std::getline(f, line)) {
+        paths += line.starts_with("path,hydrogen,smoke,");
+        sweeps += line.starts_with("sweep,hydrogen,smoke,orbit,32,all,");
+        if (line.find(",plain,") != std::string::npos) {
+            ++plain;
+            EXPECT_TRUE(contains(line, ",1,")) << "plain's speed-up over itself: " << line;
+        }
+        EXPECT_FALSE(contains(line, "nan")) << line;
+    }
+    EXPECT_EQ(paths, 14) << "7 technique sets x 2 paths";
+    EXPECT_EQ(sweeps, 2);
+    EXPECT_EQ(plain, 2);
+    auto bad = brickcast("bench --datasets hydrogen --paths spiral --no-rebuild-512 --no-generated");
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_TRUE(contains(bad.text, "spiral")) << bad.text;
+    auto none = brickcast("bench --datasets nosuchscan --no-generated");
+    EXPECT_NE(none.exitCode, 0);
+    EXPECT_TRUE(contains(none.text, "--datasets")) << none.text;
+}
+
 TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
     const std::string out = dir.file("x.png");
     auto size = brickcast("render " + store + " -o " + out + " --size 0,64");

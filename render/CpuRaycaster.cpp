@@ -1,0 +1,381 @@
+#include "render/CpuRaycaster.h"
+
+#include "brickstore/BrickCache.h"
+#include "brickstore/BrickStore.h"
+#include "render/BrickPlan.h"
+#include "render/Occupancy.h"
+#include "render/TransferFunction.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/blocked_range2d.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+
+#include <glm/geometric.hpp>
+
+namespace bc::render {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+constexpr std::uint32_t kTfEntries = 4096; // as the GPU raycaster's table
+
+enum class Slot : std::uint8_t { Absent, Sampled, Constant };
+
+struct BrickRef {
+    const void* voxels = nullptr;
+    float constant = 0.0f;
+    Slot slot = Slot::Absent;
+};
+
+/// Everything a ray needs, in float, as the shader's uniforms.
+struct Frame {
+    glm::vec3 eye, forward, right, up;
+    bool ortho = false;
+    float width = 0, height = 0;
+    glm::vec3 invSpacing, dims;
+    float stepMm = 1;
+    int brick = 64, apron = 2, edge = 68;
+    glm::ivec3 grid{1};
+    const float* tf = nullptr;
+    int entries = 2;
+    float tfScale = 1, tfOffset = 0; ///< native value -> table position
+    float ert = 2;
+    bool shading = true;
+    glm::vec3 gradScale{1};
+    const std::uint32_t* occ = nullptr;
+    int octDepth = 0, occWords = 0, leafAxis = 1;
+    float leaf = 1;
+    const BrickRef* bricks = nullptr;
+};
+
+struct Rgba {
+    float r = 0, g = 0, b = 0, a = 0;
+};
+
+Rgba classify(const Frame& f, float value) {
+    const float u = std::clamp(value * f.tfScale + f.tfOffset, 0.0f, float(f.entries - 1));
+    const int i = std::min(int(u), f.entries - 2);
+    const float w = u - float(i);
+    const float* e = f.tf + 4 * i;
+    auto mix = [w](float a, float b) { return a * (1.0f - w) + b * w; };
+    return {mix(e[0], e[4]), mix(e[1], e[5]), mix(e[2], e[6]), mix(e[3], e[7])};
+}
+
+/// Trilinear at q (brick-local stored texel coordinates, voxel j at q = j), clamped to the
+/// brick: the shader's fetch() with full-precision weights.
+template <class T> float fetch(const T* v, int edge, glm::vec3 q) {
+    const float hi = float(edge - 1);
+    q = glm::clamp(q, glm::vec3(0.0f), glm::vec3(hi));
+    const int x0 = int(q.x), y0 = int(q.y), z0 = int(q.z);
+    const float fx = q.x - float(x0), fy = q.y - float(y0), fz = q.z - float(z0);
+    const int dx = x0 < edge - 1 ? 1 : 0, dy = y0 < edge - 1 ? edge : 0,
+              dz = z0 < edge - 1 ? edge * edge : 0;
+    const T* p = v + (std::size_t(z0) * edge + std::size_t(y0)) * edge + std::size_t(x0);
+    auto mix = [](float a, float b, float t) { return a * (1.0f - t) + b * t; };
+    const float c00 = mix(float(p[0]), float(p[dx]), fx);
+    const float c10 = mix(float(p[dy]), float(p[dy + dx]), fx);
+    const float c01 = mix(float(p[dz]), float(p[dz + dx]), fx);
+    const float c11 = mix(float(p[dz + dy]), float(p[dz + dy + dx]), fx);
+    return mix(mix(c00, c10, fy), mix(c01, c11, fy), fz);
+}
+
+/// diff^kShininess by squaring (the exponent is a whole number): std::pow costs more than
+/// the rest of the shading.
+inline float powShininess(float x) {
+    static_assert(ShadingModel::kShininess == 24.0, "powShininess assumes 24");
+    const float x3 = x * x * x, x6 = x3 * x3, x12 = x6 * x6;
+    return x12 * x12;
+}
+
+template <class T> Rgba shade(const Frame& f, Rgba c, const T* v, glm::vec3 q, glm::vec3 dir) {
+    const glm::vec3 g =
+        glm::vec3(fetch(v, f.edge, q + glm::vec3(1, 0, 0)) - fetch(v, f.edge, q - glm::vec3(1, 0, 0)),
+                  fetch(v, f.edge, q + glm::vec3(0, 1, 0)) - fetch(v, f.edge, q - glm::vec3(0, 1, 0)),
+                  fetch(v, f.edge, q + glm::vec3(0, 0, 1)) - fetch(v, f.edge, q - glm::vec3(0, 0, 1))) *
+        f.gradScale;
+    const float len = glm::length(g);
+    if (len <= 0.0f) return c;
+    const float diff = std::abs(glm::dot(g / len, dir));
+    const float spec = float(ShadingModel::kSpecular) * powShininess(diff);
+    const float k = float(ShadingModel::kAmbient) + float(ShadingModel::kDiffuse) * diff;
+    const float w = std::clamp(len / float(ShadingModel::kGradientFade), 0.0f, 1.0f);
+    auto lit = [&](float x) { return x + ((x * k + spec) - x) * w; };
+    return {lit(c.r), lit(c.g), lit(c.b), c.a};
+}
+
+void composite(Rgba& acc, const Rgba& c) {
+    const float w = (1.0f - acc.a) * c.a;
+    acc.r += w * c.r;
+    acc.g += w * c.g;
+    acc.b += w * c.b;
+    acc.a += w;
+}
+
+/// The coarsest octree level whose node holding `leaf` is empty, or 0 (the shader's walk).
+int emptyLevel(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
+    int first = 0;
+    for (int l = 1; l <= f.octDepth; ++l) {
+        const glm::ivec3 n = leaf >> (f.octDepth - l);
+        const int s = 1 << l;
+        const int bit = first + (n.z * s + n.y) * s + n.x;
+        if (((words[bit >> 5] >> (bit & 31)) & 1u) == 0u) return l;
+        first += s * s * s;
+    }
+    return 0;
+}
+
+float exitParameter(glm::vec3 p0, glm::vec3 dv, glm::vec3 lo, float size) {
+    float t = 3.0e38f;
+    for (int a = 0; a < 3; ++a) {
+        if (dv[a] > 0.0f) t = std::min(t, (lo[a] + size - p0[a]) / dv[a]);
+        else if (dv[a] < 0.0f) t = std::min(t, (lo[a] - p0[a]) / dv[a]);
+    }
+    return t;
+}
+
+struct RayCount {
+    std::uint64_t samples = 0, leaps = 0;
+};
+
+/// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque.
+template <class T>
+bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
+                glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Rgba& acc, RayCount& n) {
+    const glm::vec3 rel = local + (float(f.apron) - 0.5f);
+    glm::ivec3 checked(-1);
+    for (; k < kEnd; ++k) {
+        const float t = t0 + (float(k) + 0.5f) * f.stepMm;
+        if (words) {
+            const glm::ivec3 leaf = glm::clamp(glm::ivec3(glm::floor((local + dv * t) / f.leaf)),
+                                               glm::ivec3(0), glm::ivec3(f.leafAxis - 1));
+            if (leaf != checked) {
+                const int l = emptyLevel(f, words, leaf);
+                if (l > 0) {
+                    const float size = f.leaf * float(1 << (f.octDepth - l));
+                    const glm::vec3 lo = glm::vec3(leaf >> (f.octDepth - l)) * size;
+                    const float tExit = exitParameter(local, dv, lo, size);
+                    const int kNext = int(std::ceil((tExit - t0) / f.stepMm - 0.5f));
+                    ++n.leaps;
+                    k = std::max(k, std::min(kNext, kEnd) - 1);
+                    continue;
+                }
+                checked = leaf;
+            }
+        }
+        const glm::vec3 q = rel + dv * t;
+        Rgba c = classify(f, fetch(v, f.edge, q));
+        ++n.samples;
+        if (c.a <= 0.0f) continue;
+        if (f.shading) c = shade(f, c, v, q, dir);
+        composite(acc, c);
+        if (acc.a >= f.ert) return false;
+    }
+    return true;
+}
+
+/// One ray through the brick grid (the shader's main()).
+template <class T> Rgba marchRay(const Frame& f, float sx, float sy, RayCount& n) {
+    const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
+    const glm::vec3 d = f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
+    const glm::vec3 ov = o * f.invSpacing, dv = d * f.invSpacing;
+    Rgba acc;
+    float t0 = 0.0f, t1 = 3.0e38f;
+    for (int a = 0; a < 3; ++a) {
+        if (dv[a] == 0.0f) {
+            if (ov[a] < 0.0f || ov[a] > f.dims[a]) return acc;
+            continue;
+        }
+        const float ta = -ov[a] / dv[a], tb = (f.dims[a] - ov[a]) / dv[a];
+        t0 = std::max(t0, std::min(ta, tb));
+        t1 = std::min(t1, std::max(ta, tb));
+    }
+    const int total = int(std::ceil((t1 - t0) / f.stepMm - 0.5f));
+    if (total <= 0) return acc;
+    const glm::vec3 pin = ov + dv * t0;
+    glm::ivec3 cell = glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
+    glm::ivec3 stepDir;
+    glm::vec3 tDelta, tMax;
+    for (int a = 0; a < 3; ++a) {
+        stepDir[a] = dv[a] > 0.0f ? 1 : dv[a] < 0.0f ? -1 : 0;
+        if (stepDir[a] == 0) {
+            tDelta[a] = tMax[a] = 3.0e38f;
+            continue;
+        }
+        tDelta[a] = float(f.brick) / std::abs(dv[a]);
+        const float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * f.brick);
+        tMax[a] = (plane - ov[a]) / dv[a];
+    }
+    for (int k = 0; k < total;) {
+        const float tOut = std::min({tMax.x, tMax.y, tMax.z});
+        const int kEnd = std::min(total, int(std::ceil((tOut - t0) / f.stepMm - 0.5f)));
+        const int index = (cell.z * f.grid.y + cell.y) * f.grid.x + cell.x;
+        const BrickRef& b = f.bricks[index];
+        if (b.slot == Slot::Sampled && kEnd > k) {
+            const std::uint32_t* words = f.occ ? f.occ + std::size_t(index) * f.occWords : nullptr;
+            if (!marchBrick(f, static_cast<const T*>(b.voxels), words,
+                            ov - glm::vec3(cell * f.brick), dv, d, t0, k, kEnd, acc, n))
+                return acc;
+        } else if (b.slot == Slot::Constant && kEnd > k) {
+            const Rgba c = classify(f, b.constant);
+            n.samples += std::uint64_t(kEnd - k);
+            for (; c.a > 0.0f && k < kEnd; ++k) {
+                composite(acc, c);
+                if (acc.a >= f.ert) return acc;
+            }
+        }
+        k = std::max(k, kEnd);
+        const int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
+        cell[a] += stepDir[a];
+        tMax[a] += tDelta[a];
+        if (cell[a] < 0 || cell[a] >= f.grid[a]) break;
+    }
+    return acc;
+}
+
+template <class T> void renderTiles(const Frame& f, Image& image, RayCount& total) {
+    std::atomic<std::uint64_t> samples{0}, leaps{0};
+    const auto w = image.width, h = image.height;
+    tbb::parallel_for(tbb::blocked_range2d<std::uint32_t>(0, h, 8, 0, w, 8),
+                      [&](const tbb::blocked_range2d<std::uint32_t>& r) {
+                          RayCount n;
+                          for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
+                              for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
+                                  const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
+                                  const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
+                                  const Rgba c = marchRay<T>(f, sx, sy, n);
+                                  float* px = image.pixel(x, y);
+                                  px[0] = std::clamp(c.r, 0.0f, 1.0f);
+                                  px[1] = std::clamp(c.g, 0.0f, 1.0f);
+                                  px[2] = std::clamp(c.b, 0.0f, 1.0f);
+                                  px[3] = std::clamp(c.a, 0.0f, 1.0f);
+                              }
+                          samples += n.samples;
+                          leaps += n.leaps;
+                      });
+    total.samples = samples;
+    total.leaps = leaps;
+}
+
+Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions& o,
+              const TransferFunctionTable& table) {
+    Frame f;
+    f.eye = glm::vec3(view.eye);
+    f.forward = glm::vec3(view.forward);
+    f.right = glm::vec3(view.right);
+    f.up = glm::vec3(view.upScaled);
+    f.ortho = view.orthographic;
+    f.width = float(o.width);
+    f.height = float(o.height);
+    f.invSpacing = glm::vec3(1.0 / g.spacing);
+    f.dims = glm::vec3(float(g.dims[0]), float(g.dims[1]), float(g.dims[2]));
+    f.stepMm = float(o.stepVoxels * g.minSpacing());
+    f.brick = int(g.brickVoxels);
+    f.apron = int(g.apronVoxels);
+    f.edge = f.brick + 2 * f.apron;
+    f.grid = glm::ivec3(int(g.bricks[0]), int(g.bricks[1]), int(g.bricks[2]));
+    f.tf = table.rgba.data();
+    f.entries = int(table.entries);
+    const double span = table.domainMax - table.domainMin, last = double(table.entries - 1);
+    f.tfScale = float(last / span);
+    f.tfOffset = float(-table.domainMin * last / span);
+    f.ert = o.earlyTermination ? float(o.ertThreshold) : 2.0f;
+    f.shading = o.shading;
+    f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);
+    return f;
+}
+
+} // namespace
+
+CpuRaycaster::CpuRaycaster() = default;
+CpuRaycaster::~CpuRaycaster() = default;
+
+Image CpuRaycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
+                           const TransferFunction& tf, const Camera& camera,
+                           const RenderOptions& options, FrameStats& stats) {
+    const auto frameStart = Clock::now();
+    options.validate();
+    camera.validate();
+    stats = FrameStats{};
+    const auto levels = std::uint32_t(store.layout().levels().size());
+    const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
+    const LevelGeometry g = LevelGeometry::of(store, level);
+    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
+    const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
+    const bool octree = options.skip == SkipMode::All && g.apronVoxels > 0;
+    if (octree && (!mOccupancy || mStore != &store || mStorePath != store.path() ||
+                   mOccupancy->level() != level)) {
+        mOccupancy = std::make_unique<OccupancyTrees>(store, level);
+        mStore = &store;
+        mStorePath = store.path();
+    }
+    if (octree) {
+        const auto rebuild = mOccupancy->update(table, options.octree);
+        stats.octreeBricksRebuilt = rebuild.bricksRebuilt;
+        stats.octreeRebuildMs = rebuild.ms;
+    }
+    const BrickPlan plan =
+        planBricks(store, g, table, view, options.skip, octree ? mOccupancy.get() : nullptr);
+    stats.level = level;
+    stats.bricksTotal = plan.total;
+    stats.bricksCulled = plan.culled;
+    stats.bricksSkipped = plan.skipped;
+    stats.bricksVisited = plan.drawn.size();
+    stats.bricksConstant = plan.constant;
+    stats.batches = 1;
+
+    // Pin the frame's sampled bricks (decompressing misses on every core).
+    const auto loadStart = Clock::now();
+    std::vector<BrickRef> bricks(std::max<std::uint64_t>(g.brickCount(), 1));
+    std::vector<brickstore::BrickPin> pins(plan.drawn.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, plan.drawn.size()),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                              const PlannedBrick& b = plan.drawn[i];
+                              BrickRef& ref = bricks[b.index];
+                              if (b.draw == BrickDraw::Constant) {
+                                  ref.slot = Slot::Constant;
+                                  ref.constant = b.constantValue;
+                                  continue;
+                              }
+                              pins[i] = cache.pin(b.key);
+                              ref.slot = Slot::Sampled;
+                              ref.voxels = pins[i].data().data();
+                          }
+                      });
+    stats.uploadMs = msSince(loadStart);
+
+    const auto renderStart = Clock::now();
+    Frame f = frameOf(g, view, options, table);
+    f.bricks = bricks.data();
+    if (octree && mOccupancy->depth() > 0) {
+        f.occ = mOccupancy->words().data();
+        f.octDepth = int(mOccupancy->depth());
+        f.occWords = int(mOccupancy->wordsPerBrick());
+        f.leafAxis = int(mOccupancy->leavesPerAxis());
+        f.leaf = float(mOccupancy->leafVoxels());
+    }
+    Image image(options.width, options.height);
+    RayCount count;
+    switch (store.info().volume.type) {
+    case brickstore::VoxelType::U8: renderTiles<std::uint8_t>(f, image, count); break;
+    case brickstore::VoxelType::U16: renderTiles<std::uint16_t>(f, image, count); break;
+    case brickstore::VoxelType::I16: renderTiles<std::int16_t>(f, image, count); break;
+    case brickstore::VoxelType::F32: renderTiles<float>(f, image, count); break;
+    }
+    stats.renderMs = msSince(renderStart);
+    stats.samples = count.samples;
+    stats.octreeLeaps = count.leaps;
+    stats.occlusionReason = "not on the CPU raycaster";
+    stats.totalMs = msSince(frameStart);
+    return image;
+}
+
+} // namespace bc::render

@@ -1,0 +1,46 @@
+#pragma once
+// The CPU raycaster: the GPU raycaster's twin for machines without a GPU, where llvmpipe
+// runs the shader at a few million samples per second. Same brick plan, same octree leaps,
+// same sample positions and the same optical model as the shader (render/OPTICS.md), in
+// float, on every core (TBB over 8x8 pixel tiles). Bricks come from the host cache: the
+// frame's visible non-empty bricks are pinned for the frame (the cache may exceed its budget
+// rather than fail a frame), so there are no batches and no GPU pool. Occlusion frustums are
+// a GPU technique and are not used here. Not thread-safe: one frame at a time per instance.
+#include "render/Camera.h"
+#include "render/Image.h"
+#include "render/RenderTypes.h"
+
+#include <memory>
+#include <string>
+
+namespace bc::brickstore {
+class BrickStore;
+class BrickCache;
+} // namespace bc::brickstore
+
+namespace bc::render {
+
+class TransferFunction;
+class OccupancyTrees;
+
+class CpuRaycaster {
+  public:
+    CpuRaycaster();
+    ~CpuRaycaster();
+    CpuRaycaster(const CpuRaycaster&) = delete;
+    CpuRaycaster& operator=(const CpuRaycaster&) = delete;
+
+    /// Renders one frame of `store` at options.level (interactive is ignored: the host cache
+    /// holds what it must). Fills `stats` (no uploads, one batch).
+    /// @throw std::invalid_argument on bad options or camera; StoreCorrupt naming a brick.
+    Image render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
+                 const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
+                 FrameStats& stats);
+
+  private:
+    std::unique_ptr<OccupancyTrees> mOccupancy;
+    const brickstore::BrickStore* mStore = nullptr;
+    std::string mStorePath;
+};
+
+} // namespace bc::render
