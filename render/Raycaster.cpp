@@ -428,9 +428,7 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
     stats.readbackMs = msSince(readStart);
     if (options.occlusionFrustums) {
         const auto captureStart = Clock::now();
-        const double all = double(stats.samples + stats.samplesSavedByStart);
-        mGpu->occlusion->capture(view, scene, all > 0 ? stats.samplesSavedByStart / all : 0.0,
-                                 useStarts, options.occlusion);
+        mGpu->occlusion->capture(view, scene, msSince(frameStart), useStarts, options.occlusion);
         stats.occlusionBuildMs += msSince(captureStart);
     }
     stats.bricksUploaded = mPool->stats().uploads - uploadsBefore;

@@ -43,8 +43,8 @@ void OcclusionConfig::validate() const {
     if (blockPixels < 1 || blockPixels > 64)
         throw std::invalid_argument("occlusion block size must lie in 1..64 pixels, got " +
                                     std::to_string(blockPixels));
-    if (!(minSavedShare >= 0.0 && minSavedShare <= 1.0))
-        throw std::invalid_argument("occlusion minimum saved share must lie in [0, 1]");
+    if (probeEvery < 2)
+        throw std::invalid_argument("occlusion probe interval must be at least 2 frames");
 }
 
 } // namespace bc::render

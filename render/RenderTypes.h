@@ -22,10 +22,11 @@ const char* toString(SkipMode mode);
 /// Occlusion-frustum ray starts (issue 4; render/OCCLUSION.md).
 struct OcclusionConfig {
     std::uint32_t blockPixels = 4; ///< k: occlusion blocks of k x k pixels
-    /// Policy: after a frame whose proxies saved less than this share of the samples, the
-    /// next `offFrames` frames use the plain box (random jumps on dense data do not pay).
-    double minSavedShare = 0.03;
+    /// Policy, measured: a frame with frustums that takes longer than the last frame without
+    /// them switches them off for `offFrames` frames (random jumps on dense data do not pay);
+    /// after `probeEvery` frames with them, one frame without them re-measures the plain cost.
     std::uint32_t offFrames = 8;
+    std::uint32_t probeEvery = 16;
     void validate() const;
 };
 

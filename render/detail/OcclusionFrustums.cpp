@@ -257,6 +257,7 @@ bool OcclusionFrustums::prepare(const ViewBasis& view, std::uint32_t width, std:
                                 const Box& box, std::uint64_t sceneKey, double cellMm,
                                 double stepMm, const OcclusionConfig& config, FrameStats& stats) {
     const auto start = std::chrono::steady_clock::now();
+    mComparable = false;
     auto refuse = [&](const char* why) {
         stats.occlusionUsed = false;
         stats.occlusionReason = why;
@@ -265,9 +266,14 @@ bool OcclusionFrustums::prepare(const ViewBasis& view, std::uint32_t width, std:
     if (!mValid || width != mWidth || height != mHeight || config.blockPixels != mBlockPixels)
         return refuse("no previous frame of this size");
     if (sceneKey != mSceneKey) return refuse("volume, transfer function or options changed");
+    mComparable = true; // from here on a plain frame measures what the proxies compete with
     if (mOffFor > 0) {
         --mOffFor;
-        return refuse("policy: the last proxies did not pay");
+        return refuse("policy: frustums cost more than they saved");
+    }
+    if (mUsedRun >= config.probeEvery) {
+        mUsedRun = 0;
+        return refuse("policy: probing the plain box");
     }
     if (insideBox(view.eye, box)) return refuse("camera inside the volume");
     // What can hide between the last frame's rays: rays must be denser than the cells.
@@ -379,9 +385,17 @@ std::uint32_t OcclusionFrustums::drawOutsidePieces(const ViewBasis& view, const 
     return std::uint32_t(triangles.size() / 9);
 }
 
-void OcclusionFrustums::capture(const ViewBasis& view, std::uint64_t sceneKey, double savedShare,
+void OcclusionFrustums::capture(const ViewBasis& view, std::uint64_t sceneKey, double frameMs,
                                 bool proxiesUsed, const OcclusionConfig& config) {
-    if (proxiesUsed && savedShare < config.minSavedShare) mOffFor = config.offFrames;
+    if (proxiesUsed) {
+        ++mUsedRun;
+        if (mPlainMs > 0.0 && frameMs >= mPlainMs) { // they do not pay: off for a while
+            mOffFor = config.offFrames;
+            mUsedRun = 0;
+        }
+    } else if (mComparable) {
+        mPlainMs = frameMs;
+    }
     mBlockPixels = config.blockPixels;
     mBlocksX = (mWidth + mBlockPixels - 1) / mBlockPixels;
     mBlocksY = (mHeight + mBlockPixels - 1) / mBlockPixels;

@@ -36,8 +36,8 @@ class OcclusionFrustums {
     /// Clears the first-hit image for a frame of this size.
     void beginFrame(std::uint32_t width, std::uint32_t height);
     /// After a frame: keeps its first-hit image, reduced to blocks, for the next frame, and
-    /// the share of samples the proxies saved (for the policy).
-    void capture(const ViewBasis& view, std::uint64_t sceneKey, double savedShare,
+    /// what the frame cost with or without proxies (for the policy).
+    void capture(const ViewBasis& view, std::uint64_t sceneKey, double frameMs,
                  bool proxiesUsed, const OcclusionConfig& config);
     /// Forgets the last frame (the next frame uses the plain box).
     void invalidate() { mValid = false; }
@@ -56,7 +56,10 @@ class OcclusionFrustums {
     ViewBasis mView;                ///< the last captured frame's camera
     std::uint64_t mSceneKey = 0;
     bool mValid = false;
-    std::uint32_t mOffFor = 0;
+    std::uint32_t mOffFor = 0;      ///< policy: frames left without proxies
+    std::uint32_t mUsedRun = 0;     ///< frames with proxies since the last plain one
+    double mPlainMs = -1.0;         ///< the last comparable frame without proxies
+    bool mComparable = false;       ///< this frame's refusal leaves it comparable
 };
 
 } // namespace bc::render::detail

@@ -36,6 +36,9 @@ RenderOptions options(SkipMode skip, bool frustums = false) {
     o.earlyTermination = false;
     o.skip = skip;
     o.occlusionFrustums = frustums;
+    // The invariant is about the images: keep the timing policy from switching frustums off.
+    o.occlusion.offFrames = 0;
+    o.occlusion.probeEvery = 1u << 30;
     return o;
 }
 
