@@ -142,4 +142,13 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
     return plan;
 }
 
+void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats) {
+    stats.level = level;
+    stats.bricksTotal = plan.total;
+    stats.bricksCulled = plan.culled;
+    stats.bricksSkipped = plan.skipped;
+    stats.bricksVisited = plan.drawn.size();
+    stats.bricksConstant = plan.constant;
+}
+
 } // namespace bc::render

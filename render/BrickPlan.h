@@ -60,6 +60,9 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
                      const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
                      const OccupancyTrees* occupancy = nullptr);
 
+/// The plan's brick counts and `level` into a frame's stats.
+void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats);
+
 /// True when `box` lies wholly outside the view of `view` (side planes through the image
 /// corners, and behind the eye plane).
 bool outsideView(const Box& box, const ViewBasis& view);

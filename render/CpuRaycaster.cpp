@@ -323,12 +323,7 @@ Image CpuRaycaster::render(const brickstore::BrickStore& store, brickstore::Bric
     }
     const BrickPlan plan =
         planBricks(store, g, table, view, options.skip, octree ? mOccupancy.get() : nullptr);
-    stats.level = level;
-    stats.bricksTotal = plan.total;
-    stats.bricksCulled = plan.culled;
-    stats.bricksSkipped = plan.skipped;
-    stats.bricksVisited = plan.drawn.size();
-    stats.bricksConstant = plan.constant;
+    recordPlan(plan, level, stats);
     stats.batches = 1;
 
     // Pin the frame's sampled bricks (decompressing misses on every core).

@@ -190,15 +190,6 @@ struct BatchPins {
     ~BatchPins() { pool.unpinAll(); }
 };
 
-void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats) {
-    stats.level = level;
-    stats.bricksTotal = plan.total;
-    stats.bricksCulled = plan.culled;
-    stats.bricksSkipped = plan.skipped;
-    stats.bricksVisited = plan.drawn.size();
-    stats.bricksConstant = plan.constant;
-}
-
 } // namespace
 
 std::vector<std::uint64_t> Raycaster::fillBatch(const BrickPlan& plan, std::size_t& next,

@@ -24,7 +24,8 @@ struct OcclusionConfig {
     std::uint32_t blockPixels = 4; ///< k: occlusion blocks of k x k pixels
     /// Policy, measured: a frame with frustums that takes longer than the last frame without
     /// them switches them off for `offFrames` frames (random jumps on dense data do not pay);
-    /// after `probeEvery` frames with them, one frame without them re-measures the plain cost.
+    /// the second frame of a scene, and one frame after every `probeEvery` frames with them,
+    /// is drawn without them to measure the plain cost.
     std::uint32_t offFrames = 8;
     std::uint32_t probeEvery = 16;
     void validate() const;

@@ -271,7 +271,7 @@ bool OcclusionFrustums::prepare(const ViewBasis& view, std::uint32_t width, std:
         --mOffFor;
         return refuse("policy: frustums cost more than they saved");
     }
-    if (mUsedRun >= config.probeEvery) {
+    if ((mPlainMs < 0.0 && mUsedRun >= 1) || mUsedRun >= config.probeEvery) {
         mUsedRun = 0;
         return refuse("policy: probing the plain box");
     }

@@ -151,15 +151,17 @@ struct Scene {
 
 /// One technique set over one path: frame 1 is compared with `reference`.
 BenchRow measure(Scene& s, const TechniqueSet& t, const std::string& renderer,
-                 const std::vector<render::Camera>& cams,
-                 render::RenderOptions o, std::uint64_t budgetBytes,
-                 const render::Image* reference, const render::FrameStats& referenceStats) {
+                 const std::vector<render::Camera>& cams, render::RenderOptions o,
+                 std::uint64_t budgetBytes, const render::Image* reference,
+                 const render::FrameStats& referenceStats) {
     const bool cpu = renderer == "cpu";
     render::Raycaster* gpu = nullptr;
     std::optional<render::Raycaster> gpuRaycaster;
     std::optional<render::CpuRaycaster> cpuRaycaster;
-    if (cpu) cpuRaycaster.emplace();
-    else gpu = &gpuRaycaster.emplace(render::RaycasterConfig{budgetBytes});
+    if (cpu)
+        cpuRaycaster.emplace();
+    else
+        gpu = &gpuRaycaster.emplace(render::RaycasterConfig{budgetBytes});
     o.skip = t.skip;
     o.earlyTermination = t.ert;
     o.occlusionFrustums = t.frustums;
@@ -180,7 +182,8 @@ BenchRow measure(Scene& s, const TechniqueSet& t, const std::string& renderer,
             const auto c = render::compareImages(image, *reference);
             row.psnr = c.psnrDb;
             row.ssim = c.ssim;
-            row.overOracle = double(st.samples) / double(std::max<std::uint64_t>(referenceStats.oracleSamples, 1));
+            row.overOracle = double(st.samples) /
+                             double(std::max<std::uint64_t>(referenceStats.oracleSamples, 1));
         }
         ms.push_back(st.totalMs);
         spp += double(st.samples) / (double(o.width) * o.height);
@@ -215,19 +218,22 @@ void benchScene(Scene& s, const Dataset& d, const BenchOptions& o, BenchReport& 
             std::optional<render::Image> reference;
             if (s.volume)
                 reference = render::renderReference(*s.store, *s.volume, *s.tf, cams[1], base, rs);
-            for (const auto& t : kSets) {
-                if (o.renderer == "cpu" && t.frustums) continue; // a GPU technique
-                BenchRow row = measure(s, t, o.renderer, cams, base, (d.budgetMb ? d.budgetMb : o.gpuBudgetMb) << 20,
-                                       reference ? &*reference : nullptr, rs);
-                row.dataset = d.name;
-                row.tf = d.preset;
-                row.path = path;
-                row.size = base.width;
-                row.step = base.stepVoxels;
-                report.add(row);
-            }
-            std::fprintf(stderr, "bench: %s / %s %s %u^2 done\n", d.name.c_str(),
-                         d.preset.c_str(), path.c_str(), base.width);
+            for (const auto& t : kSets)
+                for (const std::string renderer : {"gpu", "cpu"}) {
+                    if (o.renderer != "both" && o.renderer != renderer) continue;
+                    if (renderer == "cpu" && t.frustums) continue; // a GPU technique
+                    BenchRow row = measure(s, t, renderer, cams, base,
+                                           (d.budgetMb ? d.budgetMb : o.gpuBudgetMb) << 20,
+                                           reference ? &*reference : nullptr, rs);
+                    row.dataset = d.name;
+                    row.tf = d.preset;
+                    row.path = path;
+                    row.size = base.width;
+                    row.step = base.stepVoxels;
+                    report.add(row);
+                }
+            std::fprintf(stderr, "bench: %s / %s %s %u^2 done\n", d.name.c_str(), d.preset.c_str(),
+                         path.c_str(), base.width);
         }
     }
 }
@@ -243,12 +249,13 @@ void stepSweep(Scene& s, const Dataset& d, const BenchOptions& o, BenchReport& r
     base.stepVoxels = steps.front();
     const auto cams = cameraPath("orbit", render::LevelGeometry::of(*s.store, 0).box, o.frames);
     render::FrameStats rs;
-    const render::Image reference = render::renderReference(*s.store, *s.volume, *s.tf, cams[1], base, rs);
+    const render::Image reference =
+        render::renderReference(*s.store, *s.volume, *s.tf, cams[1], base, rs);
     for (double step : steps) {
         render::RenderOptions so = base;
         so.stepVoxels = step;
-        BenchRow row = measure(s, kSets[std::size(kSets) - 1], o.renderer, cams, so, o.gpuBudgetMb << 20,
-                               &reference, rs);
+        BenchRow row = measure(s, kSets[std::size(kSets) - 1], o.renderer == "cpu" ? "cpu" : "gpu",
+                               cams, so, o.gpuBudgetMb << 20, &reference, rs);
         row.kind = "sweep";
         row.dataset = d.name;
         row.tf = d.preset;
@@ -286,13 +293,14 @@ void rebuild512(const std::string& tmp) {
                 "ct-skin <-> ct-bone, incremental, %.2f ms (%.0f bricks rebuilt). Ruijters & "
                 "Vilanova 2006: 3.5 ms for 512^3.\n",
                 (unsigned long long)stored, std::thread::hardware_concurrency(), median(full),
-                median(incremental), double(rebuilt) / double(std::max<std::size_t>(incremental.size(), 1)));
+                median(incremental),
+                double(rebuilt) / double(std::max<std::size_t>(incremental.size(), 1)));
 }
 
 void runBench(const BenchOptions& o) {
     if (o.frames < 1 || o.frames > 1000) throw std::invalid_argument("--frames: 1..1000");
-    if (o.renderer != "gpu" && o.renderer != "cpu")
-        throw std::invalid_argument("--renderer: '" + o.renderer + "' is not gpu or cpu");
+    if (o.renderer != "gpu" && o.renderer != "cpu" && o.renderer != "both")
+        throw std::invalid_argument("--renderer: '" + o.renderer + "' is not gpu, cpu or both");
     for (const auto& path : splitList(o.paths))
         if (path != "orbit" && path != "jumps")
             throw std::invalid_argument("--paths: '" + path + "' is not orbit or jumps");
@@ -306,8 +314,9 @@ void runBench(const BenchOptions& o) {
                 "%d timed frames per path (orbit 2 deg/frame; jumps seeded), bricks %u^3 + 2\n",
                 context.renderer().c_str(), context.version().c_str(), context.platform().c_str(),
                 o.frames, o.brick);
-    const std::string tmp = (std::filesystem::temp_directory_path() /
-                             ("bc-bench-" + std::to_string(getpid()))).string();
+    const std::string tmp =
+        (std::filesystem::temp_directory_path() / ("bc-bench-" + std::to_string(getpid())))
+            .string();
     std::filesystem::create_directories(tmp);
     BenchReport report;
     for (const auto& d : datasetsOf(o)) {
@@ -318,9 +327,11 @@ void runBench(const BenchOptions& o) {
         if (d.budgetMb) config.geometry = {64, 2, 8};
         brickstore::ingest(*source, tmp + "/scan.bcs", config);
         s.store = brickstore::BrickStore::open(tmp + "/scan.bcs");
-        s.cache = std::make_unique<brickstore::BrickCache>(*s.store, brickstore::BrickCacheConfig{4ull << 30});
+        s.cache = std::make_unique<brickstore::BrickCache>(
+            *s.store, brickstore::BrickCacheConfig{4ull << 30});
         if (!d.budgetMb) s.volume = std::make_unique<render::ReferenceVolume>(*s.store, 0);
-        s.tf = render::TransferFunction::load(d.preset, render::VolumeValueStats::fromStore(s.store->info()));
+        s.tf = render::TransferFunction::load(d.preset,
+                                              render::VolumeValueStats::fromStore(s.store->info()));
         benchScene(s, d, o, report);
         stepSweep(s, d, o, report);
     }
@@ -335,7 +346,8 @@ void runBench(const BenchOptions& o) {
 
 void addBenchCommand(CLI::App& app) {
     auto o = std::make_shared<BenchOptions>();
-    auto* cmd = app.add_subcommand("bench", "Run time against error of every technique set on the real scans");
+    auto* cmd = app.add_subcommand(
+        "bench", "Run time against error of every technique set on the real scans");
     cmd->add_option("--data", o->data, "Folder of the real scans")->capture_default_str();
     cmd->add_option("--datasets", o->datasets, "Comma-separated scan names (default: all present)");
     cmd->add_option("--tf", o->tf, "One preset or file for every scan (default: each scan's own)");
@@ -344,8 +356,10 @@ void addBenchCommand(CLI::App& app) {
     cmd->add_option("--frames", o->frames, "Timed frames per path")->capture_default_str();
     cmd->add_option("--steps", o->steps, "Step sweep, voxels")->capture_default_str();
     cmd->add_option("--brick", o->brick, "Brick edge of the stores")->capture_default_str();
-    cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")->capture_default_str();
-    cmd->add_option("--renderer", o->renderer, "gpu (the EGL raycaster) or cpu (the CPU raycaster)")
+    cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")
+        ->capture_default_str();
+    cmd->add_option("--renderer", o->renderer,
+                    "gpu (the EGL raycaster), cpu (the CPU raycaster) or both, alternating per set")
         ->capture_default_str();
     cmd->add_option("--csv", o->csv, "Write every row as CSV");
     cmd->add_option("--plot", o->plot, "Draw run time against error as PNG (needs gnuplot)");
