@@ -176,7 +176,7 @@ void renderStoreToPng(const std::string& storePath, const std::string& output,
 void addRenderCommand(CLI::App& app) {
     auto o = std::make_shared<RenderCliOptions>();
     auto* cmd = app.add_subcommand(
-        "render", "Render one frame of a store to PNG (GPU raycaster or CPU reference)");
+        "render", "Render one frame of a store to PNG (GPU or CPU raycaster, or the CPU reference)");
     cmd->add_option("STORE", o->store, "Store file")->required();
     cmd->add_option("-o,--output", o->output, "PNG to write")->required();
     cmd->add_option("--size", o->size, "Image W,H")->capture_default_str();
