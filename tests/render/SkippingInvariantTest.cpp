@@ -15,7 +15,15 @@ constexpr double kTolerance = 2.0 / 255.0;
 
 struct Case {
     std::string scan, preset;
+    double orbitDistance = 1.0; ///< the frustum orbit's distance factor (Camera::orbit)
+    /// Early termination on both sides of the frustum check: it ends rays, frustums start them,
+    /// so the images must still agree; it keeps the dense close-up orbits affordable in CI.
+    bool ert = false;
+    int orbitFrames = 72; ///< frames of the frustum orbit (the 64^2 invariant always has 72)
 };
+
+// Test names and failure messages show the case, not its bytes.
+void PrintTo(const Case& c, std::ostream* os) { *os << c.scan << " " << c.preset; }
 
 /// Every technique set of the benchmark except early termination, against plain.
 struct Technique {
@@ -124,9 +132,11 @@ TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver50RandomJumps) {
 INSTANTIATE_TEST_SUITE_P(RealScans, SkippingInvariant,
                          ::testing::Values(Case{"cthead", "ct-skin"}, Case{"cthead", "ct-bone"},
                                            Case{"CT_AVM", "vessels"}, Case{"frog", "mr"},
-                                           Case{"pancreas", "ct-bone"}, Case{"Iguana", "ct-bone"},
+                                           Case{"pancreas", "ct-bone"}, Case{"pancreas", "ct-skin"},
+                                           Case{"Iguana", "ct-bone"}, Case{"Iguana", "ct-skin"},
                                            Case{"gaffer_smoke", "smoke"},
-                                           Case{"hydrogen", "smoke"}, Case{"headsq", "mr"}),
+                                           Case{"hydrogen", "smoke"}, Case{"headsq", "mr"},
+                                           Case{"headsq", "ct-bone"}),
                          caseName);
 
 // Octrees leap over the empty space inside non-empty bricks of sparse angiography: fewer
@@ -165,8 +175,10 @@ TEST(OctreeSkipping, LeapsInsideBricksOfSparseAngiographyWithoutChangingAPixel) 
 namespace bc::render {
 namespace {
 
-// Occlusion frustums need rays denser than the octree leaves (the policy refuses otherwise),
-// so their invariant runs at 128^2 on the scans where that holds.
+// Occlusion frustums need rays denser than half an octree leaf (the policy refuses otherwise),
+// so their invariant runs at 128^2, on every real dataset: the large scans (frog, pancreas)
+// orbit closer, where the rays are dense enough, with much of the volume outside the view so
+// the box-minus-view pieces carry most of it.
 class FrustumInvariant : public ::testing::TestWithParam<Case> {};
 
 TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt128) {
@@ -182,14 +194,19 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
     std::uint64_t sPlain = 0, sOctree = 0, sFrustums = 0;
     int used = 0;
     double worst = 0.0;
-    for (int f = 0; f < 72 + 20; ++f) {
-        // 72 orbit frames, then 20 random jumps
-        const Camera camera = f < 72 ? Camera::orbit(box, 5.0 * f, 20.0)
+    const int frames = c.orbitFrames + 20;
+    for (int f = 0; f < frames; ++f) {
+        // the orbit, then 20 random jumps
+        const Camera camera = f < c.orbitFrames
+                                  ? Camera::orbit(box, 360.0 * f / c.orbitFrames, 20.0, c.orbitDistance)
                                      : Camera::orbit(box, az(rng), el(rng), dist(rng));
         FrameStats sp, so, sf;
-        const Image a = test::gpuFrame(*t, plain, tf, camera, options(SkipMode::None), &sp);
-        test::gpuFrame(*t, octree, tf, camera, options(SkipMode::All), &so);
-        const Image b = test::gpuFrame(*t, frustums, tf, camera, options(SkipMode::All, true), &sf);
+        RenderOptions po = options(SkipMode::None), oo = options(SkipMode::All),
+                      fo = options(SkipMode::All, true);
+        po.earlyTermination = oo.earlyTermination = fo.earlyTermination = c.ert;
+        const Image a = test::gpuFrame(*t, plain, tf, camera, po, &sp);
+        test::gpuFrame(*t, octree, tf, camera, oo, &so);
+        const Image b = test::gpuFrame(*t, frustums, tf, camera, fo, &sf);
         sPlain += sp.samples;
         sOctree += so.samples;
         sFrustums += sf.samples;
@@ -201,16 +218,22 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
     }
     gEdge = 64;
     std::printf("[frustums] %s %s: worst max abs %.1f/255; samples octree %.3f, +frustums %.3f "
-                "of plain; frustums used in %d of 92 frames\n",
+                "of plain; frustums used in %d of %d frames\n",
                 c.scan.c_str(), c.preset.c_str(), worst * 255.0, double(sOctree) / double(sPlain),
-                double(sFrustums) / double(sPlain), used);
-    EXPECT_GT(used, 36) << "the policy refused the frustums on most of the orbit";
-    EXPECT_LE(sFrustums, sOctree);
+                double(sFrustums) / double(sPlain), used, frames);
+    EXPECT_GT(used, c.orbitFrames / 2) << "the policy refused the frustums on most of the orbit";
+    // A ray that starts inside a brick walks its octree from there and can take a sample the
+    // walk from the brick's face would have leapt: allow a few in a hundred million.
+    EXPECT_LE(double(sFrustums), double(sOctree) * (1.0 + 1e-7));
 }
 
 INSTANTIATE_TEST_SUITE_P(RealScans, FrustumInvariant,
-                         // frog at 128^2 has rays sparser than half a leaf: refused by policy
-                         ::testing::Values(Case{"cthead", "ct-skin"}, Case{"CT_AVM", "vessels"}),
+                         ::testing::Values(Case{"cthead", "ct-skin"}, Case{"CT_AVM", "vessels"},
+                                           Case{"frog", "mr", 0.42, true, 36},
+                                           Case{"pancreas", "ct-bone", 0.28, true, 36},
+                                           Case{"Iguana", "ct-bone"},
+                                           Case{"gaffer_smoke", "smoke"},
+                                           Case{"hydrogen", "smoke"}, Case{"headsq", "mr"}),
                          caseName);
 
 } // namespace
