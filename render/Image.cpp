@@ -170,16 +170,12 @@ std::uint8_t toByte(float v) {
     return std::uint8_t(std::lround(clamped * 255.0f));
 }
 
-std::vector<std::uint8_t> toRgba8(const std::string& path, const Image& image) {
+void checkWritable(const std::string& path, const Image& image) {
     if (image.width == 0 || image.height == 0)
         throw std::invalid_argument(path + ": cannot write an empty image");
     if (image.rgba.size() != std::size_t(image.width) * image.height * 4)
         throw std::invalid_argument(path + ": image holds " + std::to_string(image.rgba.size()) +
                                     " floats, not width*height*4");
-    std::vector<std::uint8_t> bytes(image.rgba.size());
-    for (std::size_t i = 0; i < bytes.size(); ++i)
-        bytes[i] = toByte(image.rgba[i]);
-    return bytes;
 }
 
 /// A name beside `path` that no other writer of this process or another uses.
@@ -229,8 +225,16 @@ Image toImage(const PngHeader& h, const std::vector<png_byte>& bytes) {
 
 } // namespace
 
+std::vector<std::uint8_t> toRgba8(const Image& image) {
+    std::vector<std::uint8_t> bytes(image.rgba.size());
+    for (std::size_t i = 0; i < bytes.size(); ++i)
+        bytes[i] = toByte(image.rgba[i]);
+    return bytes;
+}
+
 void writePng(const std::string& path, const Image& image) {
-    const std::vector<std::uint8_t> pixels = toRgba8(path, image);
+    checkWritable(path, image);
+    const std::vector<std::uint8_t> pixels = toRgba8(image);
     const std::string temporary = temporaryName(path);
     std::FILE* file = std::fopen(temporary.c_str(), "wbx");
     if (!file) throw RenderError(path + ": cannot write PNG: " + std::strerror(errno));

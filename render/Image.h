@@ -31,6 +31,9 @@ struct Image {
 /// Largest image readPng accepts (pixels), so a forged header cannot ask for gigabytes.
 inline constexpr std::uint64_t kMaxPngPixels = std::uint64_t(1) << 28;
 
+/// 8-bit RGBA, each channel round(clamp(v, 0, 1) * 255) (NaN -> 0): what PNGs and frames carry.
+std::vector<std::uint8_t> toRgba8(const Image& image);
+
 /// Writes an 8-bit RGBA PNG, each channel round(clamp(v,0,1)*255). Written to a temporary
 /// file beside `path` and renamed, so a reader never sees half a file.
 /// @throw RenderError naming `path` when it cannot be written.

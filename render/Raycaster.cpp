@@ -88,6 +88,12 @@ Raycaster::Raycaster(const RaycasterConfig& config)
 
 Raycaster::~Raycaster() = default;
 
+void Raycaster::setGpuBudgetBytes(std::uint64_t budgetBytes) {
+    if (budgetBytes == mConfig.gpuBudgetBytes) return;
+    mConfig.gpuBudgetBytes = budgetBytes;
+    mPool.reset();
+}
+
 void Raycaster::ensurePool(const brickstore::BrickStore& store) {
     const auto type = store.info().volume.type;
     const std::uint32_t edge = store.layout().storedEdge();

@@ -46,6 +46,10 @@ class Raycaster {
                  const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
                  FrameStats& stats);
 
+    /// A new pool budget (a daemon's fair share changed): the next frame allocates a pool of
+    /// that size, and what the old pool held is uploaded again as needed.
+    void setGpuBudgetBytes(std::uint64_t budgetBytes);
+
     /// The pool of the last frame (nullptr before the first); its counters span all frames.
     const BrickPool* pool() const { return mPool.get(); }
 

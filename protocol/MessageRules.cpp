@@ -1,0 +1,392 @@
+#include "protocol/detail/MessageRules.h"
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+namespace bc::protocol::detail {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr std::size_t kQuotedBytes = 40;
+
+/// NaN lies in no interval.
+bool inInterval(double v, double lo, double hi, bool loOpen, bool hiOpen) {
+    return (loOpen ? v > lo : v >= lo) && (hiOpen ? v < hi : v <= hi);
+}
+
+bool nameChar(char c) {
+    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' ||
+           c == '_' || c == '-';
+}
+
+std::string vec3(const std::array<double, 3>& v) {
+    std::string s = "(";
+    for (std::size_t i = 0; i < v.size(); ++i)
+        s.append(i ? ", " : "").append(number(v[i]));
+    return s.append(")");
+}
+
+/// "[3]"; built by appends, which GCC 12's -Wrestrict does not misread as overlapping copies.
+std::string indexText(std::ptrdiff_t i) {
+    return std::string("[").append(std::to_string(i)).append("]");
+}
+
+// ---- per message ----------------------------------------------------------------------
+
+void check(Rules& r, const Hello& m) {
+    // An inverted version range is not rejected here: it overlaps nothing, which the server
+    // answers UnsupportedVersion (fatal) as PROTOCOL.md says.
+    r.count("codecs", m.codecs.size(), kMaxCodecs);
+    for (std::size_t i = 0; i < m.codecs.size(); ++i)
+        r.enumValue({"codecs", i}, std::uint8_t(m.codecs[i]), 3);
+    r.text("software", m.software, 0, kMaxSoftwareBytes);
+}
+
+void check(Rules& r, const Auth& m) {
+    r.text("token", m.token, 1, kMaxTokenBytes);
+}
+
+void check(Rules& r, const VolumeInfo& m) {
+    r.volumeName("name", m.name);
+    r.finite("spacingMm", m.spacingMm);
+    r.enumValue("voxelType", std::uint8_t(m.voxelType), 3);
+    r.intRange("levels", m.levels, 1, kMaxLevel + 1);
+    r.finite("valueMin", m.valueMin);
+    r.finite("valueMax", m.valueMax);
+}
+
+void check(Rules& r, const VolumeList& m) {
+    r.count("volumes", m.volumes.size(), kMaxVolumes);
+    for (std::size_t i = 0; i < m.volumes.size() && r.ok(); ++i) {
+        r.item("volumes", std::ptrdiff_t(i));
+        check(r, m.volumes[i]);
+    }
+}
+
+void check(Rules& r, const OpenVolume& m) {
+    r.volumeName("name", m.name);
+}
+
+void check(Rules& r, const VolumeOpened& m) {
+    r.item("info");
+    check(r, m.info);
+}
+
+void checkView(Rules& r, const SetCamera& m) {
+    std::array<double, 3> view{};
+    double scale = 0;
+    for (int i = 0; i < 3; ++i) {
+        view[i] = m.target[i] - m.eye[i];
+        scale = std::max(scale, std::abs(view[i]));
+    }
+    if (scale == 0) return r.fail(ErrorCode::OutOfRange, "eye", vec3(m.eye) + " equals target");
+    if (!std::isfinite(scale))
+        return r.fail(ErrorCode::OutOfRange, "target", "target - eye is not finite");
+    // The renderer's test (render/Camera.cpp): |cross(normalize(view), up)| < 1e-9.
+    double length = 0;
+    for (auto& v : view) {
+        v /= scale;
+        length += v * v;
+    }
+    length = std::sqrt(length);
+    for (auto& v : view)
+        v /= length;
+    const double cx = view[1] * m.up[2] - view[2] * m.up[1];
+    const double cy = view[2] * m.up[0] - view[0] * m.up[2];
+    const double cz = view[0] * m.up[1] - view[1] * m.up[0];
+    if (!(std::sqrt(cx * cx + cy * cy + cz * cz) >= 1e-9))
+        r.fail(ErrorCode::OutOfRange, "up",
+               vec3(m.up) + " is zero or parallel to the view direction");
+}
+
+void check(Rules& r, const SetCamera& m) {
+    r.finite("eye", m.eye);
+    r.finite("target", m.target);
+    r.finite("up", m.up);
+    r.finite("fovYDeg", m.fovYDeg);
+    r.finite("orthoHeight", m.orthoHeight);
+    if (!r.ok()) return;
+    checkView(r, m);
+    r.realRange("fovYDeg", m.fovYDeg, 0, 180, true, true);
+    if (m.orthographic) r.realRange("orthoHeight", m.orthoHeight, 0, kInf, true, true);
+}
+
+void check(Rules& r, const TfPoint& p) {
+    r.enumValue("placement", std::uint8_t(p.placement), 2);
+    r.finite("position", p.position);
+    if (p.placement == Placement::Percentile)
+        r.realRange("position", p.position, 0, 100, false, false);
+    for (std::size_t c = 0; c < 4; ++c)
+        r.realRange({"rgba", c}, p.rgba[c], 0, 1, false, false);
+}
+
+void checkPoints(Rules& r, const SetTransferFunction& m) {
+    if (m.shadingSource == ShadingSource::Preset)
+        r.fail(ErrorCode::OutOfRange, "shadingSource", "1 (the preset's) needs kind 0 (preset)");
+    if (!m.preset.empty())
+        r.fail(ErrorCode::OutOfRange, "preset", "must be empty when kind is 1 (points)");
+    r.intRange("points", m.points.size(), 1, kMaxTfPoints);
+    for (std::size_t i = 0; i < m.points.size() && r.ok(); ++i) {
+        r.item("points", std::ptrdiff_t(i));
+        check(r, m.points[i]);
+    }
+}
+
+void check(Rules& r, const SetTransferFunction& m) {
+    r.enumValue("kind", std::uint8_t(m.kind), 1);
+    r.enumValue("shadingSource", std::uint8_t(m.shadingSource), 1);
+    if (!r.ok()) return;
+    if (m.kind == TfKind::Points) return checkPoints(r, m);
+    r.text("preset", m.preset, 0, kMaxPresetBytes);
+    if (!m.points.empty())
+        r.fail(ErrorCode::OutOfRange, "points", "must be empty when kind is 0 (preset)");
+}
+
+void checkTechniques(Rules& r, std::uint32_t t) {
+    r.bits("techniques", t, kTechAll);
+    const bool bricks = (t & kTechBrickSkipping) != 0;
+    if ((t & kTechOctreeSkipping) && !bricks)
+        r.fail(ErrorCode::OutOfRange, "techniques",
+               "octree skipping (bit 1) needs brick skipping (bit 0)");
+    if ((t & kTechOcclusionFrustums) && !bricks)
+        r.fail(ErrorCode::OutOfRange, "techniques",
+               "occlusion frustums (bit 3) need brick skipping (bit 0)");
+}
+
+void checkCodecQuality(Rules& r, Codec codec, std::uint8_t q) {
+    switch (codec) {
+    case Codec::Raw:
+        return r.intRange("codecQuality", q, 0, 0);
+    case Codec::Zstd:
+    case Codec::ZstdDelta:
+        return r.intRange("codecQuality", q, 0, 19);
+    case Codec::Jpeg:
+        return r.intRange("codecQuality", q, 0, 100);
+    }
+}
+
+void check(Rules& r, const SetRenderOptions& m) {
+    const RenderOptions& o = m.options;
+    r.intRange("width", o.width, 1, kMaxImageEdge);
+    r.intRange("height", o.height, 1, kMaxImageEdge);
+    r.realRange("stepVoxels", o.stepVoxels, 0, 64, true, false);
+    checkTechniques(r, o.techniques);
+    r.realRange("ertThreshold", o.ertThreshold, 0, 1, true, false);
+    r.enumValue("renderer", std::uint8_t(o.renderer), 2);
+    r.enumValue("quality", std::uint8_t(o.quality), 2);
+    r.enumValue("codec", std::uint8_t(o.codec), 3);
+    if (r.ok()) checkCodecQuality(r, o.codec, o.codecQuality);
+    if (o.level != kLevelAutomatic) r.intRange("level", o.level, 0, kMaxLevel);
+}
+
+void check(Rules& r, const RequestFrame& m) {
+    r.enumValue("mode", std::uint8_t(m.mode), 2);
+}
+
+void check(Rules& r, const Frame& m) {
+    const FrameHeader& h = m.header;
+    r.intRange("width", h.width, 1, kMaxImageEdge);
+    r.intRange("height", h.height, 1, kMaxImageEdge);
+    r.enumValue("codec", std::uint8_t(h.codec), 3);
+    r.intRange("level", h.level, 0, kMaxLevel);
+    const std::uint64_t rawBytes = std::uint64_t(h.width) * h.height * 4;
+    if (r.ok() && h.codec == Codec::Raw && m.image.size() != rawBytes)
+        r.fail(ErrorCode::BadPayload, "imageBytes",
+               std::to_string(m.image.size()) +
+                   " is not width x height x 4 = " + std::to_string(rawBytes) + " for a raw image");
+}
+
+void check(Rules& r, const Stats& m) {
+    r.count("counters", m.counters.size(), kMaxStats);
+    for (std::size_t i = 0; i < m.counters.size() && r.ok(); ++i) {
+        r.item("counters", std::ptrdiff_t(i));
+        r.text("name", m.counters[i].first, 0, kMaxStatNameBytes);
+    }
+}
+
+void check(Rules& r, const Error& m) {
+    r.intRange("code", std::uint16_t(m.code), 1, std::uint16_t(ErrorCode::Internal));
+    r.text("message", m.message, 0, kMaxErrorMessageBytes);
+}
+
+void check(Rules& r, const Bye& m) {
+    r.enumValue("reason", std::uint16_t(m.reason), 2);
+}
+
+void check(Rules&, const AuthOk&) {}
+void check(Rules&, const ListVolumes&) {}
+void check(Rules&, const RequestStats&) {}
+
+} // namespace
+
+// ---- Rules ----------------------------------------------------------------------------------
+
+void Rules::item(const char* list, std::ptrdiff_t index) {
+    mList = list;
+    mItem = index;
+}
+
+std::string Rules::fieldText(Field field) const {
+    std::string s = mMessage;
+    if (mList) s.append(".").append(mList);
+    if (mList && mItem >= 0) s += indexText(mItem);
+    if (field.name && *field.name) s.append(".").append(field.name);
+    if (field.index >= 0) s += indexText(field.index);
+    return s;
+}
+
+void Rules::fail(ErrorCode code, Field field, std::string_view text) {
+    if (mViolation) return;
+    mViolation = Violation{code, fieldText(field) + ": " + std::string(text)};
+}
+
+void Rules::intRange(Field field, std::uint64_t v, std::uint64_t lo, std::uint64_t hi) {
+    if (v >= lo && v <= hi) return;
+    fail(ErrorCode::OutOfRange, field,
+         std::to_string(v) + " is outside " + std::to_string(lo) + ".." + std::to_string(hi));
+}
+
+void Rules::enumValue(Field field, std::uint64_t raw, std::uint64_t maxValue) {
+    if (raw <= maxValue) return;
+    fail(ErrorCode::OutOfRange, field,
+         std::to_string(raw) + " is not one of 0.." + std::to_string(maxValue));
+}
+
+void Rules::finite(Field field, double v) {
+    if (!std::isfinite(v)) fail(ErrorCode::OutOfRange, field, number(v) + " is not finite");
+}
+
+void Rules::finite(const char* field, std::span<const double> v) {
+    for (std::size_t i = 0; i < v.size(); ++i)
+        finite({field, i}, v[i]);
+}
+
+void Rules::realRange(Field field, double v, double lo, double hi, bool loOpen, bool hiOpen) {
+    if (!inInterval(v, lo, hi, loOpen, hiOpen)) failRange(field, number(v), lo, hi, loOpen, hiOpen);
+}
+
+void Rules::realRange(Field field, float v, double lo, double hi, bool loOpen, bool hiOpen) {
+    if (!inInterval(v, lo, hi, loOpen, hiOpen)) failRange(field, number(v), lo, hi, loOpen, hiOpen);
+}
+
+void Rules::failRange(Field field, const std::string& value, double lo, double hi, bool loOpen,
+                      bool hiOpen) {
+    fail(ErrorCode::OutOfRange, field,
+         value + " is outside " + (loOpen ? "(" : "[") + number(lo) + ", " + number(hi) +
+             (hiOpen ? ")" : "]"));
+}
+
+void Rules::bits(Field field, std::uint64_t v, std::uint64_t allowedMask) {
+    if ((v & ~allowedMask) == 0) return;
+    fail(ErrorCode::OutOfRange, field, hex(v) + " has bits outside " + hex(allowedMask));
+}
+
+void Rules::text(Field field, std::string_view s, std::size_t minBytes, std::size_t maxBytes) {
+    if (s.size() < minBytes || s.size() > maxBytes)
+        return fail(ErrorCode::OutOfRange, field,
+                    std::to_string(s.size()) + " bytes is outside " + std::to_string(minBytes) +
+                        ".." + std::to_string(maxBytes));
+    for (std::size_t i = 0; i < s.size();) {
+        const std::size_t n = utf8CharBytes(s, i);
+        if (n == 0)
+            return fail(ErrorCode::BadPayload, field,
+                        quoted(s) + " is not valid UTF-8 at byte " + std::to_string(i));
+        i += n;
+    }
+}
+
+void Rules::volumeName(Field field, std::string_view s) {
+    if (s.empty() || s.size() > kMaxVolumeNameBytes)
+        return fail(ErrorCode::OutOfRange, field,
+                    std::to_string(s.size()) + " bytes is outside 1.." +
+                        std::to_string(kMaxVolumeNameBytes));
+    for (char c : s)
+        if (!nameChar(c))
+            return fail(ErrorCode::OutOfRange, field,
+                        quoted(s) + " has a character outside A-Z a-z 0-9 . _ -");
+    if (s.front() == '.') fail(ErrorCode::OutOfRange, field, quoted(s) + " starts with '.'");
+}
+
+void Rules::count(Field field, std::size_t n, std::size_t maxEntries) {
+    if (n <= maxEntries) return;
+    fail(ErrorCode::OutOfRange, field,
+         std::to_string(n) + " entries is over the limit of " + std::to_string(maxEntries));
+}
+
+// ---- free functions ---------------------------------------------------------------------------
+
+std::optional<Violation> firstViolation(const Message& m) {
+    Rules rules(typeName(std::uint8_t(typeOf(m))));
+    std::visit([&](const auto& alternative) { check(rules, alternative); }, m);
+    return rules.take();
+}
+
+std::size_t utf8CharBytes(std::string_view s, std::size_t i) {
+    const auto byte = [&](std::size_t k) { return static_cast<unsigned char>(s[k]); };
+    const unsigned char b0 = byte(i);
+    if (b0 < 0x80) return 1;
+    std::size_t n = 0;
+    std::uint32_t cp = 0;
+    if (b0 >= 0xC2 && b0 <= 0xDF)
+        n = 2, cp = b0 & 0x1F;
+    else if (b0 >= 0xE0 && b0 <= 0xEF)
+        n = 3, cp = b0 & 0x0F;
+    else if (b0 >= 0xF0 && b0 <= 0xF4)
+        n = 4, cp = b0 & 0x07;
+    else
+        return 0;
+    if (i + n > s.size()) return 0;
+    for (std::size_t k = 1; k < n; ++k) {
+        if ((byte(i + k) & 0xC0) != 0x80) return 0;
+        cp = (cp << 6) | (byte(i + k) & 0x3F);
+    }
+    const bool overlong = (n == 3 && cp < 0x800) || (n == 4 && cp < 0x10000);
+    const bool surrogate = cp >= 0xD800 && cp <= 0xDFFF;
+    return overlong || surrogate || cp > 0x10FFFF ? 0 : n;
+}
+
+std::string quoted(std::string_view s) {
+    static constexpr char kDigits[] = "0123456789abcdef";
+    std::string out = "'";
+    for (std::size_t i = 0; i < s.size() && i < kQuotedBytes; ++i) {
+        const auto c = static_cast<unsigned char>(s[i]);
+        if (c >= 0x20 && c < 0x7F && c != '\'' && c != '\\') {
+            out += char(c);
+        } else {
+            out += "\\x";
+            out += kDigits[c >> 4];
+            out += kDigits[c & 15];
+        }
+    }
+    out += s.size() > kQuotedBytes ? "'..." : "'";
+    return out;
+}
+
+std::string hex(std::uint64_t v) {
+    char buf[24];
+    auto end = std::to_chars(buf, buf + sizeof buf, v, 16).ptr;
+    return "0x" + std::string(buf, end);
+}
+
+namespace {
+template <typename T> std::string shortest(T v) {
+    if (std::isnan(v)) return "nan";
+    if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+    char buf[32];
+    auto end = std::to_chars(buf, buf + sizeof buf, v).ptr;
+    return std::string(buf, end);
+}
+} // namespace
+
+std::string number(double v) {
+    return shortest(v);
+}
+std::string number(float v) {
+    return shortest(v);
+}
+
+} // namespace bc::protocol::detail

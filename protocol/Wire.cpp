@@ -1,0 +1,81 @@
+#include "protocol/Wire.h"
+
+namespace bc::protocol {
+
+const char* typeName(std::uint8_t type) {
+    switch (MessageType(type)) {
+    case MessageType::Hello:
+        return "Hello";
+    case MessageType::Auth:
+        return "Auth";
+    case MessageType::AuthOk:
+        return "AuthOk";
+    case MessageType::ListVolumes:
+        return "ListVolumes";
+    case MessageType::VolumeList:
+        return "VolumeList";
+    case MessageType::OpenVolume:
+        return "OpenVolume";
+    case MessageType::VolumeOpened:
+        return "VolumeOpened";
+    case MessageType::SetCamera:
+        return "SetCamera";
+    case MessageType::SetTransferFunction:
+        return "SetTransferFunction";
+    case MessageType::SetRenderOptions:
+        return "SetRenderOptions";
+    case MessageType::RequestFrame:
+        return "RequestFrame";
+    case MessageType::Frame:
+        return "Frame";
+    case MessageType::RequestStats:
+        return "RequestStats";
+    case MessageType::Stats:
+        return "Stats";
+    case MessageType::Error:
+        return "Error";
+    case MessageType::Bye:
+        return "Bye";
+    }
+    return "unknown";
+}
+
+const char* errorName(std::uint16_t code) {
+    switch (ErrorCode(code)) {
+    case ErrorCode::BadMagic:
+        return "BadMagic";
+    case ErrorCode::UnsupportedVersion:
+        return "UnsupportedVersion";
+    case ErrorCode::TooLarge:
+        return "TooLarge";
+    case ErrorCode::UnknownType:
+        return "UnknownType";
+    case ErrorCode::BadPayload:
+        return "BadPayload";
+    case ErrorCode::OutOfRange:
+        return "OutOfRange";
+    case ErrorCode::NotAuthenticated:
+        return "NotAuthenticated";
+    case ErrorCode::AuthFailed:
+        return "AuthFailed";
+    case ErrorCode::UnknownVolume:
+        return "UnknownVolume";
+    case ErrorCode::NoVolume:
+        return "NoVolume";
+    case ErrorCode::Busy:
+        return "Busy";
+    case ErrorCode::Timeout:
+        return "Timeout";
+    case ErrorCode::RenderFailed:
+        return "RenderFailed";
+    case ErrorCode::ShuttingDown:
+        return "ShuttingDown";
+    case ErrorCode::BadState:
+        return "BadState";
+    case ErrorCode::Internal:
+        return "Internal";
+    }
+    return "unknown";
+}
+
+} // namespace bc::protocol

@@ -1,0 +1,102 @@
+#pragma once
+// The constants and enumerations of the wire format (protocol/PROTOCOL.md): what the header
+// carries, the message types, error codes and the enumerated fields of the messages.
+// Everything here is serialized, so every enum has an explicit underlying type and its
+// values are the ones PROTOCOL.md gives.
+#include <cstddef>
+#include <cstdint>
+
+namespace bc::protocol {
+
+inline constexpr std::uint32_t kMagic = 0x54534342; ///< the bytes "BCST", little-endian
+inline constexpr std::uint8_t kVersion = 1;
+inline constexpr std::size_t kHeaderBytes = 16;
+
+inline constexpr std::uint32_t kMaxClientPayloadBytes = 64u << 10;
+inline constexpr std::uint32_t kDefaultMaxServerPayloadBytes = 80u << 20;
+inline constexpr std::uint32_t kMaxImageEdge = 4096;
+inline constexpr std::size_t kMaxVolumeNameBytes = 64;
+inline constexpr std::size_t kMaxTokenBytes = 256;
+inline constexpr std::size_t kMaxSoftwareBytes = 64;
+inline constexpr std::size_t kMaxPresetBytes = 64;
+inline constexpr std::size_t kMaxErrorMessageBytes = 1024;
+inline constexpr std::size_t kMaxStatNameBytes = 128;
+inline constexpr std::size_t kMaxTfPoints = 256;
+inline constexpr std::size_t kMaxVolumes = 1024;
+inline constexpr std::size_t kMaxStats = 4096;
+inline constexpr std::size_t kMaxCodecs = 16;
+inline constexpr std::uint8_t kLevelAutomatic = 255;
+inline constexpr std::uint8_t kMaxLevel = 15;
+
+enum class MessageType : std::uint8_t {
+    Hello = 0x01,
+    Auth = 0x02,
+    AuthOk = 0x03,
+    ListVolumes = 0x04,
+    VolumeList = 0x05,
+    OpenVolume = 0x06,
+    VolumeOpened = 0x07,
+    SetCamera = 0x08,
+    SetTransferFunction = 0x09,
+    SetRenderOptions = 0x0A,
+    RequestFrame = 0x0B,
+    Frame = 0x0C,
+    RequestStats = 0x0D,
+    Stats = 0x0E,
+    Error = 0x0F,
+    Bye = 0x10,
+};
+
+enum class ErrorCode : std::uint16_t {
+    BadMagic = 1,
+    UnsupportedVersion = 2,
+    TooLarge = 3,
+    UnknownType = 4,
+    BadPayload = 5,
+    OutOfRange = 6,
+    NotAuthenticated = 7,
+    AuthFailed = 8,
+    UnknownVolume = 9,
+    NoVolume = 10,
+    Busy = 11,
+    Timeout = 12,
+    RenderFailed = 13,
+    ShuttingDown = 14,
+    BadState = 15,
+    Internal = 16,
+};
+
+/// Hello.capabilities bits.
+enum Capability : std::uint32_t {
+    kCapAuthRequired = 1u << 0,
+    kCapCpuRenderer = 1u << 1,
+    kCapGpuRenderer = 1u << 2,
+    kCapContinuous = 1u << 3,
+};
+
+/// RenderOptions.techniques bits.
+enum Technique : std::uint32_t {
+    kTechBrickSkipping = 1u << 0,
+    kTechOctreeSkipping = 1u << 1, ///< needs kTechBrickSkipping
+    kTechEarlyTermination = 1u << 2,
+    kTechOcclusionFrustums = 1u << 3, ///< needs kTechBrickSkipping
+    kTechShading = 1u << 4,
+    kTechAll = (1u << 5) - 1,
+};
+
+enum class Codec : std::uint8_t { Raw = 0, Zstd = 1, ZstdDelta = 2, Jpeg = 3 };
+enum class Renderer : std::uint8_t { GpuRaycaster = 0, CpuRaycaster = 1, Reference = 2 };
+enum class Quality : std::uint8_t { Adaptive = 0, Refined = 1, Interactive = 2 };
+enum class FrameMode : std::uint8_t { Once = 0, ContinuousOn = 1, ContinuousOff = 2 };
+enum class TfKind : std::uint8_t { Preset = 0, Points = 1 };
+enum class ShadingSource : std::uint8_t { Message = 0, Preset = 1 };
+enum class Placement : std::uint8_t { Value = 0, Fraction = 1, Percentile = 2 };
+enum class VoxelType : std::uint8_t { U8 = 0, U16 = 1, I16 = 2, F32 = 3 };
+enum class ByeReason : std::uint16_t { Normal = 0, ShuttingDown = 1, IdleTimeout = 2 };
+
+/// Name of a message type for logs and errors ("SetCamera"), "unknown" for other values.
+const char* typeName(std::uint8_t type);
+/// Name of an error code ("OutOfRange"), "unknown" for other values.
+const char* errorName(std::uint16_t code);
+
+} // namespace bc::protocol

@@ -1,0 +1,136 @@
+#include "server/Catalog.h"
+
+#include "brickstore/Ingest.h"
+#include "brickstore/Readers.h"
+#include "server/Log.h"
+
+#include <algorithm>
+#include <filesystem>
+
+namespace bc::server {
+
+namespace {
+
+protocol::VoxelType wireType(brickstore::VoxelType t) {
+    switch (t) {
+    case brickstore::VoxelType::U8: return protocol::VoxelType::U8;
+    case brickstore::VoxelType::U16: return protocol::VoxelType::U16;
+    case brickstore::VoxelType::I16: return protocol::VoxelType::I16;
+    case brickstore::VoxelType::F32: return protocol::VoxelType::F32;
+    }
+    return protocol::VoxelType::U8;
+}
+
+protocol::VolumeInfo infoOf(const std::string& name, const brickstore::BrickStore& store) {
+    const auto& i = store.info();
+    protocol::VolumeInfo v;
+    v.name = name;
+    for (int a = 0; a < 3; ++a) {
+        v.dims[a] = std::uint32_t(i.volume.dims[a]);
+        v.spacingMm[a] = i.volume.spacingMm[a];
+    }
+    v.voxelType = wireType(i.volume.type);
+    v.levels = std::uint8_t(store.layout().levels().size());
+    v.valueMin = i.valueMin;
+    v.valueMax = i.valueMax;
+    v.storedBytes = i.storedBytes;
+    return v;
+}
+
+/// The store of a generated entry, ingested on first use (ingest renames a complete store
+/// into place, so a half-written one is never picked up).
+std::string generatedStore(const CatalogEntry& e, const std::string& storeDir) {
+    const auto kind = brickstore::parseSynthKind(e.generate);
+    if (!kind) throw std::invalid_argument("unknown generator '" + e.generate + "'");
+    std::filesystem::create_directories(storeDir);
+    const std::string path = (std::filesystem::path(storeDir) /
+                              (e.generate + "_" + std::to_string(e.dims[0]) + "x" +
+                               std::to_string(e.dims[1]) + "x" + std::to_string(e.dims[2]) + ".bcs"))
+                                 .string();
+    if (std::filesystem::exists(path)) return path;
+    auto source = brickstore::makeSynthetic(*kind, e.dims, 1);
+    brickstore::ingest(*source, path, {});
+    return path;
+}
+
+} // namespace
+
+VolumeLease::VolumeLease(Catalog* catalog, std::shared_ptr<Volume> volume)
+    : mCatalog(catalog), mVolume(std::move(volume)) {
+    if (mVolume) mCatalog->changeSessions(*mVolume, +1);
+}
+
+VolumeLease::VolumeLease(VolumeLease&& other) noexcept
+    : mCatalog(other.mCatalog), mVolume(std::move(other.mVolume)) {
+    other.mVolume.reset();
+}
+
+VolumeLease& VolumeLease::operator=(VolumeLease&& other) noexcept {
+    if (this != &other) {
+        release();
+        mCatalog = other.mCatalog;
+        mVolume = std::move(other.mVolume);
+        other.mVolume.reset();
+    }
+    return *this;
+}
+
+VolumeLease::~VolumeLease() { release(); }
+
+void VolumeLease::release() {
+    if (mVolume) mCatalog->changeSessions(*mVolume, -1);
+    mVolume.reset();
+}
+
+Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config.hostBudgetBytes) {
+    for (const auto& entry : config.volumes) {
+        try {
+            auto volume = open(entry, config.storeDir);
+            mByName[entry.name] = volume;
+            mVolumes.push_back(std::move(volume));
+            log.info("catalog: " + entry.name + " <- " + mVolumes.back()->store->path());
+        } catch (const std::exception& e) {
+            log.error("catalog: " + entry.name + " left out: " + e.what());
+        }
+    }
+}
+
+std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry, const std::string& storeDir) {
+    const std::string path = entry.store.empty() ? generatedStore(entry, storeDir) : entry.store;
+    auto v = std::make_shared<Volume>();
+    v->name = entry.name;
+    v->store = brickstore::BrickStore::open(path);
+    // No session yet: the cache keeps nothing until a lease gives it a share.
+    v->cache = std::make_unique<brickstore::BrickCache>(*v->store, brickstore::BrickCacheConfig{0});
+    v->stats = render::VolumeValueStats::fromStore(v->store->info());
+    v->info = infoOf(entry.name, *v->store);
+    return v;
+}
+
+std::vector<protocol::VolumeInfo> Catalog::list() const {
+    std::vector<protocol::VolumeInfo> out;
+    for (const auto& v : mVolumes) out.push_back(v->info);
+    return out;
+}
+
+VolumeLease Catalog::lease(const std::string& name) {
+    const auto it = mByName.find(name);
+    if (it == mByName.end()) return {};
+    return VolumeLease(this, it->second);
+}
+
+std::uint64_t Catalog::shareOf(const Volume& volume, std::uint64_t totalBytes) const {
+    const std::uint32_t all = std::max<std::uint32_t>(mSessions.load(), 1);
+    const std::uint32_t mine = std::max<std::uint32_t>(volume.sessions.load(), 1);
+    return totalBytes / all * std::min(mine, all);
+}
+
+void Catalog::changeSessions(Volume& volume, int delta) {
+    std::lock_guard lock(mBudgetMutex);
+    volume.sessions += std::uint32_t(delta);
+    mSessions += std::uint32_t(delta);
+    for (const auto& v : mVolumes)
+        v->cache->setBudgetBytes(v->sessions.load() ? shareOf(*v, mHostBudgetBytes) : 0);
+}
+
+} // namespace bc::server

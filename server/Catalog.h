@@ -1,0 +1,81 @@
+#pragma once
+// The volumes a daemon serves, by name (clients never send paths). Every entry is opened at
+// start-up: brick stores as they are, generated entries ingested once into the store folder
+// and reused after. An entry that fails to open is logged and left out; the rest serve.
+// Sessions hold a VolumeLease while they view a volume: the host budget is split among the
+// volumes in proportion to their sessions, so every session gets a fair share.
+#include "brickstore/BrickCache.h"
+#include "brickstore/BrickStore.h"
+#include "protocol/Messages.h"
+#include "render/TransferFunction.h"
+#include "server/DaemonConfig.h"
+
+#include <atomic>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace bc::server {
+
+class Log;
+
+/// An opened catalog entry. The store and cache are thread-safe; `sessions` is how many
+/// sessions hold a lease on it.
+struct Volume {
+    std::string name;
+    std::unique_ptr<brickstore::BrickStore> store;
+    std::unique_ptr<brickstore::BrickCache> cache;
+    render::VolumeValueStats stats;
+    protocol::VolumeInfo info;
+    std::atomic<std::uint32_t> sessions{0};
+};
+
+class Catalog;
+
+/// A session's hold on a volume; releasing it rebalances the budgets. Move-only.
+class VolumeLease {
+  public:
+    VolumeLease() = default;
+    VolumeLease(Catalog* catalog, std::shared_ptr<Volume> volume);
+    VolumeLease(VolumeLease&& other) noexcept;
+    VolumeLease& operator=(VolumeLease&& other) noexcept;
+    ~VolumeLease();
+    const std::shared_ptr<Volume>& volume() const { return mVolume; }
+    explicit operator bool() const { return mVolume != nullptr; }
+
+  private:
+    void release();
+    Catalog* mCatalog = nullptr;
+    std::shared_ptr<Volume> mVolume;
+};
+
+class Catalog {
+  public:
+    /// Opens (and generates) every entry of `config`. Never throws for one bad entry.
+    Catalog(const DaemonConfig& config, Log& log);
+
+    /// The served volumes, in config order.
+    std::vector<protocol::VolumeInfo> list() const;
+    /// A lease on `name`, or an empty lease when the catalog has no such volume.
+    VolumeLease lease(const std::string& name);
+    std::size_t size() const { return mVolumes.size(); }
+    /// Sessions holding a lease, over all volumes.
+    std::uint32_t sessions() const { return mSessions.load(); }
+    /// A volume's fair share of `totalBytes`: in proportion to its sessions (at least one).
+    std::uint64_t shareOf(const Volume& volume, std::uint64_t totalBytes) const;
+
+  private:
+    friend class VolumeLease;
+    void changeSessions(Volume& volume, int delta);
+    std::shared_ptr<Volume> open(const CatalogEntry& entry, const std::string& storeDir);
+
+    std::uint64_t mHostBudgetBytes;
+    std::vector<std::shared_ptr<Volume>> mVolumes;
+    std::map<std::string, std::shared_ptr<Volume>> mByName;
+    std::atomic<std::uint32_t> mSessions{0};
+    std::mutex mBudgetMutex;
+};
+
+} // namespace bc::server

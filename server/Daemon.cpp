@@ -1,0 +1,136 @@
+#include "server/Daemon.h"
+
+#include "server/Catalog.h"
+#include "server/Error.h"
+#include "server/Log.h"
+#include "server/RenderService.h"
+#include "server/detail/Session.h"
+
+#include <asio.hpp>
+
+#include <map>
+
+namespace bc::server {
+
+struct Daemon::Impl {
+    Impl(DaemonConfig c, Log& l, bool handleSignals)
+        : config(std::move(c)), log(l), catalog(config, log),
+          render(RenderServiceConfig{config.gpuBudgetBytes, config.restMs}, catalog, log),
+          acceptor(io), signals(io), drainTimer(io),
+          context{config, catalog, render, log, capabilities(), {}} {
+        context.onClosed = [this](std::uint64_t id) { onClosed(id); };
+        bind();
+        if (handleSignals) {
+            signals.add(SIGTERM);
+            signals.add(SIGINT);
+            signals.async_wait([this](const asio::error_code& ec, int signal) {
+                if (ec) return;
+                log.info("signal " + std::to_string(signal) + ": draining");
+                drain();
+            });
+        }
+    }
+
+    std::uint32_t capabilities() {
+        std::uint32_t caps = protocol::kCapCpuRenderer | protocol::kCapContinuous;
+        if (!config.token.empty()) caps |= protocol::kCapAuthRequired;
+        if (render.gpuAvailable()) caps |= protocol::kCapGpuRenderer;
+        return caps;
+    }
+
+    void bind() {
+        const std::string where = config.listenHost + ":" + std::to_string(config.listenPort);
+        try {
+            asio::ip::tcp::resolver resolver(io);
+            const asio::ip::tcp::endpoint ep =
+                resolver.resolve(config.listenHost, std::to_string(config.listenPort),
+                                 asio::ip::resolver_base::numeric_service)
+                    .begin()
+                    ->endpoint();
+            acceptor.open(ep.protocol());
+            acceptor.set_option(asio::socket_base::reuse_address(true));
+            acceptor.bind(ep);
+            acceptor.listen();
+        } catch (const std::exception& e) {
+            throw ConfigError(config.source + ": listen " + where + ": " + e.what());
+        }
+        log.info("listening on " + config.listenHost + ":" + std::to_string(port()) + " (" +
+                 std::to_string(catalog.size()) + " volumes, " +
+                 (config.token.empty() ? "no token" : "token required") + ")");
+    }
+
+    std::uint16_t port() const { return acceptor.local_endpoint().port(); }
+
+    void accept() {
+        acceptor.async_accept([this](const asio::error_code& ec, asio::ip::tcp::socket socket) {
+            if (ec) {
+                if (ec != asio::error::operation_aborted) log.error("accept: " + ec.message());
+                if (!draining && acceptor.is_open()) accept();
+                return;
+            }
+            asio::error_code ignored;
+            socket.set_option(asio::ip::tcp::no_delay(true), ignored);
+            auto session = std::make_shared<detail::Session>(std::move(socket), context, ++nextId);
+            if (sessions.size() >= config.maxClients) {
+                session->refuseBusy();
+            } else {
+                sessions[session->id()] = session;
+                session->start();
+            }
+            accept();
+        });
+    }
+
+    void onClosed(std::uint64_t id) {
+        sessions.erase(id);
+        if (draining && sessions.empty()) io.stop();
+    }
+
+    void drain() {
+        if (draining) return;
+        draining = true;
+        asio::error_code ignored;
+        acceptor.close(ignored);
+        signals.cancel(ignored);
+        if (sessions.empty()) return io.stop();
+        for (auto& [id, s] : std::map(sessions)) s->shutdown();
+        // Sessions close once their Bye is written; a stuck one is cut at the write deadline.
+        drainTimer.expires_after(std::chrono::milliseconds(config.writeTimeoutMs + 500));
+        drainTimer.async_wait([this](const asio::error_code& ec) {
+            if (!ec) io.stop();
+        });
+    }
+
+    DaemonConfig config;
+    Log& log;
+    Catalog catalog;
+    RenderService render;
+    asio::io_context io;
+    asio::ip::tcp::acceptor acceptor;
+    asio::signal_set signals;
+    asio::steady_timer drainTimer;
+    detail::SessionContext context;
+    std::map<std::uint64_t, std::shared_ptr<detail::Session>> sessions;
+    std::uint64_t nextId = 0;
+    bool draining = false;
+};
+
+Daemon::Daemon(DaemonConfig config, Log& log, bool handleSignals)
+    : mImpl(std::make_unique<Impl>(std::move(config), log, handleSignals)) {}
+
+Daemon::~Daemon() = default;
+
+std::uint16_t Daemon::port() const { return mImpl->port(); }
+
+void Daemon::run() {
+    mImpl->accept();
+    mImpl->io.run();
+    mImpl->sessions.clear();
+    mImpl->log.info("stopped");
+}
+
+void Daemon::stop() {
+    asio::post(mImpl->io, [impl = mImpl.get()] { impl->drain(); });
+}
+
+} // namespace bc::server

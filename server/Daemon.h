@@ -1,0 +1,36 @@
+#pragma once
+// brickcastd: accepts clients on the configured address, one network thread (Asio) for all
+// sessions and one render thread for all frames. stop() (or SIGTERM/SIGINT when
+// handleSignals) drains: no new clients, every session gets Bye, run() returns once they are
+// written or the write deadline passes.
+#include "server/DaemonConfig.h"
+
+#include <cstdint>
+#include <memory>
+
+namespace bc::server {
+
+class Log;
+
+class Daemon {
+  public:
+    /// Opens the catalog, starts the render thread and binds the listen address.
+    /// @throw ConfigError when the address cannot be bound (naming it).
+    Daemon(DaemonConfig config, Log& log, bool handleSignals = false);
+    ~Daemon();
+    Daemon(const Daemon&) = delete;
+    Daemon& operator=(const Daemon&) = delete;
+
+    /// The bound port (the actual one when the config asked for port 0).
+    std::uint16_t port() const;
+    /// Serves until stop() or a signal, then drains. Call from one thread.
+    void run();
+    /// Starts the drain; thread-safe, returns at once.
+    void stop();
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
+
+} // namespace bc::server

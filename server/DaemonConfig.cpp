@@ -1,0 +1,467 @@
+#include "server/DaemonConfig.h"
+
+#include "brickstore/Readers.h"
+#include "protocol/Wire.h"
+#include "server/Error.h"
+
+#include <algorithm>
+#include <arpa/inet.h>
+#include <cctype>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <toml++/toml.h>
+#include <unistd.h>
+
+namespace bc::server {
+namespace {
+
+// The embedded default: the text of configs/brickcastd.toml (DaemonConfigTest checks that
+// the two parse to the same configuration).
+constexpr std::string_view kDefaultToml = R"toml(
+# brickcastd configuration: the built-in default, every key documented.
+# Run `brickcastd --config FILE`. Unknown keys are errors (a typo is never ignored); a key
+# left out keeps the value shown here. Relative paths are taken against this file's folder.
+
+[server]
+# HOST:PORT to accept clients on; IPv6 in brackets ("[::1]:7411"); port 0 = any free port.
+listen = "127.0.0.1:7411"
+# Shared secret clients send in Auth (1..256 bytes); "" = no authentication. Required
+# whenever listen is not loopback (127.0.0.0/8, ::1, localhost).
+token = ""
+# Clients served at once (1..1024); one more is answered Busy and closed.
+max_clients = 16
+# Folder where generated volumes are ingested as brick stores; "" = $XDG_CACHE_HOME/brickcast,
+# or /tmp/brickcast-<uid> without XDG_CACHE_HOME.
+store_dir = ""
+
+[timeouts]
+# Hello (and Auth when required) must arrive within this long of connecting.
+handshake_ms = 5000
+# A message, once its first byte has arrived, must arrive completely within this long.
+read_ms = 10000
+# A session with no message for this long is sent Bye (idle timeout) and closed.
+idle_ms = 300000
+# A client that takes longer than this to accept one message is disconnected.
+write_ms = 10000
+
+[budgets]
+# Host memory for decompressed bricks, shared by all sessions (MiB, 1..1048576).
+host_mb = 1024
+# GPU memory for the brick atlas (MiB, 1..1048576); bounds the automatic level choice.
+gpu_mb = 512
+
+[frames]
+# Under adaptive quality, a camera at rest this long gets one refined frame (0..60000 ms).
+rest_ms = 150
+# Encoded frames queued per session (1..16); a slow reader gets the newest, older are dropped.
+write_queue = 2
+
+# The catalog: one [[volume]] per name clients may open. Each has either store (a .bcs brick
+# store made by `brickcast ingest`) or generate (a synthetic volume, ingested on first use
+# into store_dir), never both.
+[[volume]]
+# What clients ask for: 1..64 of A-Z a-z 0-9 . _ -, not starting with '.'.
+name = "phantom"
+# Synthetic kind: "phantom", "vessels" or "checker".
+generate = "phantom"
+# Size of the generated volume in voxels, x y z, each 8..1024.
+dims = [128, 128, 128]
+# Free text for people reading the configuration and the daemon's log.
+description = "synthetic CT-like head, 16-bit, dense"
+
+[[volume]]
+name = "vessels"
+generate = "vessels"
+dims = [160, 160, 160]
+description = "synthetic branching vessel tree, 8-bit, 1-5% occupied"
+
+# An ingested scan is served like this:
+# [[volume]]
+# name = "cthead"
+# store = "stores/cthead.bcs"
+# description = "Stanford CT head, 256x256x113"
+)toml";
+
+constexpr std::int64_t kMaxMs = 86'400'000; // a day
+constexpr std::int64_t kMaxBudgetMb = 1 << 20;
+
+std::string nodeTypeName(toml::node_type t) {
+    std::ostringstream s;
+    s << t;
+    return s.str();
+}
+
+/// Why `name` cannot be a catalog name (PROTOCOL.md "Limits"), or nothing.
+std::optional<std::string> volumeNameProblem(const std::string& name) {
+    if (name.empty() || name.size() > protocol::kMaxVolumeNameBytes)
+        return "'" + name + "' must be 1.." + std::to_string(protocol::kMaxVolumeNameBytes) +
+               " bytes";
+    for (unsigned char c : name)
+        if (!std::isalnum(c) && c != '.' && c != '_' && c != '-')
+            return "'" + name + "' has a character outside A-Z a-z 0-9 . _ -";
+    if (name.front() == '.') return "'" + name + "' starts with '.'";
+    return std::nullopt;
+}
+
+bool isHostnameChar(unsigned char c) {
+    return std::isalnum(c) || c == '.' || c == '-';
+}
+
+/// Why `host` is no IPv4 address or host name, or nothing.
+std::optional<std::string> hostProblem(const std::string& host) {
+    if (host.empty()) return "the host is empty (0.0.0.0 listens on every interface)";
+    if (host.find(':') != std::string::npos)
+        return "an IPv6 address goes in brackets, e.g. \"[::1]:7411\"";
+    if (!std::all_of(host.begin(), host.end(), isHostnameChar) || host.front() == '-' ||
+        host.front() == '.')
+        return "'" + host + "' is neither an IPv4 address nor a host name";
+    const bool numeric = std::all_of(host.begin(), host.end(),
+                                     [](unsigned char c) { return std::isdigit(c) || c == '.'; });
+    in_addr v4{};
+    if (numeric && inet_pton(AF_INET, host.c_str(), &v4) != 1)
+        return "'" + host + "' is not an IPv4 address";
+    return std::nullopt;
+}
+
+struct Listen {
+    std::string host;
+    std::uint16_t port = 0;
+};
+
+/// Splits "HOST:PORT" or "[IPV6]:PORT"; returns why not on failure.
+std::optional<std::string> splitListen(const std::string& text, Listen& out) {
+    const std::string usage = " (expected HOST:PORT, e.g. \"127.0.0.1:7411\" or \"[::1]:7411\")";
+    std::size_t colon = 0;
+    if (!text.empty() && text.front() == '[') {
+        const std::size_t close = text.find(']');
+        if (close == std::string::npos) return "'" + text + "' has no closing ']'" + usage;
+        out.host = text.substr(1, close - 1);
+        in6_addr v6{};
+        if (inet_pton(AF_INET6, out.host.c_str(), &v6) != 1)
+            return "'" + out.host + "' is not an IPv6 address";
+        if (close + 1 >= text.size() || text[close + 1] != ':') return "no port" + usage;
+        colon = close + 1;
+    } else {
+        colon = text.rfind(':');
+        if (colon == std::string::npos) return "'" + text + "' has no port" + usage;
+        out.host = text.substr(0, colon);
+        if (auto why = hostProblem(out.host)) return why;
+    }
+    const std::string port = text.substr(colon + 1);
+    if (port.empty() || port.size() > 5 ||
+        !std::all_of(port.begin(), port.end(), [](unsigned char c) { return std::isdigit(c); }) ||
+        std::stoul(port) > 65535)
+        return "port '" + port + "' is not a number 0..65535";
+    out.port = static_cast<std::uint16_t>(std::stoul(port));
+    return std::nullopt;
+}
+
+/// Reads the sections of one document, throwing ConfigError at the first fault.
+class Reader {
+  public:
+    Reader(const std::string& sourceName, const std::string& baseDir)
+        : mSource(sourceName), mBaseDir(baseDir) {}
+
+    DaemonConfig read(const toml::table& root) const;
+
+  private:
+    [[noreturn]] void fail(const toml::source_region& at, const std::string& key,
+                           const std::string& why) const;
+    void checkKeys(const toml::table& t, const std::string& prefix,
+                   std::initializer_list<std::string_view> known) const;
+    const toml::table* section(const toml::table& root, const char* name) const;
+    std::optional<std::int64_t> integer(const toml::table& t, const std::string& prefix,
+                                        const char* key, std::int64_t min, std::int64_t max) const;
+    std::optional<std::string> string(const toml::table& t, const std::string& prefix,
+                                      const char* key) const;
+    std::string resolve(const std::string& path) const;
+
+    void readServer(const toml::table& root, DaemonConfig& c) const;
+    void readTimeouts(const toml::table& root, DaemonConfig& c) const;
+    void readLimits(const toml::table& root, DaemonConfig& c) const;
+    void readVolumes(const toml::table& root, DaemonConfig& c) const;
+    CatalogEntry readVolume(const toml::table& t, const std::string& prefix) const;
+    std::array<std::uint64_t, 3> readDims(const toml::table& t, const std::string& prefix) const;
+
+    std::string mSource;
+    std::string mBaseDir;
+};
+
+template <class T> void assign(T& field, std::optional<std::int64_t> value) {
+    if (value) field = static_cast<T>(*value);
+}
+
+std::string position(const std::string& source, const toml::source_region& at) {
+    if (at.begin.line == 0) return source + ": ";
+    return source + ":" + std::to_string(at.begin.line) + ":" + std::to_string(at.begin.column) +
+           ": ";
+}
+
+void Reader::fail(const toml::source_region& at, const std::string& key,
+                  const std::string& why) const {
+    throw ConfigError(position(mSource, at) + key + ": " + why);
+}
+
+void Reader::checkKeys(const toml::table& t, const std::string& prefix,
+                       std::initializer_list<std::string_view> known) const {
+    for (auto&& [key, node] : t) {
+        if (std::find(known.begin(), known.end(), key.str()) != known.end()) continue;
+        std::string list;
+        for (std::string_view k : known)
+            list += (list.empty() ? "" : ", ") + std::string(k);
+        fail(key.source(), prefix + std::string(key.str()), "unknown key (known: " + list + ")");
+    }
+}
+
+const toml::table* Reader::section(const toml::table& root, const char* name) const {
+    const toml::node* node = root.get(name);
+    if (!node) return nullptr;
+    if (!node->is_table())
+        fail(node->source(), name,
+             "expected a [" + std::string(name) + "] table, got " + nodeTypeName(node->type()));
+    return node->as_table();
+}
+
+std::optional<std::int64_t> Reader::integer(const toml::table& t, const std::string& prefix,
+                                            const char* key, std::int64_t min,
+                                            std::int64_t max) const {
+    const toml::node* node = t.get(key);
+    if (!node) return std::nullopt;
+    const auto* v = node->as_integer();
+    if (!v)
+        fail(node->source(), prefix + key,
+             "expected an integer, got " + nodeTypeName(node->type()));
+    if (v->get() < min || v->get() > max)
+        fail(node->source(), prefix + key,
+             std::to_string(v->get()) + " is outside " + std::to_string(min) + ".." +
+                 std::to_string(max));
+    return v->get();
+}
+
+std::optional<std::string> Reader::string(const toml::table& t, const std::string& prefix,
+                                          const char* key) const {
+    const toml::node* node = t.get(key);
+    if (!node) return std::nullopt;
+    const auto* v = node->as_string();
+    if (!v)
+        fail(node->source(), prefix + key, "expected a string, got " + nodeTypeName(node->type()));
+    return v->get();
+}
+
+std::string Reader::resolve(const std::string& path) const {
+    std::filesystem::path p(path);
+    if (p.is_relative()) p = std::filesystem::path(mBaseDir) / p;
+    return p.lexically_normal().string();
+}
+
+void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
+    const toml::table* t = section(root, "server");
+    if (!t) return;
+    checkKeys(*t, "server.", {"listen", "token", "max_clients", "store_dir"});
+    if (auto listen = string(*t, "server.", "listen")) {
+        Listen l;
+        if (auto why = splitListen(*listen, l))
+            fail(t->get("listen")->source(), "server.listen", *why);
+        c.listenHost = l.host;
+        c.listenPort = l.port;
+    }
+    if (auto token = string(*t, "server.", "token")) {
+        if (token->size() > protocol::kMaxTokenBytes)
+            fail(t->get("token")->source(), "server.token",
+                 "longer than " + std::to_string(protocol::kMaxTokenBytes) + " bytes");
+        c.token = *token;
+    }
+    assign(c.maxClients, integer(*t, "server.", "max_clients", 1, 1024));
+    if (auto dir = string(*t, "server.", "store_dir"); dir && !dir->empty())
+        c.storeDir = resolve(*dir);
+}
+
+void Reader::readTimeouts(const toml::table& root, DaemonConfig& c) const {
+    const toml::table* t = section(root, "timeouts");
+    if (!t) return;
+    const std::string p = "timeouts.";
+    checkKeys(*t, p, {"handshake_ms", "read_ms", "idle_ms", "write_ms"});
+    assign(c.handshakeTimeoutMs, integer(*t, p, "handshake_ms", 1, kMaxMs));
+    assign(c.readTimeoutMs, integer(*t, p, "read_ms", 1, kMaxMs));
+    assign(c.idleTimeoutMs, integer(*t, p, "idle_ms", 1, kMaxMs));
+    assign(c.writeTimeoutMs, integer(*t, p, "write_ms", 1, kMaxMs));
+}
+
+void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
+    if (const toml::table* t = section(root, "budgets")) {
+        checkKeys(*t, "budgets.", {"host_mb", "gpu_mb"});
+        if (auto mb = integer(*t, "budgets.", "host_mb", 1, kMaxBudgetMb))
+            c.hostBudgetBytes = std::uint64_t(*mb) << 20;
+        if (auto mb = integer(*t, "budgets.", "gpu_mb", 1, kMaxBudgetMb))
+            c.gpuBudgetBytes = std::uint64_t(*mb) << 20;
+    }
+    if (const toml::table* t = section(root, "frames")) {
+        checkKeys(*t, "frames.", {"rest_ms", "write_queue"});
+        assign(c.restMs, integer(*t, "frames.", "rest_ms", 0, 60000));
+        assign(c.writeQueueFrames, integer(*t, "frames.", "write_queue", 1, 16));
+    }
+}
+
+std::array<std::uint64_t, 3> Reader::readDims(const toml::table& t,
+                                              const std::string& prefix) const {
+    const toml::node* node = t.get("dims");
+    if (!node) fail(t.source(), prefix + "dims", "a generated volume needs dims = [X, Y, Z]");
+    const toml::array* a = node->as_array();
+    if (!a || a->size() != 3)
+        fail(node->source(), prefix + "dims",
+             "expected an array of 3 integers, e.g. [128, 128, 128]");
+    std::array<std::uint64_t, 3> dims{};
+    for (std::size_t i = 0; i < 3; ++i) {
+        const auto* v = (*a)[i].as_integer();
+        if (!v || v->get() < 8 || v->get() > 1024)
+            fail((*a)[i].source(), prefix + "dims",
+                 "element " + std::to_string(i + 1) + " must be an integer 8..1024");
+        dims[i] = std::uint64_t(v->get());
+    }
+    return dims;
+}
+
+CatalogEntry Reader::readVolume(const toml::table& t, const std::string& prefix) const {
+    checkKeys(t, prefix, {"name", "store", "generate", "dims", "description"});
+    CatalogEntry e;
+    auto name = string(t, prefix, "name");
+    if (!name) fail(t.source(), prefix + "name", "missing: every volume needs a name");
+    if (auto why = volumeNameProblem(*name)) fail(t.get("name")->source(), prefix + "name", *why);
+    e.name = *name;
+    auto store = string(t, prefix, "store");
+    auto generate = string(t, prefix, "generate");
+    if (store && generate)
+        fail(t.get("generate")->source(), prefix + "generate",
+             "and store are both given: a volume is either a store or generated");
+    if (!store && !generate)
+        fail(t.source(), prefix + "store",
+             "missing: give store (a .bcs path) or generate (a synthetic kind)");
+    if (store) {
+        if (store->empty()) fail(t.get("store")->source(), prefix + "store", "the path is empty");
+        if (t.contains("dims"))
+            fail(t.get("dims")->source(), prefix + "dims",
+                 "only for generate: a store has its own");
+        e.store = resolve(*store);
+    } else {
+        if (!brickstore::parseSynthKind(*generate))
+            fail(t.get("generate")->source(), prefix + "generate",
+                 "'" + *generate + "' is not one of phantom, vessels, checker");
+        e.generate = *generate;
+        e.dims = readDims(t, prefix);
+    }
+    e.description = string(t, prefix, "description").value_or("");
+    return e;
+}
+
+void Reader::readVolumes(const toml::table& root, DaemonConfig& c) const {
+    const toml::node* node = root.get("volume");
+    if (!node) fail(root.source(), "[[volume]]", "no volumes: the catalog needs at least one");
+    const toml::array* list = node->as_array();
+    if (!list || !list->is_array_of_tables())
+        fail(node->source(), "volume", "expected [[volume]] tables");
+    if (list->size() > protocol::kMaxVolumes)
+        fail(node->source(), "[[volume]]",
+             "more than " + std::to_string(protocol::kMaxVolumes) + " volumes");
+    std::map<std::string, std::size_t> seen;
+    for (std::size_t i = 0; i < list->size(); ++i) {
+        const toml::table& t = *(*list)[i].as_table();
+        const std::string prefix = "[[volume]] " + std::to_string(i + 1) + " .";
+        CatalogEntry e = readVolume(t, prefix);
+        if (auto [it, fresh] = seen.emplace(e.name, i + 1); !fresh)
+            fail(t.get("name")->source(), prefix + "name",
+                 "'" + e.name + "' is already [[volume]] " + std::to_string(it->second));
+        c.volumes.push_back(std::move(e));
+    }
+}
+
+DaemonConfig Reader::read(const toml::table& root) const {
+    checkKeys(root, "", {"server", "timeouts", "budgets", "frames", "volume"});
+    DaemonConfig c;
+    c.source = mSource;
+    c.storeDir = defaultStoreDir();
+    readServer(root, c);
+    readTimeouts(root, c);
+    readLimits(root, c);
+    readVolumes(root, c);
+    if (c.token.empty() && !c.loopbackOnly()) {
+        const toml::node* at = root.at_path("server.token").node();
+        if (!at) at = root.at_path("server.listen").node();
+        fail(at ? at->source() : root.source(), "server.token",
+             "required when listening on '" + c.listenHost +
+                 "' (not loopback): clients from other machines must authenticate");
+    }
+    return c;
+}
+
+} // namespace
+
+std::string defaultStoreDir() {
+    const char* cache = std::getenv("XDG_CACHE_HOME");
+    if (cache && cache[0] == '/') return (std::filesystem::path(cache) / "brickcast").string();
+    return "/tmp/brickcast-" + std::to_string(::getuid());
+}
+
+void DaemonConfig::setListen(const std::string& text, const std::string& sourceName) {
+    Listen l;
+    if (auto why = splitListen(text, l)) throw ConfigError(sourceName + ": " + *why);
+    DaemonConfig next = *this;
+    next.listenHost = l.host;
+    next.listenPort = l.port;
+    if (next.token.empty() && !next.loopbackOnly())
+        throw ConfigError(sourceName + ": listening on '" + l.host +
+                          "' (not loopback) needs server.token in the config");
+    *this = std::move(next);
+}
+
+bool DaemonConfig::loopbackOnly() const {
+    std::string host = listenHost;
+    std::transform(host.begin(), host.end(), host.begin(),
+                   [](unsigned char ch) { return char(std::tolower(ch)); });
+    if (host == "localhost") return true;
+    in_addr v4{};
+    if (inet_pton(AF_INET, host.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+    in6_addr v6{};
+    if (inet_pton(AF_INET6, host.c_str(), &v6) != 1) return false;
+    return IN6_IS_ADDR_LOOPBACK(&v6) || (IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127);
+}
+
+std::string_view DaemonConfig::defaultToml() {
+    return kDefaultToml.substr(1);
+}
+
+DaemonConfig DaemonConfig::embeddedDefault() {
+    return parse(std::string(defaultToml()), "<embedded default>", "");
+}
+
+DaemonConfig DaemonConfig::parse(const std::string& tomlText, const std::string& sourceName,
+                                 const std::string& baseDir) {
+    toml::table root;
+    try {
+        root = toml::parse(tomlText, sourceName);
+    } catch (const toml::parse_error& e) {
+        throw ConfigError(position(sourceName, e.source()) +
+                          "syntax: " + std::string(e.description()));
+    }
+    return Reader(sourceName, baseDir).read(root);
+}
+
+DaemonConfig DaemonConfig::load(const std::string& path) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec))
+        throw ConfigError(path + ": is a folder, not a file");
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw ConfigError(path + ": cannot read: " + std::strerror(errno));
+    std::ostringstream text;
+    text << in.rdbuf();
+    if (in.bad()) throw ConfigError(path + ": cannot read: " + std::strerror(errno));
+    const auto folder = std::filesystem::absolute(path, ec).parent_path();
+    return parse(text.str(), path, folder.string());
+}
+
+} // namespace bc::server

@@ -1,0 +1,67 @@
+#pragma once
+// What brickcastd serves and how: listen address, authentication, limits, timeouts, memory
+// budgets and the volume catalog. Read from TOML (configs/brickcastd.toml documents every
+// key); the daemon's other parts take this struct, never the file.
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace bc::server {
+
+/// One volume a client can open by name.
+struct CatalogEntry {
+    std::string name;     ///< 1..64 of A-Z a-z 0-9 . _ -, not starting with '.'
+    std::string store;    ///< a .bcs brick store, resolved against the config's folder; or empty
+    std::string generate; ///< "phantom" | "vessels" | "checker" when store is empty
+    std::array<std::uint64_t, 3> dims{}; ///< for generate: each 8..1024
+    std::string description;
+
+    bool operator==(const CatalogEntry&) const = default;
+};
+
+struct DaemonConfig {
+    std::string source = "<embedded default>"; ///< what it was read from
+    std::string listenHost = "127.0.0.1";      ///< without brackets: "::1"
+    std::uint16_t listenPort = 7411;           ///< 0 = any free port (tests)
+    std::string token;                         ///< empty = no auth; required off loopback
+    std::uint32_t maxClients = 16;
+    std::uint32_t handshakeTimeoutMs = 5000;
+    std::uint32_t readTimeoutMs = 10000;
+    std::uint32_t idleTimeoutMs = 300000;
+    std::uint32_t writeTimeoutMs = 10000;
+    std::uint64_t hostBudgetBytes = 1024ull << 20;
+    std::uint64_t gpuBudgetBytes = 512ull << 20;
+    std::uint32_t restMs = 150;         ///< camera at rest this long -> a refined frame
+    std::uint32_t writeQueueFrames = 2; ///< per session; older frames are dropped
+    std::string storeDir;               ///< where generated volumes are ingested
+    std::vector<CatalogEntry> volumes;
+
+    bool operator==(const DaemonConfig&) const = default;
+
+    /// Listens on "HOST:PORT" instead (a command-line override), keeping the token rule.
+    /// @throw ConfigError naming sourceName when the text is bad or a token is missing.
+    void setListen(const std::string& text, const std::string& sourceName);
+    /// Whether listenHost is a loopback address: 127.0.0.0/8, ::1 (also v4-mapped), localhost.
+    bool loopbackOnly() const;
+    /// The built-in configuration: loopback, no token, a generated 128^3 "phantom" and 160^3
+    /// "vessels"; storeDir is the default cache folder.
+    static DaemonConfig embeddedDefault();
+    /// The embedded default as documented TOML text (what configs/brickcastd.toml holds).
+    static std::string_view defaultToml();
+    /// Parses and validates a configuration; relative paths are taken against baseDir.
+    /// @throw ConfigError naming sourceName, line:column and the key: syntax errors, unknown
+    /// keys, wrong types, out-of-range values, bad listen syntax, duplicate volume names, an
+    /// entry with both or neither of store/generate, no token for a non-loopback listen.
+    static DaemonConfig parse(const std::string& tomlText, const std::string& sourceName,
+                              const std::string& baseDir);
+    /// Reads and parses a file; relative paths in it are taken against its folder.
+    /// @throw ConfigError if it is unreadable or invalid
+    static DaemonConfig load(const std::string& path);
+};
+
+/// The default store folder: $XDG_CACHE_HOME/brickcast, or /tmp/brickcast-<uid> without it.
+std::string defaultStoreDir();
+
+} // namespace bc::server

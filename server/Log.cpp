@@ -1,0 +1,28 @@
+#include "server/Log.h"
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+
+namespace bc::server {
+
+void Log::info(const std::string& line) {
+    if (!mQuiet) write("info", line);
+}
+
+void Log::error(const std::string& line) { write("error", line); }
+
+void Log::write(const char* level, const std::string& line) {
+    const auto now = std::chrono::system_clock::now();
+    const std::time_t seconds = std::chrono::system_clock::to_time_t(now);
+    const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()) % 1000;
+    std::tm utc{};
+    gmtime_r(&seconds, &utc);
+    char stamp[32];
+    std::strftime(stamp, sizeof stamp, "%Y-%m-%dT%H:%M:%S", &utc);
+    std::lock_guard lock(mMutex);
+    std::fprintf(stderr, "%s.%03dZ %s %s\n", stamp, int(ms.count()), level, line.c_str());
+    std::fflush(stderr);
+}
+
+} // namespace bc::server

@@ -1,0 +1,136 @@
+#pragma once
+// The render thread: it owns the GL context and every renderer, and draws for the sessions in
+// turn. A session writes what it wants into its RenderSlot (camera updates coalesce: the
+// latest wins) and the thread takes the newest state of a slot whose write queue has room, so
+// a slow reader never makes frames pile up: it gets the newest view when it catches up.
+// Network threads never wait for it: slots are a mutex and a condition variable away.
+#include "protocol/FrameCodec.h"
+#include "protocol/Messages.h"
+#include "render/TransferFunction.h"
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace bc::server {
+
+struct Volume;
+class Catalog;
+class Log;
+class RenderService;
+
+using Clock = std::chrono::steady_clock;
+
+/// What a session wants drawn. Setters are called from the session's network thread; the
+/// render thread takes snapshots. Thread-safe.
+class RenderSlot {
+  public:
+    /// Receives each encoded message (a Frame or an Error) on the render thread; it must not
+    /// block (the session posts it to its own thread).
+    using Deliver = std::function<void(std::vector<std::uint8_t> message)>;
+    RenderSlot(RenderService& service, Deliver deliver, std::uint32_t queueFrames);
+
+    void setVolume(std::shared_ptr<Volume> volume);
+    void setCamera(const protocol::SetCamera& camera);
+    void setTransferFunction(std::shared_ptr<const render::TransferFunction> tf,
+                             const protocol::SetTransferFunction& message);
+    /// New options; the next delta frame is a keyframe (how a client asks for one).
+    void setOptions(const protocol::RenderOptions& options);
+    void request(protocol::FrameMode mode, std::uint32_t requestId);
+    /// A frame this slot delivered has been written (or dropped): room for the next.
+    void frameDone();
+    /// The session is gone: the render thread forgets the slot.
+    void close();
+
+  private:
+    friend class RenderService;
+    struct State {
+        std::shared_ptr<Volume> volume;
+        std::optional<protocol::SetCamera> camera;
+        std::shared_ptr<const render::TransferFunction> tf;
+        protocol::SetTransferFunction tfMessage;
+        protocol::RenderOptions options;
+    };
+    /// A frame to draw: the state and whether it is the refined one.
+    struct Job {
+        State state;
+        bool refined = true;
+        std::uint32_t requestId = 0;
+        Clock::time_point queuedAt{}; ///< the oldest change this frame answers
+    };
+    /// When the slot can next be drawn (nullopt: not until something changes).
+    std::optional<Clock::time_point> readyAt(std::uint32_t restMs) const;
+    Job take(Clock::time_point now, std::uint32_t restMs);
+    void changed();
+    void markChanged(); ///< with mMutex held
+
+    RenderService& mService;
+    Deliver mDeliver;
+    std::uint32_t mQueueFrames;
+    mutable std::mutex mMutex;
+    State mState;
+    bool mClosed = false, mContinuous = false, mDirty = false, mNeedsRefine = false;
+    bool mOnce = false, mResetDelta = false;
+    std::uint32_t mOnceRequest = 0, mInFlight = 0;
+    Clock::time_point mLastCamera{}, mChangedAt{};
+    // render thread only
+    protocol::FrameEncoder mEncoder;
+    std::uint32_t mNextFrameId = 1;
+};
+
+struct RenderServiceConfig {
+    std::uint64_t gpuBudgetBytes = 512ull << 20;
+    std::uint32_t restMs = 150;
+};
+
+class RenderService {
+  public:
+    /// Starts the render thread (it creates the GL context; without one, GPU requests fail
+    /// with RenderFailed and the CPU renderers still serve).
+    RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log);
+    /// Stops and joins the thread; frames not yet drawn are not drawn.
+    ~RenderService();
+    RenderService(const RenderService&) = delete;
+    RenderService& operator=(const RenderService&) = delete;
+
+    /// A slot for a new session.
+    std::shared_ptr<RenderSlot> open(RenderSlot::Deliver deliver, std::uint32_t queueFrames);
+    /// Whether the GL context came up (waits for the thread's start-up).
+    bool gpuAvailable();
+    /// Server counters for the Stats message ("frames", "render_ms_total", ...).
+    std::vector<std::pair<std::string, double>> counters();
+
+  private:
+    friend class RenderSlot;
+    struct Renderers;
+    void run();
+    void notify();
+    std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock);
+    void draw(RenderSlot& slot, RenderSlot::Job job);
+    protocol::Frame render(RenderSlot& slot, RenderSlot::Job& job, Renderers& r);
+
+    RenderServiceConfig mConfig;
+    Catalog& mCatalog;
+    Log& mLog;
+    std::mutex mMutex;
+    std::condition_variable mWake;
+    std::vector<std::weak_ptr<RenderSlot>> mSlots;
+    std::size_t mNextSlot = 0;
+    bool mStop = false, mStarted = false, mGpu = false;
+    std::condition_variable mStartedCv;
+    std::unique_ptr<Renderers> mRenderers; // render thread only
+    struct Counters {
+        double frames = 0, refined = 0, errors = 0, renderMs = 0, encodeMs = 0, bytes = 0;
+        double samples = 0, uploads = 0, bytesUploaded = 0;
+    } mCounters;
+    std::thread mThread;
+};
+
+} // namespace bc::server

@@ -1,0 +1,90 @@
+#include "server/ViewRequest.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace bc::server {
+
+render::Camera toCamera(const protocol::SetCamera& c) {
+    render::Camera out;
+    out.eye = {c.eye[0], c.eye[1], c.eye[2]};
+    out.target = {c.target[0], c.target[1], c.target[2]};
+    out.up = {c.up[0], c.up[1], c.up[2]};
+    out.fovYDeg = c.fovYDeg;
+    out.orthographic = c.orthographic;
+    out.orthoHeight = c.orthoHeight;
+    return out;
+}
+
+render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, bool interactive) {
+    using namespace protocol;
+    render::RenderOptions r;
+    r.width = interactive ? (o.width + 1u) / 2u : o.width;
+    r.height = interactive ? (o.height + 1u) / 2u : o.height;
+    r.stepVoxels = o.stepVoxels;
+    r.earlyTermination = (o.techniques & kTechEarlyTermination) != 0;
+    r.ertThreshold = o.ertThreshold;
+    const bool bricks = (o.techniques & kTechBrickSkipping) != 0;
+    r.skip = !bricks ? render::SkipMode::None
+             : (o.techniques & kTechOctreeSkipping) ? render::SkipMode::All
+                                                    : render::SkipMode::Bricks;
+    r.occlusionFrustums = bricks && (o.techniques & kTechOcclusionFrustums) != 0;
+    r.shading = (o.techniques & kTechShading) != 0;
+    r.level = o.level == kLevelAutomatic ? 0 : o.level;
+    r.interactive = o.level == kLevelAutomatic; // a coarser level when level 0 exceeds the pool
+    return r;
+}
+
+namespace {
+
+const char* placementKey(protocol::Placement p) {
+    switch (p) {
+    case protocol::Placement::Value: return "value";
+    case protocol::Placement::Fraction: return "fraction";
+    case protocol::Placement::Percentile: return "percentile";
+    }
+    return "value";
+}
+
+} // namespace
+
+std::shared_ptr<const render::TransferFunction>
+toTransferFunction(const protocol::SetTransferFunction& m, const render::VolumeValueStats& stats) {
+    if (m.kind == protocol::TfKind::Preset)
+        return std::make_shared<const render::TransferFunction>(
+            render::TransferFunction::load(m.preset, stats));
+    // Points go through the file parser: one set of rules and error names for both.
+    nlohmann::json doc;
+    doc["name"] = "SetTransferFunction";
+    doc["shading"] = m.shading;
+    doc["points"] = nlohmann::json::array();
+    for (const auto& p : m.points)
+        doc["points"].push_back({{placementKey(p.placement), p.position},
+                                 {"rgba", {p.rgba[0], p.rgba[1], p.rgba[2], p.rgba[3]}}});
+    return std::make_shared<const render::TransferFunction>(
+        render::TransferFunction::parse(doc.dump(), "SetTransferFunction", stats));
+}
+
+bool shadingFor(const protocol::RenderOptions& options,
+                const protocol::SetTransferFunction& tfMessage, const render::TransferFunction& tf) {
+    if ((options.techniques & protocol::kTechShading) == 0) return false;
+    if (tfMessage.shadingSource == protocol::ShadingSource::Message) return tfMessage.shading;
+    return tf.shading().value_or(true);
+}
+
+render::Image interactiveUpscale(const render::Image& half, std::uint32_t width,
+                                 std::uint32_t height) {
+    render::Image out(width, height);
+    for (std::uint32_t y = 0; y < height; ++y) {
+        const std::uint32_t sy = std::min(y / 2, half.height - 1);
+        for (std::uint32_t x = 0; x < width; ++x) {
+            const float* s = half.pixel(std::min(x / 2, half.width - 1), sy);
+            std::copy(s, s + 4, out.pixel(x, y));
+        }
+    }
+    return out;
+}
+
+} // namespace bc::server

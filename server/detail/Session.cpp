@@ -1,0 +1,401 @@
+#include "server/detail/Session.h"
+
+#include "render/Camera.h"
+#include "server/Log.h"
+#include "server/ViewRequest.h"
+
+#include <algorithm>
+#include <sstream>
+
+namespace bc::server::detail {
+
+namespace {
+
+using protocol::ErrorCode;
+using protocol::MessageType;
+
+constexpr auto kWatchdogPeriod = std::chrono::milliseconds(50);
+
+std::chrono::milliseconds ms(std::uint32_t v) { return std::chrono::milliseconds(v); }
+
+/// Constant-time comparison: the time taken depends on the lengths only, never on where the
+/// first difference lies.
+bool tokensEqual(const std::string& given, const std::string& expected) {
+    const std::size_t n = std::max(given.size(), expected.size());
+    unsigned diff = given.size() == expected.size() ? 0u : 1u;
+    for (std::size_t i = 0; i < n; ++i) {
+        const unsigned char a = i < given.size() ? static_cast<unsigned char>(given[i]) : 0;
+        const unsigned char b = i < expected.size() ? static_cast<unsigned char>(expected[i]) : 0;
+        diff |= unsigned(a ^ b);
+    }
+    return diff == 0;
+}
+
+std::string mib(std::uint64_t bytes) {
+    std::ostringstream s;
+    s.precision(3);
+    s << double(bytes) / double(1 << 20) << " MiB";
+    return s.str();
+}
+
+} // namespace
+
+Session::Session(asio::ip::tcp::socket socket, SessionContext& context, std::uint64_t id)
+    : mSocket(std::move(socket)), mTimer(mSocket.get_executor()), mContext(context), mId(id),
+      mDecoder(protocol::kMaxClientPayloadBytes) {
+    mPeer = peer();
+    mStarted = mLastMessage = Clock::now();
+}
+
+std::string Session::peer() const {
+    asio::error_code ec;
+    const auto ep = mSocket.remote_endpoint(ec);
+    if (ec) return "?";
+    return ep.address().to_string() + ":" + std::to_string(ep.port());
+}
+
+void Session::start() {
+    mContext.log.info("session " + std::to_string(mId) + " from " + mPeer + " started");
+    std::weak_ptr<Session> weak = shared_from_this();
+    auto executor = mSocket.get_executor();
+    mSlot = mContext.render.open(
+        [weak, executor](std::vector<std::uint8_t> bytes) {
+            asio::post(executor, [weak, bytes = std::move(bytes)]() mutable {
+                if (auto self = weak.lock())
+                    self->enqueue({std::move(bytes), true});
+            });
+        },
+        mContext.config.writeQueueFrames);
+    read();
+    watchdog();
+}
+
+void Session::refuseBusy() {
+    mContext.log.info("session " + std::to_string(mId) + " from " + mPeer +
+                      " refused: too many clients");
+    sendError(ErrorCode::Busy, true, 0, 0,
+              "too many clients (" + std::to_string(mContext.config.maxClients) + ")");
+    watchdog();
+}
+
+void Session::shutdown() {
+    if (mPhase == Phase::Closing || mPhase == Phase::Closed) return;
+    send(protocol::Bye{protocol::ByeReason::ShuttingDown}, 0);
+    closeAfterFlush("server shutting down");
+}
+
+// ---- reading -------------------------------------------------------------------------------
+
+void Session::read() {
+    mSocket.async_read_some(asio::buffer(mReadBuffer),
+                            [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
+                                if (self->mPhase == Phase::Closed) return;
+                                if (ec) {
+                                    self->close(ec == asio::error::eof ? "peer closed"
+                                                                       : "read: " + ec.message());
+                                    return;
+                                }
+                                self->onBytes(n);
+                            });
+}
+
+void Session::onBytes(std::size_t n) {
+    mBytesReceived += n;
+    mDecoder.feed(std::span<const std::uint8_t>(mReadBuffer.data(), n));
+    for (;;) {
+        auto r = mDecoder.next();
+        if (r.status == protocol::Decoder::Status::NeedMore) break;
+        mLastMessage = Clock::now();
+        if (r.status == protocol::Decoder::Status::Error) {
+            sendError(r.error.code, r.error.fatal, r.error.type, r.error.request, r.error.message);
+            if (r.error.fatal) return;
+            continue;
+        }
+        handle(r.message, r.request);
+        if (mPhase == Phase::Closing || mPhase == Phase::Closed) return;
+    }
+    if (mDecoder.midMessage()) {
+        if (!mMidMessageSince) mMidMessageSince = Clock::now();
+    } else {
+        mMidMessageSince.reset();
+    }
+    read();
+}
+
+/// The handshake gate: before Hello only Hello; before a required Auth only Auth (and Bye).
+bool Session::admitted(MessageType type, std::uint32_t request) {
+    if (type == MessageType::Bye) return true;
+    const auto t = std::uint8_t(type);
+    if (mPhase == Phase::AwaitHello && type != MessageType::Hello) {
+        const bool auth = !mContext.config.token.empty();
+        sendError(auth ? ErrorCode::NotAuthenticated : ErrorCode::BadState, true, t, request,
+                  auth ? "authenticate first (Hello, then Auth)" : "Hello must come first");
+        return false;
+    }
+    if (mPhase == Phase::AwaitAuth && type != MessageType::Auth) {
+        sendError(ErrorCode::NotAuthenticated, true, t, request, "authenticate first");
+        return false;
+    }
+    return true;
+}
+
+void Session::handle(protocol::Message& message, std::uint32_t request) {
+    const MessageType type = protocol::typeOf(message);
+    if (!admitted(type, request)) return;
+    const auto t = std::uint8_t(type);
+    try {
+        std::visit(
+            [&](auto& m) {
+                using M = std::decay_t<decltype(m)>;
+                if constexpr (std::is_same_v<M, protocol::Hello>) {
+                    onHello(m, request);
+                } else if constexpr (std::is_same_v<M, protocol::Auth>) {
+                    onAuth(m, request);
+                } else if constexpr (std::is_same_v<M, protocol::ListVolumes>) {
+                    send(protocol::VolumeList{mContext.catalog.list()}, request);
+                } else if constexpr (std::is_same_v<M, protocol::OpenVolume>) {
+                    onOpenVolume(m, request);
+                } else if constexpr (std::is_same_v<M, protocol::SetCamera>) {
+                    toCamera(m).validate();
+                    mSlot->setCamera(m);
+                } else if constexpr (std::is_same_v<M, protocol::SetTransferFunction>) {
+                    onSetTransferFunction(m, request);
+                } else if constexpr (std::is_same_v<M, protocol::SetRenderOptions>) {
+                    onSetRenderOptions(m, request);
+                } else if constexpr (std::is_same_v<M, protocol::RequestFrame>) {
+                    onRequestFrame(m, request);
+                } else if constexpr (std::is_same_v<M, protocol::RequestStats>) {
+                    onRequestStats(request);
+                } else if constexpr (std::is_same_v<M, protocol::Bye>) {
+                    send(protocol::Bye{protocol::ByeReason::Normal}, request);
+                    closeAfterFlush("bye");
+                } else if constexpr (std::is_same_v<M, protocol::Error>) {
+                    close("client error " + std::string(protocol::errorName(std::uint16_t(m.code))) +
+                          ": " + m.message);
+                } else {
+                    sendError(ErrorCode::BadState, false, t, request,
+                              std::string(protocol::typeName(t)) + " is a server-to-client message");
+                }
+            },
+            message);
+    } catch (const std::invalid_argument& e) { // the renderer's own validation
+        sendError(ErrorCode::OutOfRange, false, t, request, e.what());
+    } catch (const std::exception& e) {
+        sendError(ErrorCode::Internal, true, t, request, e.what());
+    }
+}
+
+void Session::onHello(const protocol::Hello& hello, std::uint32_t request) {
+    const auto t = std::uint8_t(MessageType::Hello);
+    if (mPhase != Phase::AwaitHello) {
+        sendError(ErrorCode::BadState, false, t, request, "Hello was already sent");
+        return;
+    }
+    if (hello.versionMin > protocol::kVersion || hello.versionMax < protocol::kVersion) {
+        sendError(ErrorCode::UnsupportedVersion, true, t, request,
+                  "this server speaks version " + std::to_string(protocol::kVersion));
+        return;
+    }
+    protocol::Hello reply;
+    reply.capabilities = mContext.capabilities;
+    reply.codecs = {protocol::Codec::Raw, protocol::Codec::Zstd, protocol::Codec::ZstdDelta,
+                    protocol::Codec::Jpeg};
+    reply.software = "brickcastd 0.1";
+    send(reply, request);
+    mPhase = mContext.config.token.empty() ? Phase::Ready : Phase::AwaitAuth;
+}
+
+void Session::onAuth(const protocol::Auth& auth, std::uint32_t request) {
+    const auto t = std::uint8_t(MessageType::Auth);
+    if (mPhase != Phase::AwaitAuth) {
+        sendError(ErrorCode::BadState, false, t, request, "no authentication is pending");
+        return;
+    }
+    if (!tokensEqual(auth.token, mContext.config.token)) {
+        sendError(ErrorCode::AuthFailed, true, t, request, "authentication failed");
+        return;
+    }
+    send(protocol::AuthOk{}, request);
+    mPhase = Phase::Ready;
+}
+
+void Session::onOpenVolume(const protocol::OpenVolume& open, std::uint32_t request) {
+    VolumeLease lease = mContext.catalog.lease(open.name);
+    if (!lease) {
+        sendError(ErrorCode::UnknownVolume, false, std::uint8_t(MessageType::OpenVolume), request,
+                  "no volume named '" + open.name + "' in the catalog");
+        return;
+    }
+    const auto volume = lease.volume();
+    // The session's transfer function, placed anew for this volume's values.
+    if (!mHaveTf) {
+        mTfMessage = {};
+        mTfMessage.kind = protocol::TfKind::Preset;
+        mTfMessage.preset = "ct-skin";
+    }
+    auto tf = toTransferFunction(mTfMessage, volume->stats);
+    mLease = std::move(lease);
+    mSlot->setVolume(volume);
+    mSlot->setTransferFunction(std::move(tf), mTfMessage);
+    mSlot->setOptions(mOptions);
+    send(protocol::VolumeOpened{volume->info}, request);
+}
+
+void Session::onSetTransferFunction(const protocol::SetTransferFunction& m,
+                                    std::uint32_t request) {
+    const auto t = std::uint8_t(MessageType::SetTransferFunction);
+    if (!mLease) {
+        sendError(ErrorCode::NoVolume, false, t, request, "open a volume first");
+        return;
+    }
+    try {
+        auto tf = toTransferFunction(m, mLease.volume()->stats);
+        mTfMessage = m;
+        mHaveTf = true;
+        mSlot->setTransferFunction(std::move(tf), m);
+    } catch (const std::exception& e) { // RenderInputError naming the preset or point
+        sendError(ErrorCode::OutOfRange, false, t, request, e.what());
+    }
+}
+
+void Session::onSetRenderOptions(const protocol::SetRenderOptions& m, std::uint32_t request) {
+    if (m.options.renderer == protocol::Renderer::GpuRaycaster &&
+        !(mContext.capabilities & protocol::kCapGpuRenderer)) {
+        sendError(ErrorCode::OutOfRange, false, std::uint8_t(MessageType::SetRenderOptions),
+                  request, "SetRenderOptions.renderer: this server has no GPU renderer");
+        return;
+    }
+    toRenderOptions(m.options, false).validate();
+    mOptions = m.options;
+    mSlot->setOptions(mOptions);
+}
+
+void Session::onRequestFrame(const protocol::RequestFrame& m, std::uint32_t request) {
+    const auto t = std::uint8_t(MessageType::RequestFrame);
+    if (m.mode != protocol::FrameMode::ContinuousOff && !mLease) {
+        sendError(ErrorCode::NoVolume, false, t, request, "open a volume first");
+        return;
+    }
+    mSlot->request(m.mode, request);
+}
+
+void Session::onRequestStats(std::uint32_t request) {
+    protocol::Stats stats;
+    stats.counters = mContext.render.counters();
+    stats.counters.push_back({"session_frames_sent", double(mFramesSent)});
+    stats.counters.push_back({"session_bytes_sent", double(mBytesSent)});
+    stats.counters.push_back({"session_bytes_received", double(mBytesReceived)});
+    if (mLease) {
+        const auto c = mLease.volume()->cache->stats();
+        stats.counters.push_back({"host_cache_hits", double(c.hits)});
+        stats.counters.push_back({"host_cache_misses", double(c.misses)});
+        stats.counters.push_back({"host_cache_evictions", double(c.evictions)});
+        stats.counters.push_back({"host_cache_resident_bytes", double(c.residentBytes)});
+    }
+    send(stats, request);
+}
+
+// ---- writing -------------------------------------------------------------------------------
+
+void Session::send(const protocol::Message& message, std::uint32_t request) {
+    Outgoing out;
+    protocol::encode(message, request, out.bytes);
+    enqueue(std::move(out));
+}
+
+void Session::sendError(ErrorCode code, bool fatal, std::uint8_t type, std::uint32_t request,
+                        const std::string& message) {
+    ++mErrorsSent;
+    mContext.log.info("session " + std::to_string(mId) + ": " + protocol::errorName(std::uint16_t(code)) +
+                      (fatal ? " (fatal): " : ": ") + message);
+    send(protocol::Error{code, fatal, type, protocol::fitText(message, protocol::kMaxErrorMessageBytes)},
+         request);
+    if (fatal) closeAfterFlush(std::string(protocol::errorName(std::uint16_t(code))));
+}
+
+void Session::enqueue(Outgoing out) {
+    if (mPhase == Phase::Closed) {
+        if (out.fromRenderer && mSlot) mSlot->frameDone();
+        return;
+    }
+    mQueue.push_back(std::move(out));
+    if (!mWriting) write();
+}
+
+void Session::write() {
+    if (mQueue.empty()) {
+        mWriting = false;
+        if (mPhase == Phase::Closing) close(mCloseReason);
+        return;
+    }
+    mWriting = true;
+    mWriteStarted = Clock::now();
+    asio::async_write(mSocket, asio::buffer(mQueue.front().bytes),
+                      [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
+                          if (self->mPhase == Phase::Closed) return;
+                          Outgoing done = std::move(self->mQueue.front());
+                          self->mQueue.pop_front();
+                          if (done.fromRenderer) self->mSlot->frameDone(), ++self->mFramesSent;
+                          if (ec) {
+                              self->close("write: " + ec.message());
+                              return;
+                          }
+                          self->mBytesSent += n;
+                          self->write();
+                      });
+}
+
+// ---- deadlines and closing -----------------------------------------------------------------
+
+void Session::watchdog() {
+    mTimer.expires_after(kWatchdogPeriod);
+    mTimer.async_wait([self = shared_from_this()](const asio::error_code& ec) {
+        if (ec || self->mPhase == Phase::Closed) return;
+        const auto now = Clock::now();
+        const auto& c = self->mContext.config;
+        if (self->mWriting && now - self->mWriteStarted > ms(c.writeTimeoutMs))
+            return self->close("write timeout: the client stopped reading");
+        if (self->mPhase == Phase::Closing && now - self->mClosingSince > ms(c.writeTimeoutMs))
+            return self->close(self->mCloseReason + " (unsent data dropped)");
+        if (self->mPhase == Phase::AwaitHello || self->mPhase == Phase::AwaitAuth) {
+            if (now - self->mStarted > ms(c.handshakeTimeoutMs))
+                self->sendError(ErrorCode::Timeout, true, 0, 0, "handshake not completed in " +
+                                                                    std::to_string(c.handshakeTimeoutMs) + " ms");
+        } else if (self->mPhase == Phase::Ready) {
+            if (self->mMidMessageSince && now - *self->mMidMessageSince > ms(c.readTimeoutMs))
+                self->sendError(ErrorCode::Timeout, true, 0, 0, "message incomplete after " +
+                                                                    std::to_string(c.readTimeoutMs) + " ms");
+            else if (now - self->mLastMessage > ms(c.idleTimeoutMs)) {
+                self->send(protocol::Bye{protocol::ByeReason::IdleTimeout}, 0);
+                self->closeAfterFlush("idle timeout");
+            }
+        }
+        self->watchdog();
+    });
+}
+
+void Session::closeAfterFlush(const std::string& why) {
+    if (mPhase == Phase::Closing || mPhase == Phase::Closed) return;
+    mPhase = Phase::Closing;
+    mCloseReason = why;
+    mClosingSince = Clock::now();
+    if (!mWriting) write();
+}
+
+void Session::close(const std::string& why) {
+    if (mPhase == Phase::Closed) return;
+    mPhase = Phase::Closed;
+    asio::error_code ignored;
+    mSocket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+    mSocket.close(ignored);
+    mTimer.cancel();
+    if (mSlot) mSlot->close();
+    mLease = {};
+    const double seconds = std::chrono::duration<double>(Clock::now() - mStarted).count();
+    mContext.log.info("session " + std::to_string(mId) + " ended: " + why + " (" +
+                      std::to_string(mFramesSent) + " frames, " + mib(mBytesSent) + " sent, " +
+                      std::to_string(int(seconds * 1000)) + " ms)");
+    if (mContext.onClosed) mContext.onClosed(mId);
+}
+
+} // namespace bc::server::detail

@@ -1,0 +1,100 @@
+#pragma once
+// One client connection of brickcastd (private to server/). Runs on the daemon's network
+// thread: reads bytes into the protocol decoder, answers control messages at once, hands
+// render requests to its RenderSlot, and writes what comes back through a bounded queue.
+// A watchdog enforces the handshake, trickle (message started but incomplete), idle and write
+// deadlines. Every error is answered with an Error message; a fatal one closes the session.
+#include "protocol/Decoder.h"
+#include "protocol/Messages.h"
+#include "server/Catalog.h"
+#include "server/DaemonConfig.h"
+#include "server/RenderService.h"
+
+#include <asio.hpp>
+
+#include <array>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace bc::server {
+
+class Log;
+
+namespace detail {
+
+/// What every session of a daemon shares.
+struct SessionContext {
+    const DaemonConfig& config;
+    Catalog& catalog;
+    RenderService& render;
+    Log& log;
+    std::uint32_t capabilities = 0;
+    std::function<void(std::uint64_t id)> onClosed; ///< on the network thread
+};
+
+class Session : public std::enable_shared_from_this<Session> {
+  public:
+    Session(asio::ip::tcp::socket socket, SessionContext& context, std::uint64_t id);
+    /// Starts reading and the watchdog.
+    void start();
+    /// Refuses the connection: Error Busy, then close (the session never starts).
+    void refuseBusy();
+    /// The server is draining: Bye (shutting down), then close once written.
+    void shutdown();
+    std::uint64_t id() const { return mId; }
+
+  private:
+    enum class Phase { AwaitHello, AwaitAuth, Ready, Closing, Closed };
+    struct Outgoing {
+        std::vector<std::uint8_t> bytes;
+        bool fromRenderer = false; ///< a frame or render error: tell the slot when written
+    };
+
+    void read();
+    void onBytes(std::size_t n);
+    void handle(protocol::Message& message, std::uint32_t request);
+    bool admitted(protocol::MessageType type, std::uint32_t request);
+    void onHello(const protocol::Hello& hello, std::uint32_t request);
+    void onAuth(const protocol::Auth& auth, std::uint32_t request);
+    void onOpenVolume(const protocol::OpenVolume& open, std::uint32_t request);
+    void onSetTransferFunction(const protocol::SetTransferFunction& tf, std::uint32_t request);
+    void onSetRenderOptions(const protocol::SetRenderOptions& options, std::uint32_t request);
+    void onRequestFrame(const protocol::RequestFrame& frame, std::uint32_t request);
+    void onRequestStats(std::uint32_t request);
+    void send(const protocol::Message& message, std::uint32_t request);
+    void sendError(protocol::ErrorCode code, bool fatal, std::uint8_t type, std::uint32_t request,
+                   const std::string& message);
+    void enqueue(Outgoing out);
+    void write();
+    void watchdog();
+    /// Stops reading; closes once the queue is written (or the write deadline passes).
+    void closeAfterFlush(const std::string& why);
+    void close(const std::string& why);
+    std::string peer() const;
+
+    asio::ip::tcp::socket mSocket;
+    asio::steady_timer mTimer;
+    SessionContext& mContext;
+    std::uint64_t mId;
+    std::string mPeer;
+    Phase mPhase = Phase::AwaitHello;
+    protocol::Decoder mDecoder;
+    std::array<std::uint8_t, 64 * 1024> mReadBuffer{};
+    std::deque<Outgoing> mQueue;
+    bool mWriting = false;
+    std::shared_ptr<RenderSlot> mSlot;
+    VolumeLease mLease;
+    protocol::SetTransferFunction mTfMessage;
+    bool mHaveTf = false;
+    protocol::RenderOptions mOptions;
+    Clock::time_point mStarted, mLastMessage, mWriteStarted, mClosingSince;
+    std::optional<Clock::time_point> mMidMessageSince;
+    std::string mCloseReason;
+    std::uint64_t mFramesSent = 0, mBytesSent = 0, mBytesReceived = 0, mErrorsSent = 0;
+};
+
+} // namespace detail
+} // namespace bc::server
