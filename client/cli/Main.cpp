@@ -3,6 +3,7 @@
 // prints per-frame latency (request sent -> frame decoded), frames/s and bytes received.
 #include "client/Client.h"
 #include "client/Error.h"
+#include "client/Orbit.h"
 
 #include <CLI/CLI.hpp>
 #include <png.h>
@@ -28,29 +29,6 @@ struct Options {
     bool list = false, continuous = false;
     std::uint32_t timeoutMs = 60000;
 };
-
-/// The daemon's orbit (render::Camera::orbit) about a volume's box [0, dims * spacing].
-protocol::SetCamera orbit(const protocol::VolumeInfo& v, double azDeg, double elDeg, double dist) {
-    constexpr double kPi = 3.14159265358979323846;
-    double centre[3], r2 = 0;
-    for (int a = 0; a < 3; ++a) {
-        const double extent = double(v.dims[a]) * v.spacingMm[a];
-        centre[a] = 0.5 * extent;
-        r2 += 0.25 * extent * extent;
-    }
-    protocol::SetCamera c;
-    const double az = azDeg * kPi / 180, el = elDeg * kPi / 180;
-    const double dir[3] = {std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};
-    const double fit = std::sqrt(r2) / std::sin(0.5 * c.fovYDeg * kPi / 180) * dist;
-    for (int a = 0; a < 3; ++a) {
-        c.target[a] = centre[a];
-        c.eye[a] = centre[a] + dir[a] * fit;
-    }
-    c.up = std::abs(std::sin(el)) > 0.999 ? std::array<double, 3>{0, 1, 0}
-                                          : std::array<double, 3>{0, 0, 1};
-    c.orthoHeight = 2.0 * std::sqrt(r2) * dist;
-    return c;
-}
 
 /// A camera path file: one camera a line, "ex ey ez tx ty tz ux uy uz [fov]"; '#' comments.
 std::vector<protocol::SetCamera> readPath(const std::string& path) {
@@ -156,7 +134,7 @@ int fly(const Options& o) {
     if (o.continuous) c.requestFrame(protocol::FrameMode::ContinuousOn);
     for (int f = 0; f < frames; ++f) {
         if (f == switchAt) c.setTransferFunction(preset(switchTo));
-        protocol::SetCamera cam = path.empty() ? orbit(info, 360.0 * f / frames, o.elevation, o.distance)
+        protocol::SetCamera cam = path.empty() ? client::orbitCamera(info, 360.0 * f / frames, o.elevation, o.distance)
                                                : path[std::size_t(f)];
         cam.cameraId = std::uint32_t(f + 1);
         const auto sent = std::chrono::steady_clock::now();

@@ -6,6 +6,7 @@
 #include "brickstore/Readers.h"
 #include "client/Client.h"
 #include "client/Error.h"
+#include "client/Orbit.h"
 #include "protocol/Messages.h"
 #include "server/Daemon.h"
 #include "server/Log.h"
@@ -176,26 +177,10 @@ class RawConnection {
     protocol::Decoder mDecoder;
 };
 
-/// A camera orbiting a volume as the client CLI does.
+/// A camera orbiting a volume at 20 degrees elevation.
 inline protocol::SetCamera orbitCamera(const protocol::VolumeInfo& v, double azDeg,
                                        std::uint32_t id) {
-    constexpr double kPi = 3.14159265358979323846;
-    double centre[3], r2 = 0;
-    for (int a = 0; a < 3; ++a) {
-        const double e = double(v.dims[a]) * v.spacingMm[a];
-        centre[a] = e / 2;
-        r2 += e * e / 4;
-    }
-    protocol::SetCamera c;
-    c.cameraId = id;
-    const double az = azDeg * kPi / 180, el = 20 * kPi / 180;
-    const double fit = std::sqrt(r2) / std::sin(15 * kPi / 180);
-    const double dir[3] = {std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};
-    for (int a = 0; a < 3; ++a) {
-        c.target[a] = centre[a];
-        c.eye[a] = centre[a] + dir[a] * fit;
-    }
-    return c;
+    return client::orbitCamera(v, azDeg, 20.0, 1.0, id);
 }
 
 /// Small CPU-rendered frames: what most server tests ask for.
