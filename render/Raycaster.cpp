@@ -94,14 +94,29 @@ void Raycaster::setGpuBudgetBytes(std::uint64_t budgetBytes) {
     mPool.reset();
 }
 
+void Raycaster::setSharedPool(std::shared_ptr<BrickPool> pool) {
+    if (pool == mSharedPool) return;
+    mSharedPool = std::move(pool);
+    mPool.reset();
+}
+
 void Raycaster::ensurePool(const brickstore::BrickStore& store) {
     const auto type = store.info().volume.type;
     const std::uint32_t edge = store.layout().storedEdge();
+    if (mSharedPool) {
+        if (mSharedPool->type() != type || mSharedPool->edge() != edge)
+            throw RenderError("shared brick pool holds " + std::to_string(mSharedPool->edge()) +
+                              "^3 slots of another type than " + store.path() + " needs");
+        mPool = mSharedPool;
+        mPoolStore = &store;
+        mPoolStorePath = store.path();
+        return;
+    }
     if (mPool && mPool->type() == type && mPool->edge() == edge) {
         if (mPoolStore != &store || mPoolStorePath != store.path()) mPool->clear();
     } else {
         mPool.reset(); // free the old texture before allocating the new one
-        mPool = std::make_unique<BrickPool>(type, edge, BrickPoolConfig{mConfig.gpuBudgetBytes});
+        mPool = std::make_shared<BrickPool>(type, edge, BrickPoolConfig{mConfig.gpuBudgetBytes});
     }
     mPoolStore = &store;
     mPoolStorePath = store.path();

@@ -28,7 +28,7 @@ struct BrickPlan;
 struct TransferFunctionTable;
 
 struct RaycasterConfig {
-    std::uint64_t gpuBudgetBytes = 512ull << 20; ///< brick pool bytes
+    std::uint64_t gpuBudgetBytes = 512ull << 20; ///< brick pool bytes (of a pool of its own)
 };
 
 class Raycaster {
@@ -49,6 +49,13 @@ class Raycaster {
     /// A new pool budget (a daemon's fair share changed): the next frame allocates a pool of
     /// that size, and what the old pool held is uploaded again as needed.
     void setGpuBudgetBytes(std::uint64_t budgetBytes);
+
+    /// Draws from `pool` instead of a pool of its own (nullptr: back to its own): raycasters of
+    /// one store share the bricks resident on the GPU, each keeping its own octrees and
+    /// occlusion frustums (a daemon's sessions). They must render on one thread, one frame at
+    /// a time; the pool must hold this store's bricks only. @throw RenderError at the next
+    /// frame when the pool's voxel type or slot edge does not fit the store.
+    void setSharedPool(std::shared_ptr<BrickPool> pool);
 
     /// The pool of the last frame (nullptr before the first); its counters span all frames.
     const BrickPool* pool() const { return mPool.get(); }
@@ -80,7 +87,8 @@ class Raycaster {
 
     RaycasterConfig mConfig;
     std::unique_ptr<Gpu> mGpu;
-    std::unique_ptr<BrickPool> mPool;
+    std::shared_ptr<BrickPool> mPool;
+    std::shared_ptr<BrickPool> mSharedPool;
     const brickstore::BrickStore* mPoolStore = nullptr;
     std::string mPoolStorePath;
     std::unique_ptr<OccupancyTrees> mOccupancy;

@@ -122,7 +122,8 @@ VolumeLease Catalog::lease(const std::string& name) {
 std::uint64_t Catalog::shareOf(const Volume& volume, std::uint64_t totalBytes) const {
     const std::uint32_t all = std::max<std::uint32_t>(mSessions.load(), 1);
     const std::uint32_t mine = std::max<std::uint32_t>(volume.sessions.load(), 1);
-    return totalBytes / all * std::min(mine, all);
+    const std::uint64_t m = std::min(mine, all); // floor(total * m / all), without overflow
+    return totalBytes / all * m + totalBytes % all * m / all;
 }
 
 void Catalog::changeSessions(Volume& volume, int delta) {

@@ -1,6 +1,7 @@
 #include "server/RenderService.h"
 
 #include "render/CpuRaycaster.h"
+#include "render/BrickPool.h"
 #include "render/EglContext.h"
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
@@ -144,19 +145,54 @@ RenderSlot::Job RenderSlot::take(Clock::time_point now, std::uint32_t restMs) {
 
 // ---- RenderService -------------------------------------------------------------------------
 
-/// The renderers of one volume (render thread only).
+/// What the sessions of one volume share on the GPU (render thread only).
 struct VolumeRenderers {
-    std::weak_ptr<Volume> volume;
-    std::unique_ptr<render::Raycaster> gpu;
-    std::uint64_t gpuBudgetBytes = 0;
-    std::unique_ptr<render::CpuRaycaster> cpu;
+    std::shared_ptr<render::BrickPool> pool;
+    std::uint64_t poolBudgetBytes = 0;
     std::unique_ptr<render::ReferenceVolume> reference;
+};
+
+/// A session's own renderers: its octrees (its transfer function) and its occlusion frustums
+/// (its previous frame) stay its own; bricks come from the volume's shared pool.
+struct SessionRenderers {
+    std::weak_ptr<RenderSlot> slot;
+    std::unique_ptr<render::Raycaster> gpu;
+    std::unique_ptr<render::CpuRaycaster> cpu;
 };
 
 struct RenderService::Renderers {
     std::unique_ptr<render::EglContext> context;
     std::map<const Volume*, VolumeRenderers> volumes;
+    std::map<const RenderSlot*, SessionRenderers> sessions;
+
+    /// Renderers of closed sessions and pools of volumes nobody views go (GL objects, on
+    /// this thread).
+    void prune() {
+        std::erase_if(sessions, [](const auto& e) { return e.second.slot.expired(); });
+        std::erase_if(volumes, [&](const auto& e) { return e.first->sessions.load() == 0; });
+    }
+    SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
+        auto& s = sessions[slot.get()];
+        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr}; // a reused address
+        return s;
+    }
 };
+
+/// The volume's pool at its fair share of the budget; a new pool only when the share moved by
+/// more than an eighth, so sessions coming and going do not make every brick upload again.
+std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume& volume,
+                                              std::uint64_t shareBytes) {
+    const bool far = shareBytes < v.poolBudgetBytes - v.poolBudgetBytes / 8 ||
+                     shareBytes > v.poolBudgetBytes + v.poolBudgetBytes / 8;
+    if (!v.pool || far) {
+        v.pool.reset(); // the old texture goes before the new one is allocated
+        v.pool = std::make_shared<render::BrickPool>(volume.store->info().volume.type,
+                                                     volume.store->layout().storedEdge(),
+                                                     render::BrickPoolConfig{shareBytes});
+        v.poolBudgetBytes = shareBytes;
+    }
+    return v.pool;
+}
 
 RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log)
     : mConfig(config), mCatalog(catalog), mLog(log), mThread([this] { run(); }) {}
@@ -221,7 +257,8 @@ void RenderService::run() {
         if (!slot) continue;
         auto job = slot->take(Clock::now(), mConfig.restMs);
         lock.unlock();
-        draw(*slot, std::move(job));
+        mRenderers->prune();
+        draw(slot, std::move(job));
         lock.lock();
     }
     lock.unlock();
@@ -250,10 +287,11 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
     return nullptr;
 }
 
-void RenderService::draw(RenderSlot& slot, RenderSlot::Job job) {
+void RenderService::draw(const std::shared_ptr<RenderSlot>& slotPtr, RenderSlot::Job job) {
+    RenderSlot& slot = *slotPtr;
     std::vector<std::uint8_t> bytes;
     try {
-        const protocol::Frame frame = render(slot, job, *mRenderers);
+        const protocol::Frame frame = render(slotPtr, job, *mRenderers);
         protocol::encode(frame, job.requestId, bytes);
         std::lock_guard lock(mMutex);
         mCounters.frames += 1;
@@ -282,7 +320,9 @@ void RenderService::draw(RenderSlot& slot, RenderSlot::Job job) {
         slot.frameDone();
 }
 
-protocol::Frame RenderService::render(RenderSlot& slot, RenderSlot::Job& job, Renderers& r) {
+protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr,
+                                      RenderSlot::Job& job, Renderers& r) {
+    RenderSlot& slot = *slotPtr;
     const auto& s = job.state;
     const auto start = Clock::now();
     const auto& o = s.options;
@@ -290,23 +330,24 @@ protocol::Frame RenderService::render(RenderSlot& slot, RenderSlot::Job& job, Re
     options.shading = shadingFor(o, s.tfMessage, *s.tf);
     const render::Camera camera = toCamera(*s.camera);
     auto& v = r.volumes[s.volume.get()];
-    v.volume = s.volume;
     render::FrameStats stats;
     render::Image image;
     switch (o.renderer) {
     case protocol::Renderer::GpuRaycaster: {
         if (!r.context) throw std::runtime_error("this server has no OpenGL 4.5 context");
-        const std::uint64_t budget = mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes);
-        if (!v.gpu) v.gpu = std::make_unique<render::Raycaster>(render::RaycasterConfig{budget});
-        if (budget != v.gpuBudgetBytes) v.gpu->setGpuBudgetBytes(budget);
-        v.gpuBudgetBytes = budget;
-        image = v.gpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
+        auto& mine = r.of(slotPtr);
+        if (!mine.gpu) mine.gpu = std::make_unique<render::Raycaster>();
+        mine.gpu->setSharedPool(
+            sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes)));
+        image = mine.gpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
         break;
     }
-    case protocol::Renderer::CpuRaycaster:
-        if (!v.cpu) v.cpu = std::make_unique<render::CpuRaycaster>();
-        image = v.cpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
+    case protocol::Renderer::CpuRaycaster: {
+        auto& mine = r.of(slotPtr);
+        if (!mine.cpu) mine.cpu = std::make_unique<render::CpuRaycaster>();
+        image = mine.cpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
         break;
+    }
     case protocol::Renderer::Reference: {
         const auto& dims = s.volume->store->info().volume.dims;
         if (dims[0] * dims[1] * dims[2] > kMaxReferenceVoxels)

@@ -113,8 +113,9 @@ class RenderService {
     void run();
     void notify();
     std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock);
-    void draw(RenderSlot& slot, RenderSlot::Job job);
-    protocol::Frame render(RenderSlot& slot, RenderSlot::Job& job, Renderers& r);
+    void draw(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job job);
+    protocol::Frame render(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job& job,
+                           Renderers& r);
 
     RenderServiceConfig mConfig;
     Catalog& mCatalog;

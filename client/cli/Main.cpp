@@ -111,6 +111,7 @@ int fly(const Options& o) {
         for (const auto& v : volumes)
             std::printf("%s  %ux%ux%u  %.3g..%.3g  %u levels\n", v.name.c_str(), v.dims[0],
                         v.dims[1], v.dims[2], v.valueMin, v.valueMax, v.levels);
+        c.bye();
         return 0;
     }
     if (volumes.empty()) throw std::runtime_error("the server has no volumes");
