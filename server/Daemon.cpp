@@ -104,8 +104,10 @@ struct Daemon::Impl {
     DaemonConfig config;
     Log& log;
     Catalog catalog;
-    RenderService render;
+    // Before the render service: its thread posts finished frames here, so it must be joined
+    // (destroyed) while the io_context still exists.
     asio::io_context io;
+    RenderService render;
     asio::ip::tcp::acceptor acceptor;
     asio::signal_set signals;
     asio::steady_timer drainTimer;

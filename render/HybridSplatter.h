@@ -1,0 +1,101 @@
+#pragma once
+// Hybrid forward splatting on the CPU (Yuan et al. 2003; issue 6): object order, front to
+// back. Every voxel the transfer function makes visible is a sphere of radius
+// radiusVoxels (1.25) * max(spacing) carrying the kernel of SplatFootprint, weighted so that
+// overlapping spheres reconstruct the voxel values (a uniform region reconstructs a constant).
+// A voxel whose projected radius is below pointThresholdPixels is a point: its coverage (its
+// projected voxel area times its opacity over one voxel of path) is spread over the pixels by
+// the same footprint with radius pointFilterPixels (weights normalised to sum to 1) and added
+// into a slab buffer about one voxel (max spacing) deep; the slab is composited 'over' when
+// the voxels move past it (coverage clamped to 1: an area average, as a box filter would
+// give). Larger voxels are perspective splats: the exact ellipse (projectSphere), the exact
+// index (coneIndex) and the footprint lookup, composited 'over' at once.
+//
+// Optics: a voxel's opacity per unit step a (render/OPTICS.md, one voxel of the smallest
+// spacing) is applied for the footprint's line integral through its sphere, in voxel units:
+// alpha = 1 - (1 - a)^(F(d) * V / (r^2 * minSpacing)), V the voxel's volume. Classification is
+// per voxel (pre-interpolative), unlike the raycasters. Shading is OPTICS.md's headlight
+// Blinn-Phong with the gradient from central differences of the voxel grid, the light
+// direction being the eye ray to the voxel centre. RenderOptions::stepVoxels does not apply.
+//
+// Order: bricks in the plan's visibility order, the voxels of a brick by distance from the
+// eye (perspective) or depth along the view axis (orthographic). Occlusion culling: a voxel
+// is skipped without being drawn when every 8x8 tile its footprint touches is opaque
+// (ertThreshold, with earlyTermination on), and a planned brick is skipped unpinned when the
+// tiles under its screen box are; pixels at the threshold take no more colour either way, so
+// culling changes no pixel. Bricks are pinned, classified, shaded and sorted on every core
+// (TBB, 16 bricks at a time); drawing is serial, in order. Not thread-safe: one frame at a
+// time per instance.
+#include "render/Camera.h"
+#include "render/Image.h"
+#include "render/RenderTypes.h"
+#include "render/SplatFootprint.h"
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+namespace bc::brickstore {
+class BrickStore;
+class BrickCache;
+} // namespace bc::brickstore
+
+namespace bc::render {
+
+class TransferFunction;
+struct TransferFunctionTable;
+class OccupancyTrees;
+
+struct HybridSplatterConfig {
+    double radiusVoxels = 1.25;        ///< sphere radius in units of the largest spacing
+    double sigmaOverRadius = 0.5;      ///< kernel width (SplatFootprintConfig)
+    double pointThresholdPixels = 0.5; ///< projected radius below which a voxel is a point
+    double pointFilterPixels = 1.0;    ///< radius of a point's circular screen filter
+    bool occlusionCulling = true;      ///< skip voxels whose tiles are all opaque
+    std::uint32_t tilePixels = 8;      ///< edge of a culling tile
+    /// Throws std::invalid_argument naming the field when a value is out of range.
+    void validate() const;
+};
+
+/// What the last frame drew, beyond FrameStats (samples = points + splats).
+struct HybridSplatStats {
+    std::uint64_t points = 0, splats = 0;
+    std::uint64_t culled = 0;        ///< visible voxels skipped by occlusion culling
+    std::uint64_t bricksCulled = 0;  ///< planned bricks skipped whole (their tiles opaque)
+    std::uint64_t leavesSkipped = 0; ///< empty octree leaves skipped unread
+    std::uint64_t slabs = 0;         ///< point slabs composited
+};
+
+class HybridSplatter {
+  public:
+    /// @throw std::invalid_argument on a bad config.
+    explicit HybridSplatter(const HybridSplatterConfig& config = {});
+    ~HybridSplatter();
+    HybridSplatter(const HybridSplatter&) = delete;
+    HybridSplatter& operator=(const HybridSplatter&) = delete;
+
+    /// Renders one frame of `store` at options.level. Fills `stats` (samples = voxels drawn,
+    /// octreeLeaps = empty leaves skipped, uploadMs = pinning, classifying and sorting bricks,
+    /// one batch, no uploads).
+    /// @throw std::invalid_argument on bad options or camera; StoreCorrupt naming a brick.
+    Image render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
+                 const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
+                 FrameStats& stats);
+
+    /// Counts of the last render().
+    const HybridSplatStats& lastFrame() const { return mLast; }
+
+  private:
+    void updateOccupancy(const brickstore::BrickStore& store, std::uint32_t level,
+                         const TransferFunctionTable& table, const RenderOptions& options,
+                         FrameStats& stats);
+
+    HybridSplatterConfig mConfig;
+    SplatFootprint mFootprint; ///< of mConfig.sigmaOverRadius, built once
+    HybridSplatStats mLast;
+    std::unique_ptr<OccupancyTrees> mOccupancy;
+    const brickstore::BrickStore* mStore = nullptr;
+    std::string mStorePath;
+};
+
+} // namespace bc::render
