@@ -3,6 +3,7 @@
 #include "render/CpuRaycaster.h"
 #include "render/BrickPool.h"
 #include "render/EglContext.h"
+#include "render/HybridSplatter.h"
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "server/Catalog.h"
@@ -158,6 +159,7 @@ struct SessionRenderers {
     std::weak_ptr<RenderSlot> slot;
     std::unique_ptr<render::Raycaster> gpu;
     std::unique_ptr<render::CpuRaycaster> cpu;
+    std::unique_ptr<render::HybridSplatter> splat;
 };
 
 struct RenderService::Renderers {
@@ -173,7 +175,7 @@ struct RenderService::Renderers {
     }
     SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
         auto& s = sessions[slot.get()];
-        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr}; // a reused address
+        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr, nullptr}; // a reused address
         return s;
     }
 };
@@ -346,6 +348,12 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
         auto& mine = r.of(slotPtr);
         if (!mine.cpu) mine.cpu = std::make_unique<render::CpuRaycaster>();
         image = mine.cpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
+        break;
+    }
+    case protocol::Renderer::Splatter: {
+        auto& mine = r.of(slotPtr);
+        if (!mine.splat) mine.splat = std::make_unique<render::HybridSplatter>();
+        image = mine.splat->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
         break;
     }
     case protocol::Renderer::Reference: {

@@ -5,6 +5,7 @@
 #include "render/Camera.h"
 #include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
+#include "render/HybridSplatter.h"
 #include "render/Image.h"
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
@@ -119,14 +120,21 @@ void runRender(const RenderCliOptions& o) {
     render::FrameStats stats;
     render::Image image;
     std::string renderer;
-    if (o.renderer != "gpu" && o.renderer != "cpu")
-        throw std::invalid_argument("--renderer: '" + o.renderer + "' is not gpu or cpu");
+    if (o.renderer != "gpu" && o.renderer != "cpu" && o.renderer != "splat")
+        throw std::invalid_argument("--renderer: '" + o.renderer + "' is not gpu, cpu or splat");
     if (o.reference) {
         const auto level = std::min<std::uint32_t>(
             std::uint32_t(o.level), std::uint32_t(store->layout().levels().size() - 1));
         render::ReferenceVolume volume(*store, level);
         image = render::renderReference(*store, volume, tf, camera, options, stats);
         renderer = "CPU reference (double)";
+    } else if (o.renderer == "splat") {
+        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
+        render::HybridSplatter splatter;
+        image = splatter.render(*store, cache, tf, camera, options, stats);
+        const auto& f = splatter.lastFrame();
+        renderer = "hybrid splatter (CPU, " + std::to_string(f.points) + " points, " +
+                   std::to_string(f.splats) + " splats, " + std::to_string(f.culled) + " culled)";
     } else if (o.renderer == "cpu") {
         brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
         render::CpuRaycaster raycaster;
@@ -224,7 +232,8 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_flag("--interactive", o->interactive,
                   "Draw a coarser level when the view exceeds the GPU budget");
     cmd->add_option("--renderer", o->renderer,
-                    "gpu (EGL raycaster) or cpu (the CPU raycaster, fastest without a GPU)")
+                    "gpu (EGL raycaster), cpu (the CPU raycaster, fastest without a GPU) or splat "
+                    "(hybrid forward splatting, CPU)")
         ->capture_default_str();
     cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
     cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");
