@@ -19,7 +19,7 @@ class DaemonBehaviour : public ::testing::Test {
         sDir = new TempDir;
         DaemonConfig c = generatedConfig(*sDir, {{"small", 32}, {"other", 24}});
         c.readTimeoutMs = 400;
-        c.restMs = 200;
+        c.restMs = 500; // far above a 64^2 frame here, even on a loaded CI machine
         sDaemon = new TestDaemon(c);
     }
     static void TearDownTestSuite() {
@@ -104,17 +104,19 @@ TEST_F(DaemonBehaviour, AClientThatTricklesBytesIsTimedOut) {
     RawConnection c(sDaemon->port);
     c.handshake("");
     const auto bytes = protocol::encode(protocol::OpenVolume{"small"}, 3);
-    for (std::size_t i = 0; i < bytes.size() && !c.closed(); ++i) { // a byte every 100 ms
+    // A byte every 100 ms, each well inside any per-read timeout, but the message as a whole
+    // past the 400 ms read deadline; the last byte is never sent, so only the deadline ends it.
+    std::optional<protocol::Message> reply;
+    for (std::size_t i = 0; i + 1 < bytes.size() && !reply; ++i) {
         c.send(std::vector<std::uint8_t>{bytes[i]});
-        if (auto m = c.next(100)) {
-            auto* e = std::get_if<protocol::Error>(&*m);
-            ASSERT_TRUE(e);
-            EXPECT_EQ(e->code, protocol::ErrorCode::Timeout);
-            EXPECT_TRUE(c.closedByPeer());
-            return;
-        }
+        reply = c.next(100);
     }
-    FAIL() << "a message trickled over " << bytes.size() * 100 << " ms was accepted";
+    if (!reply) reply = c.next(10000);
+    ASSERT_TRUE(reply) << "a message trickled for " << (bytes.size() - 1) * 100 << " ms was not cut";
+    auto* e = std::get_if<protocol::Error>(&*reply);
+    ASSERT_TRUE(e);
+    EXPECT_EQ(e->code, protocol::ErrorCode::Timeout);
+    EXPECT_TRUE(c.closedByPeer());
 }
 
 TEST(DaemonProcess, SigtermDrainsAttachedClientsAndExitsCleanly) {
