@@ -17,6 +17,7 @@
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
+#include "server/cli/BenchDatasets.h"
 #include "server/cli/BenchReport.h"
 #include "server/cli/Commands.h"
 
@@ -44,64 +45,15 @@ struct BenchOptions {
     bool noRebuild512 = false, noGenerated = false;
 };
 
-struct Dataset {
-    std::string name, preset;
-    brickstore::SourceSpec spec;
-    std::uint64_t budgetMb = 0; ///< 0: --gpu-budget-mb; else the generated volume's budget
-};
-
-std::vector<std::string> splitList(const std::string& text) {
-    std::vector<std::string> out;
-    std::stringstream in(text);
-    for (std::string item; std::getline(in, item, ',');)
-        if (!item.empty()) out.push_back(item);
-    return out;
-}
-
 std::vector<Dataset> datasetsOf(const BenchOptions& o) {
-    auto at = [&](const std::string& f) { return (std::filesystem::path(o.data) / f).string(); };
-    std::vector<Dataset> all;
-    auto add = [&](std::string name, std::string preset, std::string input,
-                   std::optional<std::array<double, 3>> spacing = std::nullopt) {
-        brickstore::SourceSpec s;
-        s.input = std::move(input);
-        s.spacingMm = spacing;
-        if (s.input.ends_with(".vdb")) s.gridName = "density";
-        all.push_back({std::move(name), std::move(preset), s});
-    };
-    add("stanford_cthead", "ct-skin", at("stanford_cthead_256x256x113_uint16.raw"),
-        std::array<double, 3>{1, 1, 2});
-    add("stanford_cthead", "ct-bone", at("stanford_cthead_256x256x113_uint16.raw"),
-        std::array<double, 3>{1, 1, 2});
-    add("CT_AVM", "vessels", at("CT_AVM.nii.gz"));
-    add("frog", "mr", at("frog_500x470x136_uint8.raw"), std::array<double, 3>{1, 1, 1.5});
-    add("pancreas", "ct-bone", at("tcia_pancreas_ct_dicom"));
-    add("Iguana", "ct-bone", at("Iguana.nii.gz"));
-    add("gaffer_smoke", "smoke", at("gaffer_smoke.vdb"));
-    add("hydrogen", "smoke", at("hydrogen_64x64x64_float32.raw"));
-    const auto wanted = splitList(o.datasets);
-    std::vector<Dataset> out;
-    for (auto& d : all) {
-        if (!wanted.empty() && std::find(wanted.begin(), wanted.end(), d.name) == wanted.end())
-            continue;
-        if (!std::filesystem::exists(d.spec.input)) {
-            std::fprintf(stderr, "bench: skipping %s: %s is missing\n", d.name.c_str(),
-                         d.spec.input.c_str());
-            continue;
-        }
-        if (!o.tf.empty()) d.preset = o.tf;
-        if (std::none_of(out.begin(), out.end(), [&](const Dataset& e) {
-                return e.name == d.name && e.preset == d.preset;
-            }))
-            out.push_back(d);
-    }
+    std::vector<Dataset> out = realDatasets(o.data, o.datasets, o.tf, "bench");
     if (!o.noGenerated) { // u8 vessels of four times the GPU budget: out of core
         const auto edge = std::uint64_t(std::cbrt(double((o.generatedBudgetMb << 20) * 4)));
         brickstore::SourceSpec s;
         s.input = "synth:vessels";
         s.dims = std::array<std::uint64_t, 3>{edge, edge, edge};
         out.push_back({"generated vessels " + std::to_string(edge) + "^3 (4x the budget)",
-                       o.tf.empty() ? "vessels" : o.tf, s, o.generatedBudgetMb});
+                       o.tf.empty() ? "vessels" : o.tf, s, o.generatedBudgetMb, ""});
     }
     if (out.empty()) throw std::invalid_argument("--datasets: none of the named scans is here");
     return out;

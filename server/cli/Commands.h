@@ -25,6 +25,7 @@ void addDemoCommand(CLI::App& app);
 void addRenderCommand(CLI::App& app);
 void addCompareCommand(CLI::App& app);
 void addBenchCommand(CLI::App& app);
+void addSplatBenchCommand(CLI::App& app);
 
 /// Renders one frame of a store on the GPU (or the CPU reference) and writes a PNG; prints
 /// the frame's summary line. @throw what the store, TF and renderer throw.

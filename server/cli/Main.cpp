@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
     bc::cli::addCompareCommand(app);
     bc::cli::addRenderCommand(app);
     bc::cli::addBenchCommand(app);
+    bc::cli::addSplatBenchCommand(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
