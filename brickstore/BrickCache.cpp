@@ -71,6 +71,10 @@ CacheEntry& CacheCore::load(std::unique_lock<std::mutex>& lock, const BrickKey& 
     entry.data = std::move(data);
     entry.state = EntryState::Ready;
     mStats.bytesLoaded += entry.data.size();
+    if (mEvicted.erase(key) != 0) {
+        ++mStats.refetches;
+        mStats.bytesRefetched += entry.data.size();
+    }
     mStats.residentBytes += entry.data.size();
     ++mStats.residentBricks;
     addPin(entry);
@@ -105,7 +109,9 @@ void CacheCore::setBudgetBytes(std::uint64_t budgetBytes) {
 
 BrickCacheStats CacheCore::stats() const {
     std::lock_guard lock(mMutex);
-    return mStats;
+    BrickCacheStats s = mStats;
+    s.budgetBytes = mBudgetBytes;
+    return s;
 }
 
 void CacheCore::addPin(CacheEntry& entry) {
@@ -142,6 +148,7 @@ void CacheCore::evictToBudget() {
         ++mStats.evictions;
         const BrickKey key = victim.key; // not a reference into the node being erased
         mEntries.erase(key);
+        mEvicted.insert(key);
     }
 }
 

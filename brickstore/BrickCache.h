@@ -28,6 +28,12 @@ struct BrickCacheStats {
     std::uint64_t evictions = 0;
     std::uint64_t bytesLoaded = 0;    ///< bytes brought in by misses
     std::uint64_t bytesEvicted = 0;
+    /// Misses of bricks this cache held before and evicted: the traffic a larger budget
+    /// (or a better eviction order) would have saved.
+    std::uint64_t refetches = 0;
+    std::uint64_t bytesRefetched = 0;
+    /// Budget at the time of the snapshot.
+    std::uint64_t budgetBytes = 0;
     std::uint64_t residentBytes = 0;  ///< now
     std::uint64_t pinnedBytes = 0;    ///< now
     std::uint64_t residentBricks = 0; ///< now

@@ -125,12 +125,17 @@ std::optional<std::uint32_t> BrickPool::acquire(std::uint64_t key, const Loader&
     if (mFree.empty()) {
         mLru.pop_front();
         mSlotOf.erase(mKeyOf[slot]);
+        mEvicted.insert(mKeyOf[slot]);
         ++mStats.evictions;
     } else {
         mFree.pop_back();
     }
     mKeyOf[slot] = kNoKey;
     upload(slot, voxels);
+    if (mEvicted.erase(key) != 0) {
+        ++mStats.refetches;
+        mStats.bytesRefetched += voxels.size();
+    }
     mKeyOf[slot] = key;
     mSlotOf[key] = slot;
     mPinned[slot] = 1;
@@ -174,6 +179,7 @@ void BrickPool::unpinAll() {
 
 void BrickPool::clear() {
     mSlotOf.clear();
+    mEvicted.clear();
     mLru.clear();
     mFree.clear();
     mKeyOf.assign(mCapacity, kNoKey);

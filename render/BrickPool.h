@@ -12,6 +12,7 @@
 #include <optional>
 #include <span>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 namespace bc::render {
@@ -25,6 +26,9 @@ struct BrickPoolStats {
     std::uint64_t uploads = 0;
     std::uint64_t bytesUploaded = 0;
     std::uint64_t evictions = 0;
+    /// Uploads of bricks this pool held before and evicted (cleared by clear()).
+    std::uint64_t refetches = 0;
+    std::uint64_t bytesRefetched = 0;
     double uploadMs = 0.0;
 };
 
@@ -84,6 +88,7 @@ class BrickPool {
     std::vector<std::list<std::uint32_t>::iterator> mLruPos;
     std::vector<std::uint32_t> mFree;
     std::vector<std::uint16_t> mStaging; ///< i16 -> biased u16
+    std::unordered_set<std::uint64_t> mEvicted; ///< evicted, not uploaded since
     BrickPoolStats mStats;
 };
 

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <mutex>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 namespace bc::brickstore::detail {
@@ -60,6 +61,9 @@ class CacheCore {
     std::unordered_map<BrickKey, CacheEntry, BrickKeyHash> mEntries;
     CacheEntry* mLruHead = nullptr; ///< least recently used unpinned entry
     CacheEntry* mLruTail = nullptr; ///< most recently used
+    /// Keys evicted and not loaded since: a miss on one is a re-fetch. At most one key per
+    /// brick of the store.
+    std::unordered_set<BrickKey, BrickKeyHash> mEvicted;
     BrickCacheStats mStats;
 };
 

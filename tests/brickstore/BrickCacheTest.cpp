@@ -146,6 +146,40 @@ TEST(BrickCacheTest, EvictsLeastRecentlyUsedUnpinnedBrick) {
     EXPECT_EQ(fake.calls, 5);
 }
 
+// A scripted path whose misses can be counted by hand: a cycle over four bricks through a
+// cache of three thrashes LRU (every access misses, and each brick's second load is a
+// re-fetch); the same cycle through a cache of four misses only the first time round.
+TEST(BrickCacheTest, CountsRefetchesOfEvictedBricksOnAScriptedCycle) {
+    FakeLoader fake;
+    BrickCache small(fake.loader(), budgetOf(3));
+    for (int round = 0; round < 2; ++round)
+        for (std::uint32_t i : {0u, 1u, 2u, 3u})
+            small.pin(keyOf(i));
+    auto s = small.stats();
+    EXPECT_EQ(s.misses, 8u);
+    EXPECT_EQ(s.hits, 0u);
+    EXPECT_EQ(s.evictions, 5u); // bricks 0 1 2 3 0 each pushed out by the fourth after it
+    EXPECT_EQ(s.refetches, 4u);
+    EXPECT_EQ(s.bytesRefetched, 4 * kBrickBytes);
+    EXPECT_EQ(s.budgetBytes, 3 * kBrickBytes);
+    small.pin(keyOf(7)); // new: a miss and an eviction, not a re-fetch
+    EXPECT_EQ(small.stats().refetches, 4u);
+
+    BrickCache big(fake.loader(), budgetOf(4));
+    for (int round = 0; round < 2; ++round)
+        for (std::uint32_t i : {0u, 1u, 2u, 3u})
+            big.pin(keyOf(i));
+    s = big.stats();
+    EXPECT_EQ(s.misses, 4u);
+    EXPECT_EQ(s.hits, 4u);
+    EXPECT_EQ(s.evictions, 0u);
+    EXPECT_EQ(s.refetches, 0u);
+    big.setBudgetBytes(kBrickBytes); // evicts 0 1 2; loading 0 again is a re-fetch
+    big.pin(keyOf(0));
+    EXPECT_EQ(big.stats().refetches, 1u);
+    EXPECT_EQ(big.stats().bytesRefetched, kBrickBytes);
+}
+
 TEST(BrickCacheTest, NeverEvictsPinnedBricksAndEvictsDownOnceUnpinned) {
     FakeLoader fake;
     BrickCache cache(fake.loader(), budgetOf(2));
