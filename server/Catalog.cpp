@@ -1,5 +1,7 @@
 #include "server/Catalog.h"
 
+#include "server/Metrics.h"
+
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
 #include "server/Log.h"
@@ -132,6 +134,29 @@ void Catalog::changeSessions(Volume& volume, int delta) {
     mSessions += std::uint32_t(delta);
     for (const auto& v : mVolumes)
         v->cache->setBudgetBytes(v->sessions.load() ? shareOf(*v, mHostBudgetBytes) : 0);
+}
+
+void Catalog::collect(MetricSet& m) const {
+    for (const auto& v : mVolumes) {
+        const auto c = v->cache->stats();
+        const std::vector<std::pair<std::string, std::string>> l{{"volume", v->name}};
+        m.counter("host_cache_hits_total", "Brick requests served from the host cache", double(c.hits), l);
+        m.counter("host_cache_misses_total", "Brick requests read from disk and decompressed",
+                  double(c.misses), l);
+        m.counter("host_cache_evictions_total", "Bricks evicted from the host cache (LRU)",
+                  double(c.evictions), l);
+        m.counter("host_cache_bytes_loaded_total", "Decompressed bytes read from disk",
+                  double(c.bytesLoaded), l);
+        m.counter("host_cache_refetches_total",
+                  "Misses of bricks the host cache held before and evicted", double(c.refetches), l);
+        m.counter("host_cache_bytes_refetched_total",
+                  "Bytes read again from disk after their eviction", double(c.bytesRefetched), l);
+        m.gauge("host_cache_resident_bytes", "Decompressed bytes resident in the host cache",
+                double(c.residentBytes), l);
+        m.gauge("host_cache_budget_bytes", "The volume's share of the host budget",
+                double(c.budgetBytes), l);
+        m.gauge("volume_sessions", "Sessions viewing the volume", double(v->sessions.load()), l);
+    }
 }
 
 } // namespace bc::server

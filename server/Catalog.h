@@ -33,6 +33,7 @@ struct Volume {
 };
 
 class Catalog;
+class MetricSet;
 
 /// A session's hold on a volume; releasing it rebalances the budgets. Move-only.
 class VolumeLease {
@@ -65,6 +66,9 @@ class Catalog {
     std::uint32_t sessions() const { return mSessions.load(); }
     /// A volume's fair share of `totalBytes`: in proportion to its sessions (at least one).
     std::uint64_t shareOf(const Volume& volume, std::uint64_t totalBytes) const;
+    /// The disk -> host tier per volume (labelled volume="name"): hits, misses, evictions,
+    /// bytes loaded and re-fetched after eviction, resident and budget bytes; sessions.
+    void collect(MetricSet& metrics) const;
 
   private:
     friend class VolumeLease;

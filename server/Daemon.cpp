@@ -3,7 +3,9 @@
 #include "server/Catalog.h"
 #include "server/Error.h"
 #include "server/Log.h"
+#include "server/Metrics.h"
 #include "server/RenderService.h"
+#include "server/detail/MetricsEndpoint.h"
 #include "server/detail/Session.h"
 
 #include <asio.hpp>
@@ -19,7 +21,17 @@ struct Daemon::Impl {
           acceptor(io), signals(io), drainTimer(io),
           context{config, catalog, render, log, capabilities(), {}} {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };
+        context.collect = [this](MetricSet& m) { collect(m); };
         bind();
+        if (!config.metricsHost.empty())
+            metrics = std::make_unique<detail::MetricsEndpoint>(
+                io, config.metricsHost, config.metricsPort, log,
+                [this] {
+                    MetricSet m;
+                    collect(m);
+                    return m.prometheusText();
+                },
+                config.source);
         if (handleSignals) {
             signals.add(SIGTERM);
             signals.add(SIGINT);
@@ -61,6 +73,24 @@ struct Daemon::Impl {
 
     std::uint16_t port() const { return acceptor.local_endpoint().port(); }
 
+    /// Everything the server counts; on the network thread (sessions live there).
+    void collect(MetricSet& m) {
+        render.collect(m);
+        catalog.collect(m);
+        m.gauge("sessions", "Client sessions open", double(sessions.size()));
+        std::size_t queued = 0, deepest = 0;
+        for (const auto& [id, s] : sessions) {
+            queued += s->queued();
+            deepest = std::max(deepest, s->queued());
+        }
+        m.gauge("write_queue_messages", "Messages waiting in the sessions' write queues",
+                double(queued));
+        m.gauge("write_queue_messages_max", "The longest session write queue", double(deepest));
+        m.counter("connections_accepted_total", "Client connections accepted", double(accepted));
+        m.counter("connections_refused_total", "Client connections refused (Busy)", double(refused));
+        m.counter("protocol_errors_total", "Error messages sent to clients", double(context.errorsSent));
+    }
+
     void accept() {
         acceptor.async_accept([this](const asio::error_code& ec, asio::ip::tcp::socket socket) {
             if (ec) {
@@ -72,8 +102,10 @@ struct Daemon::Impl {
             socket.set_option(asio::ip::tcp::no_delay(true), ignored);
             auto session = std::make_shared<detail::Session>(std::move(socket), context, ++nextId);
             if (sessions.size() >= config.maxClients) {
+                ++refused;
                 session->refuseBusy();
             } else {
+                ++accepted;
                 sessions[session->id()] = session;
                 session->start();
             }
@@ -92,6 +124,7 @@ struct Daemon::Impl {
         asio::error_code ignored;
         acceptor.close(ignored);
         signals.cancel(ignored);
+        if (metrics) metrics->stop();
         if (sessions.empty()) return io.stop();
         for (auto& [id, s] : std::map(sessions)) s->shutdown();
         // Sessions close once their Bye is written; a stuck one is cut at the write deadline.
@@ -113,7 +146,8 @@ struct Daemon::Impl {
     asio::steady_timer drainTimer;
     detail::SessionContext context;
     std::map<std::uint64_t, std::shared_ptr<detail::Session>> sessions;
-    std::uint64_t nextId = 0;
+    std::unique_ptr<detail::MetricsEndpoint> metrics;
+    std::uint64_t nextId = 0, accepted = 0, refused = 0;
     bool draining = false;
 };
 
@@ -124,8 +158,11 @@ Daemon::~Daemon() = default;
 
 std::uint16_t Daemon::port() const { return mImpl->port(); }
 
+std::uint16_t Daemon::metricsPort() const { return mImpl->metrics ? mImpl->metrics->port() : 0; }
+
 void Daemon::run() {
     mImpl->accept();
+    if (mImpl->metrics) mImpl->metrics->start();
     mImpl->io.run();
     mImpl->sessions.clear();
     mImpl->log.info("stopped");

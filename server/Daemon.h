@@ -23,6 +23,8 @@ class Daemon {
 
     /// The bound port (the actual one when the config asked for port 0).
     std::uint16_t port() const;
+    /// The metrics endpoint's bound port; 0 when the config has none.
+    std::uint16_t metricsPort() const;
     /// Serves until stop() or a signal, then drains. Call from one thread.
     void run();
     /// Starts the drain; thread-safe, returns at once.

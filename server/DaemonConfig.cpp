@@ -39,6 +39,9 @@ max_clients = 16
 # Folder where generated volumes are ingested as brick stores; "" = $XDG_CACHE_HOME/brickcast,
 # or /tmp/brickcast-<uid> without XDG_CACHE_HOME.
 store_dir = ""
+# HOST:PORT of the metrics endpoint: GET /metrics answers with every counter in the
+# Prometheus text format (no authentication, so loopback only); "" = no endpoint.
+metrics = ""
 
 [timeouts]
 # Hello (and Auth when required) must arrive within this long of connecting.
@@ -263,7 +266,7 @@ std::string Reader::resolve(const std::string& path) const {
 void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
     const toml::table* t = section(root, "server");
     if (!t) return;
-    checkKeys(*t, "server.", {"listen", "token", "max_clients", "store_dir"});
+    checkKeys(*t, "server.", {"listen", "token", "max_clients", "store_dir", "metrics"});
     if (auto listen = string(*t, "server.", "listen")) {
         Listen l;
         if (auto why = splitListen(*listen, l))
@@ -276,6 +279,16 @@ void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
             fail(t->get("token")->source(), "server.token",
                  "longer than " + std::to_string(protocol::kMaxTokenBytes) + " bytes");
         c.token = *token;
+    }
+    if (auto metrics = string(*t, "server.", "metrics"); metrics && !metrics->empty()) {
+        Listen l;
+        if (auto why = splitListen(*metrics, l))
+            fail(t->get("metrics")->source(), "server.metrics", *why);
+        if (!isLoopback(l.host))
+            fail(t->get("metrics")->source(), "server.metrics",
+                 "'" + l.host + "' is not loopback: the endpoint has no authentication");
+        c.metricsHost = l.host;
+        c.metricsPort = l.port;
     }
     assign(c.maxClients, integer(*t, "server.", "max_clients", 1, 1024));
     if (auto dir = string(*t, "server.", "store_dir"); dir && !dir->empty())
@@ -419,8 +432,20 @@ void DaemonConfig::setListen(const std::string& text, const std::string& sourceN
     *this = std::move(next);
 }
 
-bool DaemonConfig::loopbackOnly() const {
-    std::string host = listenHost;
+bool DaemonConfig::loopbackOnly() const { return isLoopback(listenHost); }
+
+void DaemonConfig::setMetrics(const std::string& text, const std::string& sourceName) {
+    Listen l;
+    if (auto why = splitListen(text, l)) throw ConfigError(sourceName + ": " + *why);
+    if (!isLoopback(l.host))
+        throw ConfigError(sourceName + ": metrics on '" + l.host +
+                          "' (not loopback): the endpoint has no authentication");
+    metricsHost = l.host;
+    metricsPort = l.port;
+}
+
+bool isLoopback(const std::string& hostText) {
+    std::string host = hostText;
     std::transform(host.begin(), host.end(), host.begin(),
                    [](unsigned char ch) { return char(std::tolower(ch)); });
     if (host == "localhost") return true;

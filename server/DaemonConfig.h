@@ -26,6 +26,8 @@ struct DaemonConfig {
     std::string listenHost = "127.0.0.1";      ///< without brackets: "::1"
     std::uint16_t listenPort = 7411;           ///< 0 = any free port (tests)
     std::string token;                         ///< empty = no auth; required off loopback
+    std::string metricsHost;                   ///< empty = no metrics endpoint; loopback
+    std::uint16_t metricsPort = 0;
     std::uint32_t maxClients = 16;
     std::uint32_t handshakeTimeoutMs = 5000;
     std::uint32_t readTimeoutMs = 10000;
@@ -43,6 +45,9 @@ struct DaemonConfig {
     /// Listens on "HOST:PORT" instead (a command-line override), keeping the token rule.
     /// @throw ConfigError naming sourceName when the text is bad or a token is missing.
     void setListen(const std::string& text, const std::string& sourceName);
+    /// Serves metrics on "HOST:PORT" (a command-line override; loopback only).
+    /// @throw ConfigError naming sourceName when the text is bad or not loopback.
+    void setMetrics(const std::string& text, const std::string& sourceName);
     /// Whether listenHost is a loopback address: 127.0.0.0/8, ::1 (also v4-mapped), localhost.
     bool loopbackOnly() const;
     /// The built-in configuration: loopback, no token, a generated 128^3 "phantom" and 160^3
@@ -60,6 +65,9 @@ struct DaemonConfig {
     /// @throw ConfigError if it is unreadable or invalid
     static DaemonConfig load(const std::string& path);
 };
+
+/// 127.0.0.0/8, ::1 (also v4-mapped) or localhost.
+bool isLoopback(const std::string& host);
 
 /// The default store folder: $XDG_CACHE_HOME/brickcast, or /tmp/brickcast-<uid> without it.
 std::string defaultStoreDir();

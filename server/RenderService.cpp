@@ -8,6 +8,7 @@
 #include "render/ReferenceRenderer.h"
 #include "server/Catalog.h"
 #include "server/Log.h"
+#include "server/Metrics.h"
 #include "server/ViewRequest.h"
 
 #include <map>
@@ -169,9 +170,14 @@ struct RenderService::Renderers {
 
     /// Renderers of closed sessions and pools of volumes nobody views go (GL objects, on
     /// this thread).
-    void prune() {
+    /// `retired` is told the name of each volume whose pool goes.
+    void prune(const std::function<void(const std::string&)>& retired) {
         std::erase_if(sessions, [](const auto& e) { return e.second.slot.expired(); });
-        std::erase_if(volumes, [&](const auto& e) { return e.first->sessions.load() == 0; });
+        std::erase_if(volumes, [&](const auto& e) {
+            if (e.first->sessions.load() != 0) return false;
+            if (e.second.pool) retired(e.first->name);
+            return true;
+        });
     }
     SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
         auto& s = sessions[slot.get()];
@@ -179,6 +185,12 @@ struct RenderService::Renderers {
         return s;
     }
 };
+
+/// Bytes of one stored brick (apron included), as the pool and the host cache hold it.
+std::uint64_t slotBytesOf(const brickstore::BrickStore& store) {
+    const std::uint64_t e = store.layout().storedEdge();
+    return e * e * e * brickstore::voxelBytes(store.info().volume.type);
+}
 
 /// The volume's pool at its fair share of the budget; a new pool only when the share moved by
 /// more than an eighth, so sessions coming and going do not make every brick upload again.
@@ -196,8 +208,49 @@ std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume&
     return v.pool;
 }
 
+struct RenderService::Counters {
+    std::map<std::string, double> frames; ///< per renderer
+    double refined = 0, errors = 0, renderMs = 0, encodeMs = 0, bytes = 0, samples = 0;
+    Histogram latencyMs{Histogram::series125(1, 10000)};
+    Histogram renderMsHist{Histogram::series125(1, 10000)};
+    Histogram uploadMs{Histogram::series125(0.1, 10000)};
+    Histogram encodeMsHist{Histogram::series125(0.01, 1000)};
+    Histogram workingSet{Histogram::geometric(64 * 1024, 64.0 * (1ull << 30), 4)};
+    Histogram frameBytes{Histogram::geometric(256, 64.0 * (1 << 20), 4)};
+    /// Per volume: the live pool's counters (as of its last frame) and those of pools
+    /// replaced or freed before it, so the exported counters never go down.
+    std::map<std::string, render::BrickPoolStats> poolLive, poolRetired;
+    std::map<std::string, double> poolBudget;
+};
+
+namespace {
+
+render::BrickPoolStats& operator+=(render::BrickPoolStats& a, const render::BrickPoolStats& b) {
+    a.hits += b.hits;
+    a.uploads += b.uploads;
+    a.bytesUploaded += b.bytesUploaded;
+    a.evictions += b.evictions;
+    a.refetches += b.refetches;
+    a.bytesRefetched += b.bytesRefetched;
+    a.uploadMs += b.uploadMs;
+    return a;
+}
+
+const char* rendererName(protocol::Renderer r) {
+    switch (r) {
+    case protocol::Renderer::GpuRaycaster: return "gpu";
+    case protocol::Renderer::CpuRaycaster: return "cpu";
+    case protocol::Renderer::Reference: return "reference";
+    case protocol::Renderer::Splatter: return "splat";
+    }
+    return "unknown";
+}
+
+} // namespace
+
 RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log)
-    : mConfig(config), mCatalog(catalog), mLog(log), mThread([this] { run(); }) {}
+    : mConfig(config), mCatalog(catalog), mLog(log), mCounters(std::make_unique<Counters>()),
+      mThread([this] { run(); }) {}
 
 RenderService::~RenderService() {
     {
@@ -222,15 +275,86 @@ bool RenderService::gpuAvailable() {
     return mGpu;
 }
 
-std::vector<std::pair<std::string, double>> RenderService::counters() {
+void RenderService::collect(MetricSet& m) {
+    std::lock_guard lock(mMutex); // then each slot's: the order nextReady() takes them in
+    std::size_t waiting = 0;
+    const auto now = Clock::now();
+    for (const auto& w : mSlots)
+        if (auto slot = w.lock()) {
+            const auto at = slot->readyAt(mConfig.restMs);
+            waiting += at && *at <= now;
+        }
+    const Counters& c = *mCounters;
+    for (const char* r : {"gpu", "cpu", "splat", "reference"}) {
+        const auto it = c.frames.find(r);
+        m.counter("frames_total", "Frames drawn and encoded, by renderer",
+                  it == c.frames.end() ? 0.0 : it->second, {{"renderer", r}});
+    }
+    m.counter("frames_refined_total", "Full-quality frames after the camera came to rest", c.refined);
+    m.counter("render_errors_total", "Frames that failed (sent as RenderFailed)", c.errors);
+    m.counter("render_ms_total", "Milliseconds spent drawing frames", c.renderMs);
+    m.counter("encode_ms_total", "Milliseconds spent encoding frames", c.encodeMs);
+    m.counter("frame_bytes_total", "Encoded frame message bytes", c.bytes);
+    m.counter("samples_total", "Volume samples (voxels for the splatter) taken", c.samples);
+    m.histogram("frame_latency_ms",
+                "From the oldest change a frame answers to the frame encoded (queue + render + encode)",
+                c.latencyMs);
+    m.histogram("frame_render_ms", "Drawing one frame (bricks, octrees, rays or splats)", c.renderMsHist);
+    m.histogram("frame_upload_ms", "Host -> GPU uploads (CPU renderers: brick preparation) of one frame",
+                c.uploadMs);
+    m.histogram("frame_encode_ms", "Encoding one frame", c.encodeMsHist);
+    m.histogram("frame_working_set_bytes", "Bytes of the distinct bricks one frame sampled",
+                c.workingSet);
+    m.histogram("frame_encoded_bytes", "Encoded bytes of one frame message", c.frameBytes);
+    m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn", double(waiting));
+    std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
+    for (const auto& [name, live] : c.poolLive) pools[name] += live;
+    for (const auto& [name, p] : pools) {
+        const std::vector<std::pair<std::string, std::string>> l{{"volume", name}};
+        m.counter("gpu_pool_hits_total", "Bricks a frame found resident on the GPU", double(p.hits), l);
+        m.counter("gpu_pool_uploads_total", "Bricks uploaded host -> GPU", double(p.uploads), l);
+        m.counter("gpu_pool_bytes_uploaded_total", "Bytes uploaded host -> GPU",
+                  double(p.bytesUploaded), l);
+        m.counter("gpu_pool_evictions_total", "Bricks evicted from the GPU pool (LRU)",
+                  double(p.evictions), l);
+        m.counter("gpu_pool_refetches_total",
+                  "Uploads of bricks the pool held before and evicted", double(p.refetches), l);
+        m.counter("gpu_pool_bytes_refetched_total", "Bytes uploaded again after their eviction",
+                  double(p.bytesRefetched), l);
+        m.counter("gpu_pool_upload_ms_total", "Milliseconds spent uploading bricks", p.uploadMs, l);
+        const auto b = c.poolBudget.find(name);
+        m.gauge("gpu_pool_budget_bytes", "The volume's share of the GPU budget",
+                b == c.poolBudget.end() ? 0.0 : b->second, l);
+    }
+}
+
+void RenderService::record(const FrameRecord& f, double bytes, const std::string& volume,
+                           const render::BrickPool* pool) {
     std::lock_guard lock(mMutex);
-    const Counters& c = mCounters;
-    return {{"frames", c.frames},           {"frames_refined", c.refined},
-            {"render_errors", c.errors},    {"render_ms_total", c.renderMs},
-            {"encode_ms_total", c.encodeMs}, {"frame_bytes_total", c.bytes},
-            {"samples_total", c.samples},   {"gpu_uploads_total", c.uploads},
-            {"gpu_bytes_uploaded_total", c.bytesUploaded},
-            {"sessions", double(mCatalog.sessions())}};
+    Counters& c = *mCounters;
+    c.frames[f.renderer] += 1;
+    c.renderMs += f.renderMs;
+    c.encodeMs += f.encodeMs;
+    c.bytes += bytes;
+    c.latencyMs.observe(f.latencyMs);
+    c.renderMsHist.observe(f.renderMs);
+    c.uploadMs.observe(f.uploadMs);
+    c.encodeMsHist.observe(f.encodeMs);
+    c.workingSet.observe(f.workingSetBytes);
+    c.frameBytes.observe(bytes);
+    if (pool) {
+        c.poolLive[volume] = pool->stats();
+        c.poolBudget[volume] = double(pool->capacity()) * double(pool->slotBytes());
+    }
+}
+
+void RenderService::retirePool(const std::string& volume) {
+    std::lock_guard lock(mMutex);
+    Counters& c = *mCounters;
+    if (auto it = c.poolLive.find(volume); it != c.poolLive.end()) {
+        c.poolRetired[volume] += it->second;
+        c.poolLive.erase(it);
+    }
 }
 
 void RenderService::notify() {
@@ -259,7 +383,7 @@ void RenderService::run() {
         if (!slot) continue;
         auto job = slot->take(Clock::now(), mConfig.restMs);
         lock.unlock();
-        mRenderers->prune();
+        mRenderers->prune([this](const std::string& volume) { retirePool(volume); });
         draw(slot, std::move(job));
         lock.lock();
     }
@@ -293,16 +417,14 @@ void RenderService::draw(const std::shared_ptr<RenderSlot>& slotPtr, RenderSlot:
     RenderSlot& slot = *slotPtr;
     std::vector<std::uint8_t> bytes;
     try {
-        const protocol::Frame frame = render(slotPtr, job, *mRenderers);
+        FrameRecord rec;
+        const render::BrickPool* pool = nullptr;
+        const protocol::Frame frame = render(slotPtr, job, *mRenderers, rec, pool);
         protocol::encode(frame, job.requestId, bytes);
+        record(rec, double(bytes.size()), job.state.volume->name, pool);
         std::lock_guard lock(mMutex);
-        mCounters.frames += 1;
-        mCounters.refined += frame.header.refined;
-        mCounters.renderMs += frame.header.renderMs;
-        mCounters.encodeMs += frame.header.encodeMs;
-        mCounters.bytes += double(bytes.size());
-        mCounters.samples += double(frame.header.samples);
-        mCounters.bytesUploaded += double(frame.header.bytesUploaded);
+        mCounters->refined += frame.header.refined;
+        mCounters->samples += double(frame.header.samples);
     } catch (const std::exception& e) {
         protocol::Error error{protocol::ErrorCode::RenderFailed, false,
                               std::uint8_t(protocol::MessageType::RequestFrame),
@@ -311,7 +433,7 @@ void RenderService::draw(const std::shared_ptr<RenderSlot>& slotPtr, RenderSlot:
         protocol::encode(error, job.requestId, bytes);
         mLog.error("render: " + job.state.volume->name + ": " + e.what());
         std::lock_guard lock(mMutex);
-        mCounters.errors += 1;
+        mCounters->errors += 1;
     }
     std::unique_lock lock(slot.mMutex);
     auto deliver = slot.mDeliver;
@@ -323,7 +445,8 @@ void RenderService::draw(const std::shared_ptr<RenderSlot>& slotPtr, RenderSlot:
 }
 
 protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr,
-                                      RenderSlot::Job& job, Renderers& r) {
+                                      RenderSlot::Job& job, Renderers& r, FrameRecord& rec,
+                                      const render::BrickPool*& pool) {
     RenderSlot& slot = *slotPtr;
     const auto& s = job.state;
     const auto start = Clock::now();
@@ -339,8 +462,11 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
         if (!r.context) throw std::runtime_error("this server has no OpenGL 4.5 context");
         auto& mine = r.of(slotPtr);
         if (!mine.gpu) mine.gpu = std::make_unique<render::Raycaster>();
-        mine.gpu->setSharedPool(
-            sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes)));
+        const render::BrickPool* before = v.pool.get();
+        auto& shared = sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes));
+        if (before && shared.get() != before) retirePool(s.volume->name);
+        mine.gpu->setSharedPool(shared);
+        pool = shared.get();
         image = mine.gpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
         break;
     }
@@ -389,6 +515,13 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     h.bytesUploaded = stats.bytesUploaded;
     h.occlusionUsed = stats.occlusionUsed;
     frame.image = std::move(encoded.bytes);
+    rec.renderer = rendererName(o.renderer);
+    rec.renderMs = h.renderMs;
+    rec.encodeMs = h.encodeMs;
+    rec.uploadMs = stats.uploadMs;
+    rec.latencyMs = msSince(job.queuedAt);
+    rec.bricks = double(stats.bricksVisited - stats.bricksConstant);
+    rec.workingSetBytes = rec.bricks * double(slotBytesOf(*s.volume->store));
     return frame;
 }
 

@@ -19,12 +19,17 @@
 #include <thread>
 #include <vector>
 
+namespace bc::render {
+class BrickPool;
+}
+
 namespace bc::server {
 
 struct Volume;
 class Catalog;
 class Log;
 class RenderService;
+class MetricSet;
 
 using Clock = std::chrono::steady_clock;
 
@@ -104,18 +109,30 @@ class RenderService {
     std::shared_ptr<RenderSlot> open(RenderSlot::Deliver deliver, std::uint32_t queueFrames);
     /// Whether the GL context came up (waits for the thread's start-up).
     bool gpuAvailable();
-    /// Server counters for the Stats message ("frames", "render_ms_total", ...).
-    std::vector<std::pair<std::string, double>> counters();
+    /// Frames (per renderer), errors, time and bytes; per-frame histograms of latency
+    /// (oldest change answered -> encoded), render, upload and encode ms, working set and
+    /// encoded bytes; the host -> GPU tier per volume (hits, uploads, evictions, bytes,
+    /// re-fetches; counters carried across pool rebuilds); render slots waiting.
+    void collect(MetricSet& metrics);
 
   private:
     friend class RenderSlot;
     struct Renderers;
+    /// What one frame measured, for the counters.
+    struct FrameRecord {
+        std::string renderer;
+        double latencyMs = 0, renderMs = 0, uploadMs = 0, encodeMs = 0;
+        double workingSetBytes = 0, bricks = 0;
+    };
     void run();
     void notify();
     std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock);
     void draw(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job job);
     protocol::Frame render(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job& job,
-                           Renderers& r);
+                           Renderers& r, FrameRecord& record, const render::BrickPool*& pool);
+    void record(const FrameRecord& f, double bytes, const std::string& volume,
+                const render::BrickPool* pool);
+    void retirePool(const std::string& volume); ///< its pool is replaced or freed
 
     RenderServiceConfig mConfig;
     Catalog& mCatalog;
@@ -127,10 +144,9 @@ class RenderService {
     bool mStop = false, mStarted = false, mGpu = false;
     std::condition_variable mStartedCv;
     std::unique_ptr<Renderers> mRenderers; // render thread only
-    struct Counters {
-        double frames = 0, refined = 0, errors = 0, renderMs = 0, encodeMs = 0, bytes = 0;
-        double samples = 0, uploads = 0, bytesUploaded = 0;
-    } mCounters;
+
+    struct Counters; // under mMutex
+    std::unique_ptr<Counters> mCounters;
     std::thread mThread;
 };
 

@@ -13,11 +13,14 @@
 
 int main(int argc, char** argv) {
     CLI::App app{"brickcastd: out-of-core volume rendering, streamed to thin clients"};
-    std::string configPath, portFile, listen;
+    std::string configPath, portFile, listen, metrics, metricsPortFile;
     bool printDefault = false, quiet = false;
     app.add_option("-c,--config", configPath, "Config file (TOML); default: the embedded one");
     app.add_option("--listen", listen, "HOST:PORT, overriding the config (port 0: any free port)");
     app.add_option("--port-file", portFile, "Write the bound port here once listening");
+    app.add_option("--metrics", metrics,
+                   "HOST:PORT (loopback) for GET /metrics in the Prometheus text format, overriding the config");
+    app.add_option("--metrics-port-file", metricsPortFile, "Write the metrics port here once listening");
     app.add_flag("--print-default-config", printDefault, "Print the embedded default config and exit");
     app.add_flag("-q,--quiet", quiet, "Log errors only");
     CLI11_PARSE(app, argc, argv);
@@ -31,11 +34,15 @@ int main(int argc, char** argv) {
         auto config = configPath.empty() ? bc::server::DaemonConfig::embeddedDefault()
                                          : bc::server::DaemonConfig::load(configPath);
         if (!listen.empty()) config.setListen(listen, "--listen");
+        if (!metrics.empty()) config.setMetrics(metrics, "--metrics");
         bc::server::Daemon daemon(std::move(config), log, /*handleSignals=*/true);
-        if (!portFile.empty()) {
-            std::ofstream(portFile + ".tmp") << daemon.port() << "\n";
-            std::rename((portFile + ".tmp").c_str(), portFile.c_str());
-        }
+        auto writePort = [](const std::string& file, unsigned port) {
+            if (file.empty()) return;
+            std::ofstream(file + ".tmp") << port << "\n";
+            std::rename((file + ".tmp").c_str(), file.c_str());
+        };
+        writePort(metricsPortFile, daemon.metricsPort());
+        writePort(portFile, daemon.port());
         daemon.run();
         return 0;
     } catch (const std::exception& e) {

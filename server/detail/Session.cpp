@@ -1,5 +1,7 @@
 #include "server/detail/Session.h"
 
+#include "server/Metrics.h"
+
 #include "render/Camera.h"
 #include "server/Log.h"
 #include "server/ViewRequest.h"
@@ -280,18 +282,17 @@ void Session::onRequestFrame(const protocol::RequestFrame& m, std::uint32_t requ
 }
 
 void Session::onRequestStats(std::uint32_t request) {
+    MetricSet metrics;
+    if (mContext.collect) mContext.collect(metrics);
+    metrics.counter("session_frames_sent_total", "Frames this session was sent", double(mFramesSent));
+    metrics.counter("session_bytes_sent_total", "Bytes this session was sent", double(mBytesSent));
+    metrics.counter("session_bytes_received_total", "Bytes this session sent",
+                    double(mBytesReceived));
+    metrics.gauge("session_write_queue_messages", "Messages in this session's write queue",
+                  double(mQueue.size()));
     protocol::Stats stats;
-    stats.counters = mContext.render.counters();
-    stats.counters.push_back({"session_frames_sent", double(mFramesSent)});
-    stats.counters.push_back({"session_bytes_sent", double(mBytesSent)});
-    stats.counters.push_back({"session_bytes_received", double(mBytesReceived)});
-    if (mLease) {
-        const auto c = mLease.volume()->cache->stats();
-        stats.counters.push_back({"host_cache_hits", double(c.hits)});
-        stats.counters.push_back({"host_cache_misses", double(c.misses)});
-        stats.counters.push_back({"host_cache_evictions", double(c.evictions)});
-        stats.counters.push_back({"host_cache_resident_bytes", double(c.residentBytes)});
-    }
+    stats.counters = metrics.statCounters(protocol::kMaxStatNameBytes);
+    if (stats.counters.size() > protocol::kMaxStats) stats.counters.resize(protocol::kMaxStats);
     send(stats, request);
 }
 
@@ -306,6 +307,7 @@ void Session::send(const protocol::Message& message, std::uint32_t request) {
 void Session::sendError(ErrorCode code, bool fatal, std::uint8_t type, std::uint32_t request,
                         const std::string& message) {
     ++mErrorsSent;
+    ++mContext.errorsSent;
     mContext.log.info("session " + std::to_string(mId) + ": " + protocol::errorName(std::uint16_t(code)) +
                       (fatal ? " (fatal): " : ": ") + message);
     send(protocol::Error{code, fatal, type, protocol::fitText(message, protocol::kMaxErrorMessageBytes)},

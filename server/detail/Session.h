@@ -23,6 +23,8 @@ namespace bc::server {
 
 class Log;
 
+class MetricSet;
+
 namespace detail {
 
 /// What every session of a daemon shares.
@@ -33,6 +35,9 @@ struct SessionContext {
     Log& log;
     std::uint32_t capabilities = 0;
     std::function<void(std::uint64_t id)> onClosed; ///< on the network thread
+    /// The whole server's metrics (what GET /metrics serves), on the network thread.
+    std::function<void(MetricSet&)> collect;
+    std::uint64_t errorsSent = 0; ///< by every session; network thread only
 };
 
 class Session : public std::enable_shared_from_this<Session> {
@@ -45,6 +50,8 @@ class Session : public std::enable_shared_from_this<Session> {
     /// The server is draining: Bye (shutting down), then close once written.
     void shutdown();
     std::uint64_t id() const { return mId; }
+    /// Messages waiting in the write queue (the one being written included).
+    std::size_t queued() const { return mQueue.size(); }
 
   private:
     enum class Phase { AwaitHello, AwaitAuth, Ready, Closing, Closed };

@@ -83,7 +83,7 @@ TEST_F(DaemonBehaviour, SessionsOnOneVolumeShareItsCacheAndBudgetsFollowTheSessi
         return -1.0;
     };
     const auto s = b.stats();
-    EXPECT_GT(counter(s, "host_cache_hits"), 0) << "the second session loaded its own bricks";
+    EXPECT_GT(counter(s, "host_cache_hits_total{volume=\"small\"}"), 0) << "the second session loaded its own bricks";
     // Budgets: a catalog of two volumes, three leases on one and one on the other.
     Log quiet(true);
     DaemonConfig config = generatedConfig(*sDir, {{"small", 32}, {"other", 24}});

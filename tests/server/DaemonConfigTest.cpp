@@ -76,6 +76,7 @@ listen = "[::1]:0"
 token = "s3cret"
 max_clients = 4
 store_dir = "cache"
+metrics = "127.0.0.1:9100"
 [timeouts]
 handshake_ms = 1
 read_ms = 2
@@ -93,6 +94,8 @@ write_queue = 16
     EXPECT_EQ(c.token, "s3cret");
     EXPECT_EQ(c.maxClients, 4u);
     EXPECT_EQ(c.storeDir, "/cfg/cache");
+    EXPECT_EQ(c.metricsHost, "127.0.0.1");
+    EXPECT_EQ(c.metricsPort, 9100);
     EXPECT_EQ(c.handshakeTimeoutMs, 1u);
     EXPECT_EQ(c.readTimeoutMs, 2u);
     EXPECT_EQ(c.idleTimeoutMs, 3u);
@@ -264,6 +267,32 @@ TEST(DaemonConfigTest, TokenRequiredOnlyOffLoopback) {
     EXPECT_EQ(v6.listenHost, "::1");
     EXPECT_EQ(v6.listenPort, 7411);
     EXPECT_EQ(listen("localhost:0", "").listenPort, 0);
+}
+
+// The metrics endpoint has no authentication: loopback only, from the file and --metrics.
+TEST(DaemonConfigTest, MetricsAddressIsLoopbackOnlyAndNamed) {
+    auto metrics = [](const std::string& m) {
+        return errorOf("[server]\nmetrics = \"" + m + "\"\n" + kVolume);
+    };
+    EXPECT_EQ(metrics("127.0.0.1:0"), "");
+    EXPECT_EQ(metrics(""), "");
+    const std::string open = metrics("0.0.0.0:9100");
+    EXPECT_NE(open.find("bad.toml:2:"), std::string::npos) << open;
+    EXPECT_NE(open.find("server.metrics"), std::string::npos) << open;
+    EXPECT_NE(open.find("not loopback"), std::string::npos) << open;
+    EXPECT_NE(metrics("9100").find("server.metrics"), std::string::npos);
+    EXPECT_TRUE(DaemonConfig::embeddedDefault().metricsHost.empty()) << "off by default";
+    DaemonConfig c = DaemonConfig::embeddedDefault();
+    c.setMetrics("[::1]:9100", "--metrics");
+    EXPECT_EQ(c.metricsHost, "::1");
+    EXPECT_EQ(c.metricsPort, 9100);
+    try {
+        c.setMetrics("example.org:9100", "--metrics");
+        ADD_FAILURE() << "no ConfigError";
+    } catch (const ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find("--metrics"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(c.metricsHost, "::1") << "a refused override changes nothing";
 }
 
 TEST(DaemonConfigTest, LoopbackOnlyCases) {
