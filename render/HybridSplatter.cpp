@@ -7,11 +7,9 @@
 #include "render/SplatFootprint.h"
 #include "render/SplatGeometry.h"
 #include "render/TransferFunction.h"
-
-#include <tbb/parallel_for.h>
+#include "render/detail/SplatPrep.h"
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -22,28 +20,18 @@
 namespace bc::render {
 namespace {
 
+using detail::Frame;
+using detail::kChunkBricks;
+using detail::PointFilter;
+using detail::PreparedBrick;
+using detail::SplatScene;
+using detail::Visible;
+using detail::VoxelDraw;
+
 using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
-
-constexpr std::uint32_t kTfEntries = 4096; // as the raycasters' table
-constexpr double kMaxOpacity = 1.0 - 1e-6; // keeps -log(1 - a) finite
-
-/// Everything a voxel needs to be drawn.
-struct Frame {
-    SplatView view;
-    LevelGeometry g;
-    const TransferFunctionTable* table = nullptr;
-    double radiusMm = 1.0;
-    double depthScale = 1.0; ///< V / (r^2 minSpacing): footprint -> steps of one voxel
-    double slabMm = 1.0;
-    double voxelSteps = 1.0;   ///< cube root of the voxel volume, in steps of minSpacing
-    double voxelAreaMm2 = 1.0; ///< the voxel volume to the power 2/3
-    double pointThreshold = 0.5, pointFilter = 1.0;
-    bool shading = true, cull = true;
-    glm::dvec3 gradScale{1.0};
-};
 
 /// The image, its per-tile count of pixels still below the threshold, and the point slab.
 class Canvas {
@@ -122,30 +110,6 @@ class Canvas {
     double mSlabEnd = 0.0;
 };
 
-/// Pixel rectangle of image-plane box [lo, hi], clipped; false when empty.
-bool pixelRect(const glm::dvec2& lo, const glm::dvec2& hi, std::uint32_t w, std::uint32_t h,
-               std::uint32_t r[4]) {
-    const double x0 = std::ceil(lo.x + 0.5 * w - 0.5), x1 = std::floor(hi.x + 0.5 * w - 0.5);
-    const double y0 = std::ceil(0.5 * h - 0.5 - hi.y), y1 = std::floor(0.5 * h - 0.5 - lo.y);
-    if (!(x1 >= 0.0 && y1 >= 0.0 && x0 <= double(w) - 1 && y0 <= double(h) - 1 && x0 <= x1 &&
-          y0 <= y1))
-        return false;
-    r[0] = std::uint32_t(std::max(x0, 0.0));
-    r[1] = std::uint32_t(std::max(y0, 0.0));
-    r[2] = std::uint32_t(std::min(x1, double(w) - 1));
-    r[3] = std::uint32_t(std::min(y1, double(h) - 1));
-    return true;
-}
-
-/// One visible voxel of a brick, waiting for its turn.
-struct Visible {
-    double depth;
-    std::uint32_t stored; ///< index in the stored brick (apron included); voxel for constants
-    glm::dvec3 centre;
-    float value;
-    std::array<float, 4> rgba{}; ///< classified and shaded: straight colour, opacity per step
-};
-
 class Drawer {
   public:
     Drawer(const Frame& f, const SplatFootprint& fp, Canvas& canvas, HybridSplatStats& n)
@@ -153,58 +117,41 @@ class Drawer {
 
     /// Draws one classified voxel (straight colour c, opacity a per unit step) at `depth`.
     void draw(const glm::dvec3& centre, double depth, const float* c, float a) {
-        const glm::dvec3 rel = centre - mF.view.eye;
-        const double z = glm::dot(rel, mF.view.forward);
-        if (!(z > mF.radiusMm)) return; // touches the eye plane: no ellipse
-        const double scale = mF.view.orthographic ? mF.view.orthoScale : mF.view.focalLength / z;
-        const double rho = mF.radiusMm * scale;
-        const double lnT = -std::log(1.0 - std::min(double(a), kMaxOpacity));
-        if (rho < mF.pointThreshold)
-            point(scale * glm::dvec2(glm::dot(rel, mF.view.right), glm::dot(rel, mF.view.up)),
-                  scale, depth, c, lnT);
-        else
-            splat(centre, c, lnT);
+        const VoxelDraw d = detail::classifyDraw(mF, centre, a);
+        if (d.kind == VoxelDraw::Kind::Point)
+            point(d, depth, c);
+        else if (d.kind == VoxelDraw::Kind::Splat)
+            splat(centre, c, d.lnT);
     }
 
   private:
-    void point(const glm::dvec2& p, double scale, double depth, const float* c, double lnT) {
+    void point(const VoxelDraw& d, double depth, const float* c) {
         const double R = mF.pointFilter;
         std::uint32_t r[4];
-        if (!pixelRect(p - R, p + R, mCanvas.image.width, mCanvas.image.height, r)) return;
+        if (!detail::pixelRect(d.image - R, d.image + R, mCanvas.image.width, mCanvas.image.height,
+                               r))
+            return;
+        // Slabs are cut as if nothing were culled, so that culling changes no slab's sum.
+        if (mCanvas.slabOpen() && depth > mCanvas.slabEnd()) mN.slabs += mCanvas.flushSlab();
+        if (!mCanvas.slabOpen()) mCanvas.openSlab(depth + mF.slabMm);
         if (mF.cull && mCanvas.occluded(r[0], r[1], r[2], r[3])) {
             ++mN.culled;
             return;
         }
-        if (mCanvas.slabOpen() && depth > mCanvas.slabEnd()) mN.slabs += mCanvas.flushSlab();
-        if (!mCanvas.slabOpen()) mCanvas.openSlab(depth + mF.slabMm);
         ++mN.points;
-        // A point covers its voxel's projected area (pixels^2) with the voxel's opacity over
-        // one voxel of path; that coverage is spread by the footprint at each pixel centre,
-        // normalised over the unclipped lattice, so no point is lost between pixel centres.
         // The slab adds coverages: an area average, as a box filter of the pixel would.
         const std::uint32_t w = mCanvas.image.width, h = mCanvas.image.height;
-        const double fx = p.x + 0.5 * w - 0.5, fy = 0.5 * h - 0.5 - p.y;
-        const int x0 = int(std::ceil(fx - R)), x1 = int(std::floor(fx + R));
-        const int y0 = int(std::ceil(fy - R)), y1 = int(std::floor(fy + R));
-        auto weight = [&](int x, int y) {
-            return mFp.lineIntegral(std::hypot(x - fx, y - fy) / R);
-        };
-        double sum = 0.0;
-        for (int y = y0; y <= y1; ++y)
-            for (int x = x0; x <= x1; ++x)
-                sum += weight(x, y);
-        const double total =
-            (1.0 - std::exp(-lnT * mF.voxelSteps)) * mF.voxelAreaMm2 * scale * scale;
-        if (!(sum > 0.0)) {
-            const long nx = std::lround(fx), ny = std::lround(fy);
+        const PointFilter pf = detail::pointFilterOf(mF, mFp, d, w, h);
+        if (!(pf.sum > 0.0)) {
+            const long nx = std::lround(pf.fx), ny = std::lround(pf.fy);
             if (nx >= 0 && ny >= 0 && nx < long(w) && ny < long(h))
-                mCanvas.deposit(std::uint32_t(nx), std::uint32_t(ny), float(total), c);
+                mCanvas.deposit(std::uint32_t(nx), std::uint32_t(ny), float(pf.total), c);
             return;
         }
         for (std::uint32_t y = r[1]; y <= r[3]; ++y)
             for (std::uint32_t x = r[0]; x <= r[2]; ++x) {
-                const double fp = weight(int(x), int(y));
-                if (fp > 0.0) mCanvas.deposit(x, y, float(total * fp / sum), c);
+                const double fp = detail::pointWeight(mF, mFp, pf, int(x), int(y));
+                if (fp > 0.0) mCanvas.deposit(x, y, float(pf.total * fp / pf.sum), c);
             }
     }
 
@@ -215,12 +162,12 @@ class Drawer {
         const glm::dvec2 half = e.halfExtent();
         std::uint32_t r[4];
         const std::uint32_t w = mCanvas.image.width, h = mCanvas.image.height;
-        if (!pixelRect(e.centre - half, e.centre + half, w, h, r)) return;
+        if (!detail::pixelRect(e.centre - half, e.centre + half, w, h, r)) return;
+        mN.slabs += mCanvas.flushSlab(); // points in front go first, culled or not
         if (mF.cull && mCanvas.occluded(r[0], r[1], r[2], r[3])) {
             ++mN.culled;
             return;
         }
-        mN.slabs += mCanvas.flushSlab(); // points in front go first
         ++mN.splats;
         const double k = lnT * mF.depthScale;
         for (std::uint32_t y = r[1]; y <= r[3]; ++y)
@@ -238,127 +185,6 @@ class Drawer {
     Canvas& mCanvas;
     HybridSplatStats& mN;
 };
-
-/// OPTICS.md shading with the gradient from central differences of the stored voxels.
-template <class T>
-void shade(const Frame& f, const T* v, int edge, std::uint32_t stored, const glm::dvec3& dir,
-           float* c) {
-    const int x = int(stored % edge), y = int(stored / edge % edge), z = int(stored / edge / edge);
-    auto at = [&](int i, int j, int k) {
-        i = std::clamp(i, 0, edge - 1), j = std::clamp(j, 0, edge - 1),
-        k = std::clamp(k, 0, edge - 1);
-        return double(v[(std::size_t(k) * edge + j) * edge + i]);
-    };
-    const glm::dvec3 g =
-        glm::dvec3(at(x + 1, y, z) - at(x - 1, y, z), at(x, y + 1, z) - at(x, y - 1, z),
-                   at(x, y, z + 1) - at(x, y, z - 1)) *
-        f.gradScale;
-    const double len = glm::length(g);
-    if (!(len > 0.0)) return;
-    const double d = std::abs(glm::dot(g / len, dir));
-    const double spec = ShadingModel::kSpecular * std::pow(d, ShadingModel::kShininess);
-    const double k = ShadingModel::kAmbient + ShadingModel::kDiffuse * d;
-    const double w = std::clamp(len / ShadingModel::kGradientFade, 0.0, 1.0);
-    for (int i = 0; i < 3; ++i)
-        c[i] = float(c[i] + ((c[i] * k + spec) - c[i]) * w);
-}
-
-struct BrickJob {
-    const PlannedBrick* brick;
-    const void* voxels; ///< null for a constant brick
-    const OccupancyTrees* occupancy;
-};
-
-/// False when the leaf or any node above it is empty (the raycaster's walk leaps it).
-bool leafOccupied(const OccupancyTrees& occ, std::uint64_t brick, std::uint32_t depth,
-                  std::uint32_t x, std::uint32_t y, std::uint32_t z) {
-    for (std::uint32_t l = 1; l <= depth; ++l) {
-        const std::uint32_t s = depth - l;
-        if (!occ.occupied(brick, l, {x >> s, y >> s, z >> s})) return false;
-    }
-    return true;
-}
-
-/// The visible voxels of one brick, front to back.
-template <class T>
-std::vector<Visible> visibleVoxels(const Frame& f, const BrickJob& job, std::uint64_t& leaves) {
-    const LevelGeometry& g = f.g;
-    const auto& pos = job.brick->key.pos;
-    const std::uint32_t b = g.brickVoxels, a = g.apronVoxels, edge = b + 2 * a;
-    std::uint32_t extent[3];
-    for (int i = 0; i < 3; ++i)
-        extent[i] =
-            std::uint32_t(std::min<std::uint64_t>(b, g.dims[i] - std::uint64_t(pos[i]) * b));
-    const T* v = static_cast<const T*>(job.voxels);
-    const std::uint32_t leaf = job.occupancy ? job.occupancy->leafVoxels() : b;
-    const std::uint32_t depth = job.occupancy ? job.occupancy->depth() : 0;
-    std::vector<Visible> out;
-    for (std::uint32_t lz = 0; lz * leaf < extent[2]; ++lz)
-        for (std::uint32_t ly = 0; ly * leaf < extent[1]; ++ly)
-            for (std::uint32_t lx = 0; lx * leaf < extent[0]; ++lx) {
-                if (job.occupancy &&
-                    !leafOccupied(*job.occupancy, job.brick->index, depth, lx, ly, lz)) {
-                    ++leaves;
-                    continue;
-                }
-                for (std::uint32_t z = lz * leaf; z < std::min(extent[2], (lz + 1) * leaf); ++z)
-                    for (std::uint32_t y = ly * leaf; y < std::min(extent[1], (ly + 1) * leaf); ++y)
-                        for (std::uint32_t x = lx * leaf; x < std::min(extent[0], (lx + 1) * leaf);
-                             ++x) {
-                            const std::uint32_t s = ((z + a) * edge + (y + a)) * edge + (x + a);
-                            const float value = v ? float(v[s]) : job.brick->constantValue;
-                            if (f.table->lookup(value)[3] <= 0.0f) continue;
-                            const glm::dvec3 voxel{double(pos[0]) * b + x, double(pos[1]) * b + y,
-                                                   double(pos[2]) * b + z};
-                            const glm::dvec3 c = (voxel + 0.5) * g.spacing;
-                            const glm::dvec3 rel = c - f.view.eye;
-                            const double d = f.view.orthographic ? glm::dot(rel, f.view.forward)
-                                                                 : glm::length(rel);
-                            out.push_back({d, s, c, value});
-                        }
-            }
-    std::sort(out.begin(), out.end(),
-              [](const Visible& l, const Visible& r) { return l.depth < r.depth; });
-    return out;
-}
-
-/// The visible voxels of one brick, front to back, classified and shaded. Thread-safe.
-template <class T>
-std::vector<Visible> prepareBrick(const Frame& f, const BrickJob& job, std::uint64_t& leaves) {
-    const int edge = int(f.g.brickVoxels + 2 * f.g.apronVoxels);
-    const T* v = static_cast<const T*>(job.voxels);
-    std::vector<Visible> voxels = visibleVoxels<T>(f, job, leaves);
-    for (Visible& vis : voxels) {
-        vis.rgba = f.table->lookup(vis.value);
-        if (!f.shading || !v) continue; // a constant brick has no gradient
-        const glm::dvec3 dir =
-            f.view.orthographic ? f.view.forward : glm::normalize(vis.centre - f.view.eye);
-        shade(f, v, edge, vis.stored, dir, vis.rgba.data());
-    }
-    return voxels;
-}
-
-Frame frameOf(const HybridSplatterConfig& config, const LevelGeometry& g, const ViewBasis& basis,
-              const RenderOptions& o, const TransferFunctionTable& table) {
-    Frame f;
-    f.view = SplatView::from(basis, o.width, o.height);
-    f.g = g;
-    f.table = &table;
-    const double maxSpacing = std::max({g.spacing.x, g.spacing.y, g.spacing.z});
-    f.radiusMm = config.radiusVoxels * maxSpacing;
-    f.depthScale =
-        g.spacing.x * g.spacing.y * g.spacing.z / (f.radiusMm * f.radiusMm * g.minSpacing());
-    f.slabMm = maxSpacing;
-    const double edgeMm = std::cbrt(g.spacing.x * g.spacing.y * g.spacing.z);
-    f.voxelSteps = edgeMm / g.minSpacing();
-    f.voxelAreaMm2 = edgeMm * edgeMm;
-    f.pointThreshold = config.pointThresholdPixels;
-    f.pointFilter = config.pointFilterPixels;
-    f.shading = o.shading;
-    f.cull = config.occlusionCulling && o.earlyTermination;
-    f.gradScale = 0.5 / (table.domainMax - table.domainMin) * g.minSpacing() / g.spacing;
-    return f;
-}
 
 } // namespace
 
@@ -401,36 +227,10 @@ bool brickOccluded(const Frame& f, const Canvas& canvas, const PlannedBrick& b) 
     }
     const double grow = f.pointFilter + 1.0;
     std::uint32_t r[4];
-    if (!pixelRect(lo - grow, hi + grow, canvas.image.width, canvas.image.height, r)) return true;
+    if (!detail::pixelRect(lo - grow, hi + grow, canvas.image.width, canvas.image.height, r))
+        return true;
     return canvas.occluded(r[0], r[1], r[2], r[3]);
 }
-
-std::vector<Visible> prepareOfType(brickstore::VoxelType type, const Frame& f, const BrickJob& job,
-                                   std::uint64_t& leaves) {
-    switch (type) {
-    case brickstore::VoxelType::U8:
-        return prepareBrick<std::uint8_t>(f, job, leaves);
-    case brickstore::VoxelType::U16:
-        return prepareBrick<std::uint16_t>(f, job, leaves);
-    case brickstore::VoxelType::I16:
-        return prepareBrick<std::int16_t>(f, job, leaves);
-    case brickstore::VoxelType::F32:
-        return prepareBrick<float>(f, job, leaves);
-    }
-    return {};
-}
-
-/// A brick made ready on a worker: pinned, its visible voxels sorted and shaded.
-struct PreparedBrick {
-    brickstore::BrickPin pin;
-    std::vector<Visible> voxels;
-    std::uint64_t leavesSkipped = 0;
-    bool culled = false;
-};
-
-/// Bricks prepared in parallel per chunk, drawn in order: enough bricks to keep the workers
-/// busy, few enough that the culling test before a chunk is still sharp.
-constexpr std::size_t kChunkBricks = 16;
 
 } // namespace
 
@@ -438,24 +238,22 @@ Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::Br
                              const TransferFunction& tf, const Camera& camera,
                              const RenderOptions& options, FrameStats& stats) {
     const auto frameStart = Clock::now();
-    options.validate();
-    camera.validate();
+    // Opacity per unit step: the footprint supplies each voxel's own path length.
+    const SplatScene scene = detail::sceneOf(store, tf, camera, options);
     stats = FrameStats{};
     mLast = HybridSplatStats{};
-    const auto levels = std::uint32_t(store.layout().levels().size());
-    const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
-    const LevelGeometry g = LevelGeometry::of(store, level);
-    const ViewBasis basis = ViewBasis::from(camera, options.width, options.height);
-    // Opacity per unit step: the footprint supplies each voxel's own path length.
-    const TransferFunctionTable table = tf.table(1.0, kTfEntries);
-    const bool octree = options.skip == SkipMode::All && g.apronVoxels > 0;
+    const std::uint32_t level = scene.level;
+    const LevelGeometry& g = scene.g;
+    const ViewBasis& basis = scene.basis;
+    const TransferFunctionTable& table = scene.table;
+    const bool octree = scene.octree;
     if (octree) updateOccupancy(store, level, table, options, stats);
     const BrickPlan plan =
         planBricks(store, g, table, basis, options.skip, octree ? mOccupancy.get() : nullptr);
     recordPlan(plan, level, stats);
     stats.batches = 1;
 
-    const Frame f = frameOf(mConfig, g, basis, options, table);
+    const Frame f = detail::frameOf(mConfig, g, basis, options, table);
     Canvas canvas(options.width, options.height, mConfig.tilePixels,
                   options.earlyTermination ? options.ertThreshold : 2.0);
     Drawer drawer(f, mFootprint, canvas, mLast);
@@ -466,15 +264,8 @@ Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::Br
         for (std::size_t i = 0; i < count; ++i)
             chunk[i].culled = f.cull && brickOccluded(f, canvas, plan.drawn[first + i]);
         const auto prepareStart = Clock::now();
-        tbb::parallel_for(std::size_t(0), count, [&](std::size_t i) {
-            const PlannedBrick& b = plan.drawn[first + i];
-            PreparedBrick& p = chunk[i];
-            if (p.culled) return;
-            if (b.draw == BrickDraw::Sampled) p.pin = cache.pin(b.key);
-            const BrickJob job{&b, p.pin ? p.pin.data().data() : nullptr,
-                               octree && b.draw == BrickDraw::Sampled ? mOccupancy.get() : nullptr};
-            p.voxels = prepareOfType(type, f, job, p.leavesSkipped);
-        });
+        detail::prepareChunk(f, plan, first, cache, type, octree ? mOccupancy.get() : nullptr,
+                             chunk);
         stats.uploadMs += msSince(prepareStart);
         for (std::size_t i = 0; i < count; ++i) {
             PreparedBrick& p = chunk[i];
@@ -502,15 +293,7 @@ Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::Br
 void HybridSplatter::updateOccupancy(const brickstore::BrickStore& store, std::uint32_t level,
                                      const TransferFunctionTable& table,
                                      const RenderOptions& options, FrameStats& stats) {
-    if (!mOccupancy || mStore != &store || mStorePath != store.path() ||
-        mOccupancy->level() != level) {
-        mOccupancy = std::make_unique<OccupancyTrees>(store, level);
-        mStore = &store;
-        mStorePath = store.path();
-    }
-    const auto rebuild = mOccupancy->update(table, options.octree);
-    stats.octreeBricksRebuilt = rebuild.bricksRebuilt;
-    stats.octreeRebuildMs = rebuild.ms;
+    detail::updateOccupancy(mOccupancy, mStore, mStorePath, store, level, table, options, stats);
 }
 
 } // namespace bc::render

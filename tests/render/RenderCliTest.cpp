@@ -7,6 +7,7 @@
 
 #include <array>
 #include <fstream>
+#include <sstream>
 #include <sys/wait.h>
 
 namespace bc::render {
@@ -94,6 +95,53 @@ TEST(BenchCli, PrintsEveryTechniqueSetWithErrorsAndASweepAndNamesBadInput) {
     auto none = brickcast("bench --datasets nosuchscan --no-generated");
     EXPECT_NE(none.exitCode, 0);
     EXPECT_TRUE(contains(none.text, "--datasets")) << none.text;
+}
+
+// `brickcast bench-splat`: the paper's three views per dataset (all splats, mixed, all
+// points, as the splatter's own counts say), the raycaster sweep beside it, errors against
+// the reference; bad sweeps named.
+TEST(SplatBenchCli, PrintsTheFigure9ViewsBesideTheRaycasterSweepAndNamesBadInput) {
+    if (!test::realScan("hydrogen")) GTEST_SKIP() << "missing hydrogen";
+    test::TempDir dir;
+    const std::string csv = dir.file("splat.csv");
+    auto r = brickcast("bench-splat --data " + std::string(BC_SHARED_DATA_DIR) +
+                       " --datasets hydrogen,checker --size 48 --frames 1 --steps 1,2"
+                       " --supersampling 1 --csv " + csv);
+    ASSERT_EQ(r.exitCode, 0) << r.text;
+    EXPECT_TRUE(contains(r.text, "| All splats | Mixed | All points |")) << r.text;
+    EXPECT_TRUE(contains(r.text, "| checker box 100^3 | checker | 100x100x100 | 1000000 |")) << r.text;
+    std::ifstream f(csv);
+    std::string line;
+    std::getline(f, line);
+    EXPECT_EQ(line, "dataset,tf,view,distance_factor,renderer,step,supersampling,ms,psnr_db,ssim,"
+                    "splats,points,culled");
+    int splatRows = 0, raycastRows = 0;
+    while (std::getline(f, line)) {
+        EXPECT_FALSE(contains(line, "nan")) << line;
+        std::vector<std::string> cell;
+        std::stringstream in(line);
+        for (std::string c; std::getline(in, c, ',');) cell.push_back(c);
+        cell.resize(13);
+        if (cell[4] == "cpu raycaster") {
+            ++raycastRows;
+            EXPECT_GT(std::stod(cell[8]), 20.0) << line; // a PSNR, against the reference
+        }
+        if (cell[4] != "splatter") continue;
+        ++splatRows;
+        const double splats = std::stod(cell[10]), points = std::stod(cell[11]);
+        EXPECT_GT(std::stod(cell[8]), 20.0) << line;
+        if (cell[2] == "all splats") EXPECT_TRUE(splats > 0 && points == 0) << line;
+        if (cell[2] == "mixed") EXPECT_TRUE(splats > 0 && points > 0) << line;
+        if (cell[2] == "all points") EXPECT_TRUE(splats == 0 && points > 0) << line;
+    }
+    EXPECT_EQ(splatRows, 6) << "3 views x 2 datasets";
+    EXPECT_EQ(raycastRows, 12) << "2 steps x 3 views x 2 datasets";
+    auto step = brickcast("bench-splat --datasets hydrogen --steps 0");
+    EXPECT_NE(step.exitCode, 0);
+    EXPECT_TRUE(contains(step.text, "--steps")) << step.text;
+    auto ss = brickcast("bench-splat --datasets hydrogen --supersampling 1.5");
+    EXPECT_NE(ss.exitCode, 0);
+    EXPECT_TRUE(contains(ss.text, "--supersampling")) << ss.text;
 }
 
 TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {

@@ -1,0 +1,476 @@
+#include "render/GpuSplatter.h"
+
+#include "brickstore/BrickCache.h"
+#include "brickstore/BrickStore.h"
+#include "render/BrickPlan.h"
+#include "render/Error.h"
+#include "render/Occupancy.h"
+#include "render/SplatGeometry.h"
+#include "render/TransferFunction.h"
+#include "render/detail/Gl.h"
+#include "render/detail/SplatPrep.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace bc::render {
+namespace {
+
+using detail::Frame;
+using detail::PointFilter;
+using detail::PreparedBrick;
+using detail::Visible;
+using detail::VoxelDraw;
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+/// One primitive of the frame's vertex buffer: three vec4 instance attributes.
+struct Primitive {
+    float rect[4];   ///< first and last pixel column and row, inclusive (row 0 at the top)
+    float colour[4]; ///< straight colour; w: k = lnT * depthScale (splat) or cover scale (point)
+    /// splat: centre - eye (mm), half angle (rad; the shader needs only the centre);
+    /// point: filter centre (pixels), 1 / filter radius, 1 for all to the nearest pixel.
+    float shape[4];
+};
+static_assert(sizeof(Primitive) == 12 * sizeof(float));
+
+/// Consecutive primitives of one kind: a run of splats, or the points of one slab.
+struct Batch {
+    bool points = false;
+    std::uint32_t first = 0, count = 0;
+    std::uint32_t box[4] = {0, 0, 0, 0}; ///< pixels the batch touches (columns, rows; inclusive)
+};
+
+/// The frame as primitives: the CPU splatter's decisions (render/HybridSplatter.cpp's Drawer),
+/// recorded in order instead of drawn.
+class PrimitiveList {
+  public:
+    PrimitiveList(const Frame& f, const SplatFootprint& fp, std::uint32_t w, std::uint32_t h,
+                  HybridSplatStats& n)
+        : mF(f), mFp(fp), mW(w), mH(h), mN(n) {}
+
+    std::vector<Primitive> primitives;
+    std::vector<Batch> batches;
+
+    /// Records one classified voxel (straight colour c, opacity a per unit step) at `depth`.
+    void draw(const glm::dvec3& centre, double depth, const float* c, float a) {
+        const VoxelDraw d = detail::classifyDraw(mF, centre, a);
+        if (d.kind == VoxelDraw::Kind::Point)
+            point(d, depth, c);
+        else if (d.kind == VoxelDraw::Kind::Splat)
+            splat(centre, c, d.lnT);
+    }
+    /// Ends the open slab, if any: its points become one batch.
+    void flushSlab() {
+        if (!mSlabOpen) return;
+        mSlabOpen = false;
+        mBatchClosed = true;
+        ++mN.slabs;
+    }
+
+  private:
+    void point(const VoxelDraw& d, double depth, const float* c) {
+        const double R = mF.pointFilter;
+        std::uint32_t r[4];
+        if (!detail::pixelRect(d.image - R, d.image + R, mW, mH, r)) return;
+        if (mSlabOpen && depth > mSlabEnd) flushSlab();
+        if (!mSlabOpen) {
+            mSlabOpen = true;
+            mSlabEnd = depth + mF.slabMm;
+        }
+        ++mN.points;
+        const PointFilter pf = detail::pointFilterOf(mF, mFp, d, mW, mH);
+        Primitive p{{}, {c[0], c[1], c[2], 0.0f}, {float(pf.fx), float(pf.fy), float(1.0 / R), 0}};
+        if (pf.sum > 0.0) {
+            p.colour[3] = float(pf.total / pf.sum);
+        } else { // no pixel centre under the filter: all of it to the nearest pixel
+            const long nx = std::lround(pf.fx), ny = std::lround(pf.fy);
+            if (!(nx >= 0 && ny >= 0 && nx < long(mW) && ny < long(mH))) return;
+            r[0] = r[2] = std::uint32_t(nx);
+            r[1] = r[3] = std::uint32_t(ny);
+            p.colour[3] = float(pf.total);
+            p.shape[3] = 1.0f;
+        }
+        push(p, true, r);
+    }
+
+    void splat(const glm::dvec3& centre, const float* c, double lnT) {
+        const SplatProjection proj = projectSphere(mF.view, centre, mF.radiusMm);
+        if (!proj.ok()) return;
+        const SplatEllipse& e = proj.ellipse;
+        const glm::dvec2 half = e.halfExtent();
+        std::uint32_t r[4];
+        if (!detail::pixelRect(e.centre - half, e.centre + half, mW, mH, r)) return;
+        flushSlab(); // points in front go first
+        ++mN.splats;
+        const glm::dvec3 rel = centre - mF.view.eye;
+        push({{},
+              {c[0], c[1], c[2], float(lnT * mF.depthScale)},
+              {float(rel.x), float(rel.y), float(rel.z), float(e.halfAngleRad)}},
+             false, r);
+    }
+
+    void push(Primitive p, bool points, const std::uint32_t r[4]) {
+        for (int i = 0; i < 4; ++i)
+            p.rect[i] = float(r[i]);
+        if (batches.empty() || mBatchClosed || batches.back().points != points) {
+            batches.push_back(
+                {points, std::uint32_t(primitives.size()), 0, {r[0], r[1], r[2], r[3]}});
+            mBatchClosed = false;
+        }
+        Batch& b = batches.back();
+        ++b.count;
+        b.box[0] = std::min(b.box[0], r[0]);
+        b.box[1] = std::min(b.box[1], r[1]);
+        b.box[2] = std::max(b.box[2], r[2]);
+        b.box[3] = std::max(b.box[3], r[3]);
+        primitives.push_back(p);
+    }
+
+    const Frame& mF;
+    const SplatFootprint& mFp;
+    std::uint32_t mW, mH;
+    HybridSplatStats& mN;
+    bool mSlabOpen = false, mBatchClosed = true;
+    double mSlabEnd = 0.0;
+};
+
+// Quads over pixel rectangles; GL window row = image row (row 0 at the top of the image is
+// row 0 of the target), so the read-back needs no flip.
+const std::string kQuadVertex = R"(#version 450 core
+layout(location = 0) in vec4 aRect;
+layout(location = 1) in vec4 aColour;
+layout(location = 2) in vec4 aShape;
+uniform vec2 uViewport;
+flat out vec4 vColour;
+flat out vec4 vShape;
+void main() {
+    vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
+    vec2 pixel = mix(aRect.xy, aRect.zw + 1.0, corner);
+    gl_Position = vec4(pixel / uViewport * 2.0 - 1.0, 0.0, 1.0);
+    vColour = aColour;
+    vShape = aShape;
+}
+)";
+
+// Linear between neighbouring texels with full-precision weights: filtering hardware may
+// quantise them (8 bits on many GPUs). GpuSplatter::sampleFootprint is the CPU twin.
+std::string footprintGlsl() {
+    return "const int kTexels = " + std::to_string(GpuSplatter::kFootprintTexels) + ";\n" +
+           R"(layout(binding = 0) uniform sampler1D uFootprint;
+float footprint(float d) {
+    float u = clamp(d, 0.0, 1.0) * float(kTexels - 1);
+    int i = min(int(u), kTexels - 2);
+    return mix(texelFetch(uFootprint, i, 0).r, texelFetch(uFootprint, i + 1, 0).r, u - float(i));
+}
+)";
+}
+
+// The pixel's eye ray against the sphere centre: distance in radii is the footprint index
+// after correctedDistance (render/SplatGeometry.h), exact in perspective and orthographic.
+std::string splatFragment() {
+    return "#version 450 core\n" + footprintGlsl() + R"(
+uniform vec2 uViewport;
+uniform vec3 uForward, uRight, uUp;
+uniform float uFocal, uOrthoScale, uInvRadius;
+uniform bool uOrtho;
+flat in vec4 vColour;
+flat in vec4 vShape;
+out vec4 outColor;
+void main() {
+    vec2 p = vec2(gl_FragCoord.x - 0.5 * uViewport.x, 0.5 * uViewport.y - gl_FragCoord.y);
+    vec3 rel = vShape.xyz;
+    float d;
+    if (uOrtho) {
+        vec2 q = p / uOrthoScale;
+        d = length(cross(rel - q.x * uRight - q.y * uUp, uForward));
+    } else {
+        vec3 w = normalize(uForward + (p.x / uFocal) * uRight + (p.y / uFocal) * uUp);
+        if (!(dot(w, rel) > 0.0)) discard;
+        d = length(cross(rel, w));
+    }
+    d *= uInvRadius;
+    if (!(d < 1.0)) discard;
+    float a = 1.0 - exp(-vColour.w * footprint(d));
+    outColor = vec4(a * vColour.rgb, a);
+}
+)";
+}
+
+std::string pointFragment() {
+    return "#version 450 core\n" + footprintGlsl() + R"(
+flat in vec4 vColour;
+flat in vec4 vShape;
+out vec4 outColor;
+void main() {
+    float w = 1.0;
+    if (vShape.w == 0.0) {
+        float d = length(gl_FragCoord.xy - 0.5 - vShape.xy) * vShape.z;
+        if (!(d < 1.0)) discard;
+        w = footprint(d);
+    }
+    float cover = vColour.w * w;
+    outColor = vec4(cover * vColour.rgb, cover);
+}
+)";
+}
+
+const std::string kFullScreenVertex = R"(#version 450 core
+void main() {
+    vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+)";
+
+// The slab as one layer: summed coverage clamped to 1, coverage-weighted colour.
+const std::string kCompositeFragment = R"(#version 450 core
+layout(binding = 1) uniform sampler2D uSlab;
+out vec4 outColor;
+void main() {
+    vec4 s = texelFetch(uSlab, ivec2(gl_FragCoord.xy), 0);
+    if (!(s.a > 0.0)) discard;
+    float a = min(s.a, 1.0);
+    outColor = vec4(s.rgb * (a / s.a), a);
+}
+)";
+
+gl::Texture floatTarget(std::uint32_t w, std::uint32_t h, gl::Framebuffer& fbo) {
+    gl::Texture t = gl::createTexture(GL_TEXTURE_2D);
+    glTextureStorage2D(t.get(), 1, GL_RGBA32F, GLsizei(w), GLsizei(h));
+    glTextureParameteri(t.get(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(t.get(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    GLuint f = 0;
+    glCreateFramebuffers(1, &f);
+    fbo = gl::Framebuffer(f);
+    glNamedFramebufferTexture(f, GL_COLOR_ATTACHMENT0, t.get(), 0);
+    if (glCheckNamedFramebufferStatus(f, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+        throw RenderError("splatter render target " + std::to_string(w) + "x" + std::to_string(h) +
+                          " is incomplete");
+    return t;
+}
+
+/// dst += (1 - dst.a) * src, src premultiplied: front-to-back 'over'.
+void blendFrontToBack() {
+    glBlendFuncSeparate(GL_ONE_MINUS_DST_ALPHA, GL_ONE, GL_ONE_MINUS_DST_ALPHA, GL_ONE);
+}
+
+} // namespace
+
+struct GpuSplatter::Gpu {
+    gl::Program splat, point, composite;
+    gl::VertexArray quads, empty;
+    gl::Buffer primitives;
+    std::size_t primitiveBytes = 0; ///< capacity of `primitives`
+    gl::Texture footprint;
+    gl::Texture colour, slab;
+    gl::Framebuffer colourFbo, slabFbo;
+    std::uint32_t width = 0, height = 0;
+
+    void ensureTargets(std::uint32_t w, std::uint32_t h) {
+        if (w == width && h == height) return;
+        colour = floatTarget(w, h, colourFbo);
+        slab = floatTarget(w, h, slabFbo);
+        width = w;
+        height = h;
+        gl::glCheck("allocating splatter render targets");
+    }
+
+    void upload(const std::vector<Primitive>& list) {
+        const std::size_t bytes = list.size() * sizeof(Primitive);
+        if (bytes > primitiveBytes) {
+            primitiveBytes = std::max(bytes, 2 * primitiveBytes);
+            primitives = gl::createBuffer();
+            glNamedBufferStorage(primitives.get(), GLsizeiptr(primitiveBytes), nullptr,
+                                 GL_DYNAMIC_STORAGE_BIT);
+            glVertexArrayVertexBuffer(quads.get(), 0, primitives.get(), 0, sizeof(Primitive));
+        }
+        if (bytes > 0) glNamedBufferSubData(primitives.get(), 0, GLsizeiptr(bytes), list.data());
+        gl::glCheck("uploading splat primitives");
+    }
+
+    void drawSlab(const Batch& b) {
+        glBindFramebuffer(GL_DRAW_FRAMEBUFFER, slabFbo.get());
+        glUseProgram(point.get());
+        glBindVertexArray(quads.get());
+        glBlendFunc(GL_ONE, GL_ONE);
+        glDrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, GLsizei(b.count), b.first);
+        // Composite and clear only the slab's pixel box (scissored; window row = image row).
+        glEnable(GL_SCISSOR_TEST);
+        glScissor(GLint(b.box[0]), GLint(b.box[1]), GLsizei(b.box[2] - b.box[0] + 1),
+                  GLsizei(b.box[3] - b.box[1] + 1));
+        glBindFramebuffer(GL_DRAW_FRAMEBUFFER, colourFbo.get());
+        glUseProgram(composite.get());
+        glBindVertexArray(empty.get());
+        blendFrontToBack();
+        glDrawArrays(GL_TRIANGLES, 0, 3);
+        const float zero[4] = {0, 0, 0, 0};
+        glClearNamedFramebufferfv(slabFbo.get(), GL_COLOR, 0, zero);
+        glDisable(GL_SCISSOR_TEST);
+    }
+
+    void draw(const std::vector<Batch>& batches) {
+        const float zero[4] = {0, 0, 0, 0};
+        glDisable(GL_SCISSOR_TEST);
+        glClearNamedFramebufferfv(colourFbo.get(), GL_COLOR, 0, zero);
+        glClearNamedFramebufferfv(slabFbo.get(), GL_COLOR, 0, zero);
+        glViewport(0, 0, GLsizei(width), GLsizei(height));
+        glDisable(GL_DEPTH_TEST);
+        glDisable(GL_CULL_FACE);
+        glEnable(GL_BLEND);
+        glBlendEquation(GL_FUNC_ADD);
+        glBindTextureUnit(0, footprint.get());
+        glBindTextureUnit(1, slab.get());
+        for (const Batch& b : batches) {
+            if (b.points) {
+                drawSlab(b);
+                continue;
+            }
+            glBindFramebuffer(GL_DRAW_FRAMEBUFFER, colourFbo.get());
+            glUseProgram(splat.get());
+            glBindVertexArray(quads.get());
+            blendFrontToBack();
+            glDrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, GLsizei(b.count), b.first);
+        }
+        glDisable(GL_BLEND); // other renderers of this context expect the default state
+        glBindFramebuffer(GL_DRAW_FRAMEBUFFER, 0);
+        glBindVertexArray(0);
+        glUseProgram(0);
+        gl::glCheck("drawing splats");
+    }
+
+    Image readBack() {
+        Image image(width, height);
+        glGetTextureImage(colour.get(), 0, GL_RGBA, GL_FLOAT, GLsizei(image.rgba.size() * 4),
+                          image.rgba.data());
+        gl::glCheck("reading the splatter image back");
+        for (float& v : image.rgba)
+            v = std::clamp(v, 0.0f, 1.0f);
+        return image;
+    }
+};
+
+namespace {
+
+void setViewUniforms(GLuint p, const Frame& f, std::uint32_t w, std::uint32_t h) {
+    auto vec3 = [&](const char* name, const glm::dvec3& x) {
+        glProgramUniform3f(p, glGetUniformLocation(p, name), float(x.x), float(x.y), float(x.z));
+    };
+    auto f1 = [&](const char* name, double x) {
+        glProgramUniform1f(p, glGetUniformLocation(p, name), float(x));
+    };
+    glProgramUniform2f(p, glGetUniformLocation(p, "uViewport"), float(w), float(h));
+    vec3("uForward", f.view.forward);
+    vec3("uRight", f.view.right);
+    vec3("uUp", f.view.up);
+    f1("uFocal", f.view.focalLength);
+    f1("uOrthoScale", f.view.orthoScale);
+    f1("uInvRadius", 1.0 / f.radiusMm);
+    glProgramUniform1i(p, glGetUniformLocation(p, "uOrtho"), f.view.orthographic);
+}
+
+/// The instance attributes of Primitive, from binding 0 (the buffer is attached on upload).
+void describePrimitives(GLuint vao) {
+    for (GLuint i = 0; i < 3; ++i) {
+        glEnableVertexArrayAttrib(vao, i);
+        glVertexArrayAttribFormat(vao, i, 4, GL_FLOAT, GL_FALSE, i * 4 * sizeof(float));
+        glVertexArrayAttribBinding(vao, i, 0);
+    }
+    glVertexArrayBindingDivisor(vao, 0, 1);
+}
+
+} // namespace
+
+std::vector<float> GpuSplatter::footprintTexels(const SplatFootprint& footprint) {
+    std::vector<float> texels(kFootprintTexels);
+    for (std::uint32_t k = 0; k < kFootprintTexels; ++k)
+        texels[k] = float(footprint.lineIntegral(double(k) / (kFootprintTexels - 1)));
+    return texels;
+}
+
+double GpuSplatter::sampleFootprint(const std::vector<float>& texels, double distanceRadii) {
+    if (!(distanceRadii < 1.0)) return 0.0;
+    const double u = std::clamp(distanceRadii, 0.0, 1.0) * (kFootprintTexels - 1);
+    const std::uint32_t i = std::min(std::uint32_t(u), kFootprintTexels - 2);
+    return texels[i] + (u - i) * (double(texels[i + 1]) - texels[i]);
+}
+
+GpuSplatter::GpuSplatter(const HybridSplatterConfig& config)
+    : mConfig((config.validate(), config)),
+      mFootprint(SplatFootprintConfig{config.sigmaOverRadius}), mGpu(std::make_unique<Gpu>()) {
+    mGpu->splat = gl::buildProgram("splat", kQuadVertex, splatFragment());
+    mGpu->point = gl::buildProgram("splat point", kQuadVertex, pointFragment());
+    mGpu->composite =
+        gl::buildProgram("splat slab composite", kFullScreenVertex, kCompositeFragment);
+    GLuint vao[2] = {0, 0};
+    glCreateVertexArrays(2, vao);
+    mGpu->quads = gl::VertexArray(vao[0]);
+    mGpu->empty = gl::VertexArray(vao[1]);
+    describePrimitives(vao[0]);
+    mGpu->footprint = gl::createTexture(GL_TEXTURE_1D);
+    glTextureStorage1D(mGpu->footprint.get(), 1, GL_R32F, GLsizei(kFootprintTexels));
+    glTextureParameteri(mGpu->footprint.get(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(mGpu->footprint.get(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    const std::vector<float> texels = footprintTexels(mFootprint);
+    glTextureSubImage1D(mGpu->footprint.get(), 0, 0, GLsizei(kFootprintTexels), GL_RED, GL_FLOAT,
+                        texels.data());
+    gl::glCheck("creating the splatter");
+}
+
+GpuSplatter::~GpuSplatter() = default;
+
+Image GpuSplatter::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
+                          const TransferFunction& tf, const Camera& camera,
+                          const RenderOptions& options, FrameStats& stats) {
+    const auto frameStart = Clock::now();
+    const detail::SplatScene scene = detail::sceneOf(store, tf, camera, options);
+    stats = FrameStats{};
+    mLast = HybridSplatStats{};
+    if (scene.octree)
+        detail::updateOccupancy(mOccupancy, mStore, mStorePath, store, scene.level, scene.table,
+                                options, stats);
+    const OccupancyTrees* occupancy = scene.octree ? mOccupancy.get() : nullptr;
+    const BrickPlan plan =
+        planBricks(store, scene.g, scene.table, scene.basis, options.skip, occupancy);
+    recordPlan(plan, scene.level, stats);
+
+    const auto prepareStart = Clock::now();
+    const Frame f = detail::frameOf(mConfig, scene.g, scene.basis, options, scene.table);
+    PrimitiveList list(f, mFootprint, options.width, options.height, mLast);
+    const auto type = store.info().volume.type;
+    for (std::size_t first = 0; first < plan.drawn.size(); first += detail::kChunkBricks) {
+        std::vector<PreparedBrick> chunk(std::min(detail::kChunkBricks, plan.drawn.size() - first));
+        detail::prepareChunk(f, plan, first, cache, type, occupancy, chunk);
+        for (const PreparedBrick& p : chunk) {
+            mLast.leavesSkipped += p.leavesSkipped;
+            for (const Visible& vis : p.voxels)
+                list.draw(vis.centre, vis.depth, vis.rgba.data(), vis.rgba[3]);
+            list.flushSlab(); // the next brick may lie in front of this slab
+        }
+    }
+    mGpu->ensureTargets(options.width, options.height);
+    mGpu->upload(list.primitives);
+    setViewUniforms(mGpu->splat.get(), f, options.width, options.height);
+    setViewUniforms(mGpu->point.get(), f, options.width, options.height);
+    gl::glCheck("setting splatter uniforms");
+    stats.uploadMs = msSince(prepareStart);
+
+    const auto renderStart = Clock::now();
+    mGpu->draw(list.batches);
+    glFinish();
+    stats.renderMs = msSince(renderStart);
+    const auto readStart = Clock::now();
+    Image image = mGpu->readBack();
+    stats.readbackMs = msSince(readStart);
+    stats.batches = std::uint32_t(list.batches.size());
+    stats.samples = mLast.points + mLast.splats;
+    stats.octreeLeaps = mLast.leavesSkipped;
+    stats.occlusionReason = "not on the splatter";
+    stats.totalMs = msSince(frameStart);
+    return image;
+}
+
+} // namespace bc::render
