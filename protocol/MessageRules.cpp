@@ -176,7 +176,7 @@ void check(Rules& r, const SetRenderOptions& m) {
     r.realRange("stepVoxels", o.stepVoxels, 0, 64, true, false);
     checkTechniques(r, o.techniques);
     r.realRange("ertThreshold", o.ertThreshold, 0, 1, true, false);
-    r.enumValue("renderer", std::uint8_t(o.renderer), 3);
+    r.enumValue("renderer", std::uint8_t(o.renderer), 4);
     r.enumValue("quality", std::uint8_t(o.quality), 2);
     r.enumValue("codec", std::uint8_t(o.codec), 3);
     if (r.ok()) checkCodecQuality(r, o.codec, o.codecQuality);

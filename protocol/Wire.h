@@ -85,7 +85,13 @@ enum Technique : std::uint32_t {
 };
 
 enum class Codec : std::uint8_t { Raw = 0, Zstd = 1, ZstdDelta = 2, Jpeg = 3 };
-enum class Renderer : std::uint8_t { GpuRaycaster = 0, CpuRaycaster = 1, Reference = 2, Splatter = 3 };
+enum class Renderer : std::uint8_t {
+    GpuRaycaster = 0,
+    CpuRaycaster = 1,
+    Reference = 2,
+    Splatter = 3,    ///< hybrid forward splatting on the CPU
+    GpuSplatter = 4, ///< the same model drawn by OpenGL
+};
 enum class Quality : std::uint8_t { Adaptive = 0, Refined = 1, Interactive = 2 };
 enum class FrameMode : std::uint8_t { Once = 0, ContinuousOn = 1, ContinuousOff = 2 };
 enum class TfKind : std::uint8_t { Preset = 0, Points = 1 };

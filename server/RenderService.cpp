@@ -3,6 +3,7 @@
 #include "render/CpuRaycaster.h"
 #include "render/BrickPool.h"
 #include "render/EglContext.h"
+#include "render/GpuSplatter.h"
 #include "render/HybridSplatter.h"
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
@@ -161,6 +162,7 @@ struct SessionRenderers {
     std::unique_ptr<render::Raycaster> gpu;
     std::unique_ptr<render::CpuRaycaster> cpu;
     std::unique_ptr<render::HybridSplatter> splat;
+    std::unique_ptr<render::GpuSplatter> gpuSplat;
 };
 
 struct RenderService::Renderers {
@@ -181,7 +183,7 @@ struct RenderService::Renderers {
     }
     SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
         auto& s = sessions[slot.get()];
-        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr, nullptr}; // a reused address
+        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr, nullptr, nullptr}; // a reused address
         return s;
     }
 };
@@ -242,6 +244,7 @@ const char* rendererName(protocol::Renderer r) {
     case protocol::Renderer::CpuRaycaster: return "cpu";
     case protocol::Renderer::Reference: return "reference";
     case protocol::Renderer::Splatter: return "splat";
+    case protocol::Renderer::GpuSplatter: return "splat-gpu";
     }
     return "unknown";
 }
@@ -285,7 +288,7 @@ void RenderService::collect(MetricSet& m) {
             waiting += at && *at <= now;
         }
     const Counters& c = *mCounters;
-    for (const char* r : {"gpu", "cpu", "splat", "reference"}) {
+    for (const char* r : {"gpu", "cpu", "splat", "splat-gpu", "reference"}) {
         const auto it = c.frames.find(r);
         m.counter("frames_total", "Frames drawn and encoded, by renderer",
                   it == c.frames.end() ? 0.0 : it->second, {{"renderer", r}});
@@ -480,6 +483,13 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
         auto& mine = r.of(slotPtr);
         if (!mine.splat) mine.splat = std::make_unique<render::HybridSplatter>();
         image = mine.splat->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
+        break;
+    }
+    case protocol::Renderer::GpuSplatter: {
+        if (!r.context) throw std::runtime_error("this server has no OpenGL 4.5 context");
+        auto& mine = r.of(slotPtr);
+        if (!mine.gpuSplat) mine.gpuSplat = std::make_unique<render::GpuSplatter>();
+        image = mine.gpuSplat->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
         break;
     }
     case protocol::Renderer::Reference: {

@@ -96,7 +96,9 @@ protocol::RenderOptions renderOptions(const Options& o) {
     if (o.renderer == "cpu") r.renderer = protocol::Renderer::CpuRaycaster;
     else if (o.renderer == "reference") r.renderer = protocol::Renderer::Reference;
     else if (o.renderer == "splat") r.renderer = protocol::Renderer::Splatter;
-    else if (o.renderer != "gpu") throw CLI::ValidationError("--renderer", "gpu, cpu, splat or reference");
+    else if (o.renderer == "splat-gpu") r.renderer = protocol::Renderer::GpuSplatter;
+    else if (o.renderer != "gpu")
+        throw CLI::ValidationError("--renderer", "gpu, cpu, splat, splat-gpu or reference");
     return r;
 }
 
@@ -186,7 +188,7 @@ int main(int argc, char** argv) {
     app.add_option("--tf-switch", o.tfSwitch, "PRESET@FRAME: switch the transfer function mid-flight");
     app.add_option("--codec", o.codec, "raw, zstd, delta or jpeg")->capture_default_str();
     app.add_option("--quality", o.quality, "JPEG quality or zstd level (0 = default)")->check(CLI::Range(0, 100));
-    app.add_option("--renderer", o.renderer, "gpu, cpu, splat or reference")->capture_default_str();
+    app.add_option("--renderer", o.renderer, "gpu, cpu, splat, splat-gpu or reference")->capture_default_str();
     app.add_flag("--continuous", o.continuous, "Continuous mode instead of one request a frame");
     app.add_option("-o,--output-dir", o.outputDir, "Save frames as PNG here");
     app.add_option("--save-every", o.saveEvery, "Save every Nth frame")->capture_default_str();

@@ -5,6 +5,7 @@
 #include "render/Camera.h"
 #include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
+#include "render/GpuSplatter.h"
 #include "render/HybridSplatter.h"
 #include "render/Image.h"
 #include "render/Raycaster.h"
@@ -120,8 +121,10 @@ void runRender(const RenderCliOptions& o) {
     render::FrameStats stats;
     render::Image image;
     std::string renderer;
-    if (o.renderer != "gpu" && o.renderer != "cpu" && o.renderer != "splat")
-        throw std::invalid_argument("--renderer: '" + o.renderer + "' is not gpu, cpu or splat");
+    if (o.renderer != "gpu" && o.renderer != "cpu" && o.renderer != "splat" &&
+        o.renderer != "splat-gpu")
+        throw std::invalid_argument("--renderer: '" + o.renderer +
+                                    "' is not gpu, cpu, splat or splat-gpu");
     if (o.reference) {
         const auto level = std::min<std::uint32_t>(
             std::uint32_t(o.level), std::uint32_t(store->layout().levels().size() - 1));
@@ -135,6 +138,14 @@ void runRender(const RenderCliOptions& o) {
         const auto& f = splatter.lastFrame();
         renderer = "hybrid splatter (CPU, " + std::to_string(f.points) + " points, " +
                    std::to_string(f.splats) + " splats, " + std::to_string(f.culled) + " culled)";
+    } else if (o.renderer == "splat-gpu") {
+        render::EglContext context;
+        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
+        render::GpuSplatter splatter;
+        image = splatter.render(*store, cache, tf, camera, options, stats);
+        const auto& f = splatter.lastFrame();
+        renderer = "hybrid splatter (" + context.renderer() + ", " + std::to_string(f.points) +
+                   " points, " + std::to_string(f.splats) + " splats)";
     } else if (o.renderer == "cpu") {
         brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
         render::CpuRaycaster raycaster;
@@ -232,8 +243,8 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_flag("--interactive", o->interactive,
                   "Draw a coarser level when the view exceeds the GPU budget");
     cmd->add_option("--renderer", o->renderer,
-                    "gpu (EGL raycaster), cpu (the CPU raycaster, fastest without a GPU) or splat "
-                    "(hybrid forward splatting, CPU)")
+                    "gpu (EGL raycaster), cpu (the CPU raycaster, fastest without a GPU), splat "
+                    "(hybrid forward splatting, CPU) or splat-gpu (the same, drawn by OpenGL)")
         ->capture_default_str();
     cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
     cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");

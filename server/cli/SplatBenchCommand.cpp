@@ -6,7 +6,8 @@
 // median ms, the share of drawn voxels that were splats, its error against the float64
 // reference (k x k supersampled: the pixel's area average, which is what an antialiased
 // image should converge to), the same with occlusion culling off (and the largest pixel
-// difference, which must be 0: culling changes no pixel), and the CPU raycaster in every
+// difference, which must be 0: culling changes no pixel), the GPU splatter when EGL gives a
+// context (its ms and largest difference from the CPU splatter), and the CPU raycaster in every
 // (step, supersampling) configuration of the sweep: its default (1 voxel, no
 // supersampling), and the fastest configuration whose PSNR is at least the splatter's, the
 // raycaster "at equal error". Ratios come from one run: the machines are shared and noisy.
@@ -16,6 +17,8 @@
 #include "brickstore/Readers.h"
 #include "render/BrickPlan.h"
 #include "render/CpuRaycaster.h"
+#include "render/EglContext.h"
+#include "render/GpuSplatter.h"
 #include "render/HybridSplatter.h"
 #include "render/ImageMetrics.h"
 #include "render/ReferenceRenderer.h"
@@ -53,7 +56,7 @@ struct SplatBenchOptions {
     std::uint32_t referenceSupersampling = 2;
     double referenceStep = 0.5;
     int frames = 3;
-    bool noChecker = false;
+    bool noChecker = false, noGpu = false;
 };
 
 /// The paper's fifth volume: a 100^3 checker box, every voxel non-transparent.
@@ -162,6 +165,7 @@ struct ViewResult {
     std::string view;
     double distanceFactor = 0;
     double splatMs = 0, noCullMs = 0, psnr = 0, ssim = 0, cullMaxAbs = 0;
+    double gpuMs = std::nan(""), gpuMaxAbs = std::nan(""); ///< NaN: no GPU splatter run
     render::HybridSplatStats n;
     std::vector<RaycastConfig> raycasts;
     double splatFraction() const {
@@ -195,7 +199,7 @@ std::uint64_t countVisible(const render::ReferenceVolume& volume,
 }
 
 std::vector<ViewResult> benchDataset(Scene& s, const Dataset& d, const SplatBenchOptions& o,
-                                     const std::vector<RaycastConfig>& sweep) {
+                                     const std::vector<RaycastConfig>& sweep, bool gpu) {
     const render::LevelGeometry g = render::LevelGeometry::of(*s.store, 0);
     render::HybridSplatterConfig culling, noCulling;
     noCulling.occlusionCulling = false;
@@ -234,6 +238,15 @@ std::vector<ViewResult> benchDataset(Scene& s, const Dataset& d, const SplatBenc
         r.psnr = cmp.psnrDb;
         r.ssim = cmp.ssim;
         r.cullMaxAbs = render::compareImages(splat.first, plain.first).maxAbs;
+        if (gpu) {
+            render::GpuSplatter splatter(culling);
+            const Timed g = timeFrames(cams, [&](const render::Camera& c, render::HybridSplatStats&) {
+                render::FrameStats st;
+                return splatter.render(*s.store, *s.cache, *s.tf, c, ro, st);
+            });
+            r.gpuMs = g.ms;
+            r.gpuMaxAbs = render::compareImages(g.first, plain.first).maxAbs;
+        }
 
         render::CpuRaycaster raycaster;
         for (RaycastConfig rc : sweep) {
@@ -290,19 +303,23 @@ void printTables(const std::vector<std::pair<Dataset, std::string>>& sets,
                 "step %g, %ux%u supersampled)\n\n",
                 o.referenceStep, o.referenceSupersampling, o.referenceSupersampling);
     std::printf("| Dataset | View | Distance | Drawn (culled) | Splatter ms | PSNR dB | SSIM | "
-                "No culling ms (max diff) | Raycaster default | Raycaster at equal error | "
-                "Splatter / equal-error raycaster time |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+                "No culling ms (max diff) | GPU splatter ms (max diff) | Raycaster default | "
+                "Raycaster at equal error | Splatter / equal-error raycaster time |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const auto& rows : results)
         for (const auto& r : rows) {
             const auto* eq = r.equalError();
             char ratio[32] = "n/a";
             if (eq) std::snprintf(ratio, sizeof ratio, "%.2f", r.splatMs / eq->ms);
+            char gpu[48] = "not run";
+            if (!std::isnan(r.gpuMs))
+                std::snprintf(gpu, sizeof gpu, "%.0f (%.5f)", r.gpuMs, r.gpuMaxAbs);
             std::printf("| %s %s | %s | %.2f | %llu (%llu) | %.0f | %.1f | %.4f | %.0f (%.4f) | %s | "
-                        "%s | %s |\n",
+                        "%s | %s | %s |\n",
                         r.dataset.c_str(), r.preset.c_str(), r.view.c_str(), r.distanceFactor,
                         (unsigned long long)(r.n.points + r.n.splats),
                         (unsigned long long)r.n.culled, r.splatMs, r.psnr, r.ssim, r.noCullMs,
-                        r.cullMaxAbs, raycastText(r.defaultRaycast()).c_str(),
+                        r.cullMaxAbs, gpu, raycastText(r.defaultRaycast()).c_str(),
                         raycastText(eq).c_str(), ratio);
         }
 }
@@ -319,6 +336,9 @@ void writeCsv(const std::string& path, const std::vector<std::vector<ViewResult>
                 << r.n.splats << ',' << r.n.points << ',' << r.n.culled << '\n';
             out << r.dataset << ',' << r.preset << ',' << r.view << ',' << r.distanceFactor
                 << ",splatter no culling,,1," << r.noCullMs << ",,,,,\n";
+            if (!std::isnan(r.gpuMs))
+                out << r.dataset << ',' << r.preset << ',' << r.view << ',' << r.distanceFactor
+                    << ",gpu splatter,,1," << r.gpuMs << ",,,,,\n";
             for (const auto& c : r.raycasts)
                 out << r.dataset << ',' << r.preset << ',' << r.view << ',' << r.distanceFactor
                     << ",cpu raycaster," << c.step << ',' << c.supersampling << ',' << c.ms << ','
@@ -349,11 +369,20 @@ void runSplatBench(const SplatBenchOptions& o) {
         datasets.push_back(checkerBox());
     if (datasets.empty()) throw std::invalid_argument("--datasets: none of the named scans is here");
 
+    std::optional<render::EglContext> context;
+    if (!o.noGpu) {
+        try {
+            context.emplace();
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "bench-splat: no GPU splatter: %s\n", e.what());
+        }
+    }
     std::printf("brickcast bench-splat: %u^2 frames, %d timed frames per view (orbit 2 deg/frame "
                 "at the view's distance), shaded, early termination 0.99, bricks %u^3 + 2, "
                 "%u threads; CPU hybrid splatter (radius 1.25 voxels, points below 0.5 px) "
-                "and CPU raycaster\n",
-                o.size, o.frames, o.brick, std::thread::hardware_concurrency());
+                "and CPU raycaster; GPU splatter on %s\n",
+                o.size, o.frames, o.brick, std::thread::hardware_concurrency(),
+                context ? context->renderer().c_str() : "nothing (not run)");
     const std::string tmp =
         (std::filesystem::temp_directory_path() / ("bc-bench-splat-" + std::to_string(getpid())))
             .string();
@@ -376,7 +405,7 @@ void runSplatBench(const SplatBenchOptions& o) {
                                 : render::TransferFunction::parse(d.tfJson, d.name, stats);
         visible.push_back(countVisible(*s.volume, s.tf->table(1.0)));
         sets.emplace_back(d, dims(render::LevelGeometry::of(*s.store, 0)));
-        results.push_back(benchDataset(s, d, o, sweep));
+        results.push_back(benchDataset(s, d, o, sweep, context.has_value()));
     }
     std::filesystem::remove_all(tmp);
     printTables(sets, visible, results, o);
@@ -408,6 +437,7 @@ void addSplatBenchCommand(CLI::App& app) {
     cmd->add_option("--brick", o->brick, "Brick edge of the stores")->capture_default_str();
     cmd->add_option("--csv", o->csv, "Write every measurement as CSV");
     cmd->add_flag("--no-checker", o->noChecker, "Leave out the generated 100^3 checker box");
+    cmd->add_flag("--no-gpu", o->noGpu, "Leave out the GPU splatter (slow on llvmpipe)");
     cmd->callback([o] { runSplatBench(*o); });
 }
 

@@ -1,12 +1,14 @@
-// brickcastd end to end on loopback: nine concurrent clients on different real scans,
+// brickcastd end to end on loopback: ten concurrent clients on different real scans,
 // transfer functions, renderers and codecs; every frame a client receives equals a direct
-// render of the same request (exactly for the CPU raycaster and the splatter with lossless
-// codecs; within the skipping invariant's 2/255 for the GPU raycaster, whose brick pool the
-// daemon shares between sessions; within JPEG's bound for JPEG).
+// render of the same request (exactly for the CPU raycaster and the CPU splatter with
+// lossless codecs; within the skipping invariant's 2/255 for the GPU raycaster, whose brick
+// pool the daemon shares between sessions, and for the GPU splatter; within JPEG's bound for
+// JPEG).
 #include "ServerTestSupport.h"
 
 #include "../render/RenderTestSupport.h"
 #include "render/CpuRaycaster.h"
+#include "render/GpuSplatter.h"
 #include "render/HybridSplatter.h"
 #include "render/Raycaster.h"
 #include "server/ViewRequest.h"
@@ -63,7 +65,7 @@ std::vector<Received> fly(const TestDaemon& d, const ClientPlan& plan, int seed)
 /// The frame a fresh renderer draws for the same request.
 std::vector<std::uint8_t> directRender(bc::test::TestStore& t, const Received& r,
                                        render::Raycaster& gpu, render::CpuRaycaster& cpu,
-                                       render::HybridSplatter& splat) {
+                                       render::HybridSplatter& splat, render::GpuSplatter& gpuSplat) {
     const auto tf = toTransferFunction(r.tf, render::VolumeValueStats::fromStore(t.store->info()));
     render::RenderOptions o = toRenderOptions(r.options, false);
     o.shading = shadingFor(r.options, r.tf, *tf);
@@ -75,7 +77,9 @@ std::vector<std::uint8_t> directRender(bc::test::TestStore& t, const Received& r
     const render::Image image =
         renderer == protocol::Renderer::CpuRaycaster ? cpu.render(*t.store, *t.cache, *tf, camera, o, stats)
         : renderer == protocol::Renderer::Splatter   ? splat.render(*t.store, *t.cache, *tf, camera, o, stats)
-                                                     : gpu.render(*t.store, *t.cache, *tf, camera, o, stats);
+        : renderer == protocol::Renderer::GpuSplatter
+            ? gpuSplat.render(*t.store, *t.cache, *tf, camera, o, stats)
+            : gpu.render(*t.store, *t.cache, *tf, camera, o, stats);
     return render::toRgba8(image);
 }
 
@@ -93,7 +97,7 @@ double meanAbsDiffRgb(const std::vector<std::uint8_t>& a, const std::vector<std:
     return sum / double(a.size() / 4 * 3);
 }
 
-TEST(DaemonEndToEnd, NineConcurrentClientsEachReceiveTheDirectRenderOfTheirRequest) {
+TEST(DaemonEndToEnd, TenConcurrentClientsEachReceiveTheDirectRenderOfTheirRequest) {
     const std::vector<std::string> scans = {"cthead", "CT_AVM", "headsq", "hydrogen"};
     std::map<std::string, std::unique_ptr<bc::test::TestStore>> stores;
     bc::test::glContext();
@@ -122,6 +126,7 @@ TEST(DaemonEndToEnd, NineConcurrentClientsEachReceiveTheDirectRenderOfTheirReque
         {"hydrogen", "smoke", "", R::CpuRaycaster, C::Jpeg},
         {"hydrogen", "smoke", "mr", R::GpuRaycaster, C::Raw},
         {"headsq", "ct-skin", "", R::Splatter, C::Zstd}, // the second renderer, by protocol
+        {"hydrogen", "smoke", "", R::GpuSplatter, C::Zstd}, // and its OpenGL path
     };
     std::vector<std::vector<Received>> got(plans.size());
     {
@@ -147,15 +152,17 @@ TEST(DaemonEndToEnd, NineConcurrentClientsEachReceiveTheDirectRenderOfTheirReque
         render::Raycaster gpu;
         render::CpuRaycaster cpu;
         render::HybridSplatter splat;
+        render::GpuSplatter gpuSplat;
         for (const auto& r : got[i]) {
-            const auto direct = directRender(*stores[plan.volume], r, gpu, cpu, splat);
+            const auto direct = directRender(*stores[plan.volume], r, gpu, cpu, splat, gpuSplat);
             ASSERT_EQ(r.frame.rgba.size(), direct.size());
             const std::string what = "client " + std::to_string(i) + " " + plan.volume +
                                      " camera " + std::to_string(r.frame.header.cameraId);
             EXPECT_EQ(r.frame.header.cameraId, r.camera.cameraId) << what;
             if (plan.codec == C::Jpeg) {
                 EXPECT_LT(meanAbsDiffRgb(r.frame.rgba, direct), 3.0) << what;
-            } else if (plan.renderer != R::GpuRaycaster) { // CPU renderers are deterministic
+            } else if (plan.renderer != R::GpuRaycaster && plan.renderer != R::GpuSplatter) {
+                // CPU renderers are deterministic
                 EXPECT_EQ(maxAbsDiff(r.frame.rgba, direct), 0) << what;
             } else {
                 EXPECT_LE(maxAbsDiff(r.frame.rgba, direct), 2) << what;
