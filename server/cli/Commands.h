@@ -26,6 +26,7 @@ void addRenderCommand(CLI::App& app);
 void addCompareCommand(CLI::App& app);
 void addBenchCommand(CLI::App& app);
 void addSplatBenchCommand(CLI::App& app);
+void addLoadtestCommand(CLI::App& app);
 
 /// Renders one frame of a store on the GPU (or the CPU reference) and writes a PNG; prints
 /// the frame's summary line. @throw what the store, TF and renderer throw.

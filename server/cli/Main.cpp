@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
     bc::cli::addRenderCommand(app);
     bc::cli::addBenchCommand(app);
     bc::cli::addSplatBenchCommand(app);
+    bc::cli::addLoadtestCommand(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
