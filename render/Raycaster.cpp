@@ -387,6 +387,38 @@ bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
     return used;
 }
 
+std::uint32_t Raycaster::prefetch(const brickstore::BrickStore& store,
+                                  brickstore::BrickCache& cache, const TransferFunction& tf,
+                                  const Camera& camera, const RenderOptions& options,
+                                  std::uint32_t maxUploads) {
+    options.validate();
+    camera.validate();
+    ensurePool(store);
+    const std::uint32_t level = chooseLevel(store, tf, camera, options);
+    const LevelGeometry g = LevelGeometry::of(store, level);
+    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
+    const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
+    FrameStats ignored;
+    const OccupancyTrees* occupancy = prepareOccupancy(store, level, table, options, ignored);
+    const BrickPlan plan = planBricks(store, g, table, view, options.skip, occupancy);
+    const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
+    BatchPins pins{*mPool};
+    std::uint32_t uploaded = 0;
+    for (const PlannedBrick& b : plan.drawn) {
+        if (uploaded >= maxUploads) break;
+        if (b.draw == BrickDraw::Constant || mPool->resident(levelFirst + b.index)) continue;
+        brickstore::BrickPin pin;
+        const auto slot = mPool->acquire(levelFirst + b.index, [&] {
+            pin = cache.pin(b.key);
+            return pin.data();
+        });
+        if (!slot) break;
+        ++uploaded;
+    }
+    glFinish();
+    return uploaded;
+}
+
 Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
                         const TransferFunction& tf, const Camera& camera,
                         const RenderOptions& options, FrameStats& stats) {

@@ -57,6 +57,16 @@ class Raycaster {
     /// frame when the pool's voxel type or slot edge does not fit the store.
     void setSharedPool(std::shared_ptr<BrickPool> pool);
 
+    /// Uploads into the pool, nearest first, up to `maxUploads` bricks of the view `camera`
+    /// would sample that the pool lacks (the level render() would choose; constant and
+    /// transparent bricks need none), drawing nothing. LRU evicts the least recently used
+    /// slots, so a caller that passes at most capacity - (bricks of the last frame) keeps
+    /// every brick of the last frame resident. Returns the bricks uploaded.
+    /// @throw what render() throws for its inputs.
+    std::uint32_t prefetch(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
+                           const TransferFunction& tf, const Camera& camera,
+                           const RenderOptions& options, std::uint32_t maxUploads);
+
     /// The pool of the last frame (nullptr before the first); its counters span all frames.
     const BrickPool* pool() const { return mPool.get(); }
 

@@ -64,6 +64,10 @@ gpu_mb = 512
 rest_ms = 150
 # Encoded frames queued per session (1..16); a slow reader gets the newest, older are dropped.
 write_queue = 2
+# While the render thread is idle, upload the bricks of each GPU session's next view (its
+# camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick
+# of its last frame.
+prefetch = true
 
 # The catalog: one [[volume]] per name clients may open. Each has either store (a .bcs brick
 # store made by `brickcast ingest`) or generate (a synthetic volume, ingested on first use
@@ -183,6 +187,8 @@ class Reader {
                                         const char* key, std::int64_t min, std::int64_t max) const;
     std::optional<std::string> string(const toml::table& t, const std::string& prefix,
                                       const char* key) const;
+    std::optional<bool> boolean(const toml::table& t, const std::string& prefix,
+                                const char* key) const;
     std::string resolve(const std::string& path) const;
 
     void readServer(const toml::table& root, DaemonConfig& c) const;
@@ -257,6 +263,16 @@ std::optional<std::string> Reader::string(const toml::table& t, const std::strin
     return v->get();
 }
 
+std::optional<bool> Reader::boolean(const toml::table& t, const std::string& prefix,
+                                    const char* key) const {
+    const toml::node* node = t.get(key);
+    if (!node) return std::nullopt;
+    const auto* v = node->as_boolean();
+    if (!v)
+        fail(node->source(), prefix + key, "expected true or false, got " + nodeTypeName(node->type()));
+    return v->get();
+}
+
 std::string Reader::resolve(const std::string& path) const {
     std::filesystem::path p(path);
     if (p.is_relative()) p = std::filesystem::path(mBaseDir) / p;
@@ -315,9 +331,10 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
             c.gpuBudgetBytes = std::uint64_t(*mb) << 20;
     }
     if (const toml::table* t = section(root, "frames")) {
-        checkKeys(*t, "frames.", {"rest_ms", "write_queue"});
+        checkKeys(*t, "frames.", {"rest_ms", "write_queue", "prefetch"});
         assign(c.restMs, integer(*t, "frames.", "rest_ms", 0, 60000));
         assign(c.writeQueueFrames, integer(*t, "frames.", "write_queue", 1, 16));
+        if (auto b = boolean(*t, "frames.", "prefetch")) c.prefetch = *b;
     }
 }
 

@@ -37,6 +37,7 @@ struct DaemonConfig {
     std::uint64_t gpuBudgetBytes = 512ull << 20;
     std::uint32_t restMs = 150;         ///< camera at rest this long -> a refined frame
     std::uint32_t writeQueueFrames = 2; ///< per session; older frames are dropped
+    bool prefetch = true; ///< bricks of each GPU session's predicted next view, while idle
     std::string storeDir;               ///< where generated volumes are ingested
     std::vector<CatalogEntry> volumes;
 

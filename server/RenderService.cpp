@@ -12,7 +12,10 @@
 #include "server/Metrics.h"
 #include "server/ViewRequest.h"
 
+#include <cmath>
 #include <map>
+
+#include <glm/geometric.hpp>
 
 namespace bc::server {
 
@@ -163,6 +166,16 @@ struct SessionRenderers {
     std::unique_ptr<render::CpuRaycaster> cpu;
     std::unique_ptr<render::HybridSplatter> splat;
     std::unique_ptr<render::GpuSplatter> gpuSplat;
+    /// The GPU raycaster's last two views and what to prefetch for the next (see runPrefetch).
+    std::optional<render::Camera> lastCamera, previousCamera;
+    struct Prefetch {
+        std::shared_ptr<Volume> volume;
+        std::shared_ptr<const render::TransferFunction> tf;
+        render::Camera camera;
+        render::RenderOptions options;
+        std::uint64_t lastFrameBricks = 0;
+    };
+    std::optional<Prefetch> prefetch;
 };
 
 struct RenderService::Renderers {
@@ -183,7 +196,7 @@ struct RenderService::Renderers {
     }
     SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
         auto& s = sessions[slot.get()];
-        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr, nullptr, nullptr}; // a reused address
+        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr, nullptr, nullptr, {}, {}, {}}; // a reused address
         return s;
     }
 };
@@ -223,6 +236,9 @@ struct RenderService::Counters {
     /// replaced or freed before it, so the exported counters never go down.
     std::map<std::string, render::BrickPoolStats> poolLive, poolRetired;
     std::map<std::string, double> poolBudget;
+    /// Per volume: bricks uploaded while a frame waited for them, and by prefetch while idle.
+    std::map<std::string, double> frameUploads, prefetchUploads, prefetchBytes;
+    double prefetchMs = 0;
 };
 
 namespace {
@@ -236,6 +252,33 @@ render::BrickPoolStats& operator+=(render::BrickPoolStats& a, const render::Bric
     a.bytesRefetched += b.bytesRefetched;
     a.uploadMs += b.uploadMs;
     return a;
+}
+
+/// `v` rotated by `angle` radians about unit `axis` (Rodrigues).
+glm::dvec3 rotated(const glm::dvec3& v, const glm::dvec3& axis, double angle) {
+    return v * std::cos(angle) + glm::cross(axis, v) * std::sin(angle) +
+           axis * glm::dot(axis, v) * (1.0 - std::cos(angle));
+}
+
+/// The view one frame on, if the camera keeps moving as it did from `a` to `b`: a turn about a
+/// fixed target (an orbit) continues as the same rotation and zoom; anything else moves eye
+/// and target on by the same step.
+render::Camera predictNext(const render::Camera& a, const render::Camera& b) {
+    render::Camera next = b;
+    const glm::dvec3 r0 = a.eye - a.target, r1 = b.eye - b.target;
+    const double l0 = glm::length(r0), l1 = glm::length(r1);
+    const glm::dvec3 axis = glm::cross(r0, r1);
+    const bool sameTarget = glm::length(b.target - a.target) <= 1e-9 * std::max(l1, 1.0);
+    if (sameTarget && l0 > 0 && l1 > 0 && glm::length(axis) > 1e-12 * l0 * l1) {
+        const double angle = std::atan2(glm::length(axis), glm::dot(r0, r1));
+        const glm::dvec3 u = glm::normalize(axis);
+        next.eye = b.target + rotated(r1, u, angle) * (l1 / l0);
+        next.up = rotated(b.up, u, angle);
+    } else {
+        next.eye = b.eye + (b.eye - a.eye);
+        next.target = b.target + (b.target - a.target);
+    }
+    return next;
 }
 
 const char* rendererName(protocol::Renderer r) {
@@ -309,6 +352,7 @@ void RenderService::collect(MetricSet& m) {
     m.histogram("frame_working_set_bytes", "Bytes of the distinct bricks one frame sampled",
                 c.workingSet);
     m.histogram("frame_encoded_bytes", "Encoded bytes of one frame message", c.frameBytes);
+    m.counter("prefetch_ms_total", "Milliseconds the render thread spent prefetching", c.prefetchMs);
     m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn", double(waiting));
     std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
     for (const auto& [name, live] : c.poolLive) pools[name] += live;
@@ -325,10 +369,48 @@ void RenderService::collect(MetricSet& m) {
         m.counter("gpu_pool_bytes_refetched_total", "Bytes uploaded again after their eviction",
                   double(p.bytesRefetched), l);
         m.counter("gpu_pool_upload_ms_total", "Milliseconds spent uploading bricks", p.uploadMs, l);
+        auto of = [](const std::map<std::string, double>& m, const std::string& k) {
+            const auto it = m.find(k);
+            return it == m.end() ? 0.0 : it->second;
+        };
+        m.counter("gpu_frame_uploads_total", "Bricks uploaded while a frame waited for them",
+                  of(c.frameUploads, name), l);
+        m.counter("gpu_prefetch_uploads_total",
+                  "Bricks uploaded ahead of need, for a predicted next view, while idle",
+                  of(c.prefetchUploads, name), l);
+        m.counter("gpu_prefetch_bytes_total", "Bytes uploaded by prefetch", of(c.prefetchBytes, name), l);
         const auto b = c.poolBudget.find(name);
         m.gauge("gpu_pool_budget_bytes", "The volume's share of the GPU budget",
                 b == c.poolBudget.end() ? 0.0 : b->second, l);
     }
+}
+
+void RenderService::runPrefetch() {
+    const auto start = Clock::now();
+    for (auto& [key, mine] : mRenderers->sessions) {
+        if (!mine.prefetch) continue;
+        const auto job = std::move(*mine.prefetch);
+        mine.prefetch.reset();
+        if (!mine.gpu || mine.slot.expired() || !mine.gpu->pool()) continue;
+        const render::BrickPool& pool = *mine.gpu->pool();
+        const std::uint64_t keep = std::min<std::uint64_t>(job.lastFrameBricks, pool.capacity());
+        const auto room = std::uint32_t(pool.capacity() - keep);
+        if (room == 0) continue;
+        try {
+            const std::uint64_t bytesBefore = pool.stats().bytesUploaded;
+            const std::uint32_t n = mine.gpu->prefetch(*job.volume->store, *job.volume->cache,
+                                                       *job.tf, job.camera, job.options, room);
+            std::lock_guard lock(mMutex);
+            mCounters->prefetchUploads[job.volume->name] += n;
+            mCounters->prefetchBytes[job.volume->name] +=
+                double(pool.stats().bytesUploaded - bytesBefore);
+            mCounters->poolLive[job.volume->name] = pool.stats();
+        } catch (const std::exception& e) { // a guess that failed costs nothing but the log line
+            mLog.error("prefetch: " + job.volume->name + ": " + e.what());
+        }
+    }
+    std::lock_guard lock(mMutex);
+    mCounters->prefetchMs += msSince(start);
 }
 
 void RenderService::record(const FrameRecord& f, double bytes, const std::string& volume,
@@ -346,6 +428,7 @@ void RenderService::record(const FrameRecord& f, double bytes, const std::string
     c.workingSet.observe(f.workingSetBytes);
     c.frameBytes.observe(bytes);
     if (pool) {
+        c.frameUploads[volume] += f.bricksUploaded;
         c.poolLive[volume] = pool->stats();
         c.poolBudget[volume] = double(pool->capacity()) * double(pool->slotBytes());
     }
@@ -382,8 +465,17 @@ void RenderService::run() {
     mStartedCv.notify_all();
     std::unique_lock lock(mMutex);
     while (!mStop) {
-        auto slot = nextReady(lock);
-        if (!slot) continue;
+        bool prefetchDue = false;
+        for (const auto& [key, s] : mRenderers->sessions) prefetchDue |= s.prefetch.has_value();
+        auto slot = nextReady(lock, !prefetchDue);
+        if (!slot) {
+            if (prefetchDue) {
+                lock.unlock();
+                runPrefetch();
+                lock.lock();
+            }
+            continue;
+        }
         auto job = slot->take(Clock::now(), mConfig.restMs);
         lock.unlock();
         mRenderers->prune([this](const std::string& volume) { retirePool(volume); });
@@ -394,7 +486,8 @@ void RenderService::run() {
     mRenderers.reset(); // GL objects go before the context, on this thread
 }
 
-std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex>& lock) {
+std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex>& lock,
+                                                     bool mayWait) {
     std::erase_if(mSlots, [](const auto& w) { return w.expired(); });
     const auto now = Clock::now();
     std::optional<Clock::time_point> wakeAt;
@@ -409,6 +502,7 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
         }
         if (at && (!wakeAt || *at < *wakeAt)) wakeAt = at;
     }
+    if (!mayWait) return nullptr;
     if (wakeAt)
         mWake.wait_until(lock, *wakeAt);
     else
@@ -471,6 +565,13 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
         mine.gpu->setSharedPool(shared);
         pool = shared.get();
         image = mine.gpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
+        mine.previousCamera = mine.lastCamera;
+        mine.lastCamera = camera;
+        mine.prefetch.reset();
+        if (mConfig.prefetch && mine.previousCamera)
+            mine.prefetch = SessionRenderers::Prefetch{
+                s.volume, s.tf, predictNext(*mine.previousCamera, camera), options,
+                stats.bricksVisited - stats.bricksConstant};
         break;
     }
     case protocol::Renderer::CpuRaycaster: {
@@ -532,6 +633,7 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     rec.latencyMs = msSince(job.queuedAt);
     rec.bricks = double(stats.bricksVisited - stats.bricksConstant);
     rec.workingSetBytes = rec.bricks * double(slotBytesOf(*s.volume->store));
+    rec.bricksUploaded = double(stats.bricksUploaded);
     return frame;
 }
 

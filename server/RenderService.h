@@ -93,6 +93,7 @@ class RenderSlot {
 struct RenderServiceConfig {
     std::uint64_t gpuBudgetBytes = 512ull << 20;
     std::uint32_t restMs = 150;
+    bool prefetch = true; ///< DaemonConfig::prefetch
 };
 
 class RenderService {
@@ -122,11 +123,15 @@ class RenderService {
     struct FrameRecord {
         std::string renderer;
         double latencyMs = 0, renderMs = 0, uploadMs = 0, encodeMs = 0;
-        double workingSetBytes = 0, bricks = 0;
+        double workingSetBytes = 0, bricks = 0, bricksUploaded = 0;
     };
     void run();
     void notify();
-    std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock);
+    /// The next slot due, or nullptr after waiting (not at all when `mayWait` is false) for one.
+    std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock, bool mayWait);
+    /// Uploads the predicted next view's missing bricks of every GPU session (render thread,
+    /// when no frame is due).
+    void runPrefetch();
     void draw(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job job);
     protocol::Frame render(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job& job,
                            Renderers& r, FrameRecord& record, const render::BrickPool*& pool);

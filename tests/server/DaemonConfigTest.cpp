@@ -88,6 +88,7 @@ gpu_mb = 6
 [frames]
 rest_ms = 0
 write_queue = 16
+prefetch = false
 )") + kVolume + "description = \"d\"\n");
     EXPECT_EQ(c.listenHost, "::1");
     EXPECT_EQ(c.listenPort, 0);
@@ -104,6 +105,7 @@ write_queue = 16
     EXPECT_EQ(c.gpuBudgetBytes, 6ull << 20);
     EXPECT_EQ(c.restMs, 0u);
     EXPECT_EQ(c.writeQueueFrames, 16u);
+    EXPECT_FALSE(c.prefetch);
     EXPECT_EQ(c.volumes.at(0).description, "d");
 }
 
