@@ -385,21 +385,31 @@ void RenderService::collect(MetricSet& m) {
     }
 }
 
+/// Bricks one prefetch step uploads at most (see runPrefetch).
+constexpr std::uint32_t kPrefetchStepBricks = 32;
+
 void RenderService::runPrefetch() {
     const auto start = Clock::now();
     for (auto& [key, mine] : mRenderers->sessions) {
         if (!mine.prefetch) continue;
-        const auto job = std::move(*mine.prefetch);
+        auto job = std::move(*mine.prefetch);
         mine.prefetch.reset();
         if (!mine.gpu || mine.slot.expired() || !mine.gpu->pool()) continue;
         const render::BrickPool& pool = *mine.gpu->pool();
         const std::uint64_t keep = std::min<std::uint64_t>(job.lastFrameBricks, pool.capacity());
         const auto room = std::uint32_t(pool.capacity() - keep);
         if (room == 0) continue;
+        // A bounded step, so that a session whose frame falls due waits for at most this many
+        // uploads; the rest of the job waits for the next idle turn.
+        const std::uint32_t step = std::min(room, kPrefetchStepBricks);
         try {
             const std::uint64_t bytesBefore = pool.stats().bytesUploaded;
             const std::uint32_t n = mine.gpu->prefetch(*job.volume->store, *job.volume->cache,
-                                                       *job.tf, job.camera, job.options, room);
+                                                       *job.tf, job.camera, job.options, step);
+            if (n == step && step < room) { // more may be missing: continue next turn
+                job.lastFrameBricks += n;       // what this step brought in stays too
+                mine.prefetch = job;
+            }
             std::lock_guard lock(mMutex);
             mCounters->prefetchUploads[job.volume->name] += n;
             mCounters->prefetchBytes[job.volume->name] +=
