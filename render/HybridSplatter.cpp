@@ -9,6 +9,10 @@
 #include "render/TransferFunction.h"
 #include "render/detail/SplatPrep.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -22,7 +26,6 @@ namespace {
 
 using detail::Frame;
 using detail::kChunkBricks;
-using detail::PointFilter;
 using detail::PreparedBrick;
 using detail::SplatScene;
 using detail::Visible;
@@ -34,6 +37,8 @@ double msSince(Clock::time_point t) {
 }
 
 /// The image, its per-tile count of pixels still below the threshold, and the point slab.
+/// Workers draw disjoint bands of whole tile rows: each owns its rows of all three, and keeps
+/// its own list of the slab pixels it dirtied.
 class Canvas {
   public:
     Canvas(std::uint32_t w, std::uint32_t h, std::uint32_t tile, double ert)
@@ -48,6 +53,7 @@ class Canvas {
 
     Image image;
 
+    std::uint32_t tile() const { return mTile; }
     /// Front-to-back 'over' of straight colour `c` with opacity `a` into pixel (x, y).
     void over(std::uint32_t x, std::uint32_t y, float a, const float* c) {
         float* p = image.pixel(x, y);
@@ -67,24 +73,19 @@ class Canvas {
         return true;
     }
     /// Adds coverage `cover` (area share times opacity) of colour `c` to the slab at (x, y).
-    void deposit(std::uint32_t x, std::uint32_t y, float cover, const float* c) {
+    void deposit(std::uint32_t x, std::uint32_t y, float cover, const float* c,
+                 std::vector<std::uint32_t>& dirty) {
         float* s = mSlab.data() + (std::size_t(y) * image.width + x) * 4;
-        if (s[3] == 0.0f) mDirty.push_back(std::uint32_t(y * image.width + x));
+        if (s[3] == 0.0f) dirty.push_back(std::uint32_t(y * image.width + x));
         s[0] += cover * c[0];
         s[1] += cover * c[1];
         s[2] += cover * c[2];
         s[3] += cover;
     }
-    bool slabOpen() const { return mSlabOpen; }
-    double slabEnd() const { return mSlabEnd; }
-    void openSlab(double end) {
-        mSlabOpen = true;
-        mSlabEnd = end;
-    }
-    /// Composites the slab (summed coverage, at most 1; coverage-weighted colour), empties it.
-    bool flushSlab() {
-        if (!mSlabOpen) return false;
-        for (std::uint32_t i : mDirty) {
+    /// Composites the `dirty` slab pixels (summed coverage, at most 1; coverage-weighted
+    /// colour) and empties them.
+    void flushSlab(std::vector<std::uint32_t>& dirty) {
+        for (std::uint32_t i : dirty) {
             float* s = mSlab.data() + std::size_t(i) * 4;
             if (s[3] > 0.0f) {
                 const float c[3] = {s[0] / s[3], s[1] / s[3], s[2] / s[3]};
@@ -92,9 +93,7 @@ class Canvas {
             }
             s[0] = s[1] = s[2] = s[3] = 0.0f;
         }
-        mDirty.clear();
-        mSlabOpen = false;
-        return true;
+        dirty.clear();
     }
 
   private:
@@ -105,86 +104,449 @@ class Canvas {
     float mErt;
     std::vector<std::uint32_t> mOpen;
     std::vector<float> mSlab;
-    std::vector<std::uint32_t> mDirty;
-    bool mSlabOpen = false;
-    double mSlabEnd = 0.0;
 };
 
-class Drawer {
-  public:
-    Drawer(const Frame& f, const SplatFootprint& fp, Canvas& canvas, HybridSplatStats& n)
-        : mF(f), mFp(fp), mCanvas(canvas), mN(n) {}
+/// A visible voxel made ready to draw (on every core): the pixels it may touch and the
+/// constants of its per-pixel loop.
+struct DrawRecord {
+    enum class Kind : std::uint8_t { None, Point, Splat };
+    Kind kind = Kind::None;     ///< None: nothing to draw (no ellipse, or off the image)
+    bool nearest = false;       ///< a point without a pixel centre under its filter
+    std::uint16_t rect[4] = {}; ///< x0, y0, x1, y1, clipped to the image
+    std::uint32_t slab = 0;     ///< slab cuts before it in the chunk: bands flush on a change
+    /// Point: pixel (rect[0], rect[1]) minus the filter centre (pixels, y down) and the
+    /// coverage per unit weight (the whole coverage, to pixel nearX, nearY, when `nearest`).
+    /// Splat: that pixel's image point minus the projected centre (pixels, y up), the scale
+    /// of d^2 (splatDistance2), the projected centre's tangents, optical depth per footprint.
+    float dx = 0.0f, dy = 0.0f, scale = 0.0f, tanX = 0.0f, tanY = 0.0f, opticalDepth = 0.0f;
+    std::int32_t nearX = -1, nearY = -1;
+    const Visible* voxel = nullptr;
+};
 
-    /// Draws one classified voxel (straight colour c, opacity a per unit step) at `depth`.
-    void draw(const glm::dvec3& centre, double depth, const float* c, float a) {
-        const VoxelDraw d = detail::classifyDraw(mF, centre, a);
-        if (d.kind == VoxelDraw::Kind::Point)
-            point(d, depth, c);
-        else if (d.kind == VoxelDraw::Kind::Splat)
-            splat(centre, c, d.lnT);
+/// A point's footprint argument (distance / filter radius)^2 at the pixel i columns and j rows
+/// from (rect[0], rect[1]). One expression for the weights' sum and for the deposits.
+inline float pointDistance2(const DrawRecord& r, int i, int j, float invFilter2) {
+    const float x = r.dx + float(i), y = r.dy + float(j);
+    return (x * x + y * y) * invFilter2;
+}
+
+/// The squared distance, in radii, between a splat's centre and the eye ray of the image point
+/// (da, db) pixels from its projected centre, sx, sy from the view axis. With a = sx / f, the
+/// ray q = (a, b, 1) and the centre c = c.z (a0, b0, 1) in view coordinates,
+/// |q x c|^2 = c.z^2 ((a - a0)^2 + (b - b0)^2 + ((a - a0) b0 - (b - b0) a0)^2): no cancellation
+/// however far the sphere, so float suffices. `perspective2` is 1 / f^2 (0 orthographic).
+inline float splatDistance2(const DrawRecord& r, float da, float db, float rowDenominator, float sx,
+                            float perspective2) {
+    const float cross = da * r.tanY - db * r.tanX;
+    return r.scale * (da * da + db * db + cross * cross) /
+           (rowDenominator + perspective2 * sx * sx);
+}
+
+/// Where a planned brick can draw: its world box grown by the sphere radius (and a point's
+/// filter) on the screen; Nowhere off the image, Unbounded when it reaches behind the eye.
+struct BrickReach {
+    enum class Kind : std::uint8_t { Nowhere, Unbounded, Rect };
+    Kind kind = Kind::Unbounded;
+    std::uint32_t rect[4] = {};
+};
+
+BrickReach brickReach(const Frame& f, const PlannedBrick& b, std::uint32_t w, std::uint32_t h) {
+    const Box box = f.g.brickBox(b.key.pos);
+    glm::dvec2 lo(1e300), hi(-1e300);
+    for (int corner = 0; corner < 8; ++corner) {
+        const glm::dvec3 c((corner & 1) ? box.max.x + f.radiusMm : box.min.x - f.radiusMm,
+                           (corner & 2) ? box.max.y + f.radiusMm : box.min.y - f.radiusMm,
+                           (corner & 4) ? box.max.z + f.radiusMm : box.min.z - f.radiusMm);
+        const glm::dvec3 rel = c - f.view.eye;
+        const double z = glm::dot(rel, f.view.forward);
+        if (!f.view.orthographic && !(z > 0.0)) return {}; // reaches behind the eye
+        const double scale = f.view.orthographic ? f.view.orthoScale : f.view.focalLength / z;
+        const glm::dvec2 p =
+            scale * glm::dvec2(glm::dot(rel, f.view.right), glm::dot(rel, f.view.up));
+        lo = glm::min(lo, p);
+        hi = glm::max(hi, p);
     }
+    const double grow = f.pointFilter + 1.0;
+    BrickReach reach;
+    reach.kind = detail::pixelRect(lo - grow, hi + grow, w, h, reach.rect)
+                     ? BrickReach::Kind::Rect
+                     : BrickReach::Kind::Nowhere;
+    return reach;
+}
+
+/// True when every pixel of rows [y0, y1] that the brick can touch is opaque.
+bool occludedIn(const Canvas& canvas, const BrickReach& reach, std::uint32_t y0, std::uint32_t y1) {
+    if (reach.kind != BrickReach::Kind::Rect) return reach.kind == BrickReach::Kind::Nowhere;
+    const std::uint32_t* r = reach.rect;
+    const std::uint32_t lo = std::max(r[1], y0), hi = std::min(r[3], y1);
+    return lo > hi || canvas.occluded(r[0], lo, r[2], hi);
+}
+
+/// The pixel rectangle of the bounding box of a sphere's screen ellipse (projectSphere's),
+/// without hypot and atan2 (a third of a record's cost). Precondition: the sphere lies in
+/// front of the eye plane (classifyDraw's Splat). False when the box misses the image or the
+/// ellipse is not finite. The box may differ by an ulp, which moves at most a pixel centre on
+/// the rim, where the footprint is 0.
+bool splatRect(const SplatView& view, const glm::dvec3& centre, double radius, std::uint32_t w,
+               std::uint32_t h, std::uint32_t rect[4]) {
+    const glm::dvec3 rel = centre - view.eye;
+    const glm::dvec3 c(glm::dot(rel, view.right), glm::dot(rel, view.up),
+                       glm::dot(rel, view.forward));
+    glm::dvec2 mid, half;
+    if (view.orthographic) {
+        mid = view.orthoScale * glm::dvec2(c.x, c.y);
+        half = glm::dvec2(view.orthoScale * radius);
+    } else {
+        // projectPerspective's ellipse: with q = c / |c|, s = r / |c|, g = q.z^2 - s^2 and
+        // e1 = q.xy / |q.xy|, centre f q.z / g q.xy and semi-axes f s cos(alpha) / g e1 and
+        // f s / sqrt(g) e1 turned by 90 deg; the box's half size follows per axis.
+        const double dist2 = glm::dot(c, c), s2 = radius * radius / dist2;
+        const double g = (c.z * c.z - radius * radius) / dist2,
+                     rho2 = (c.x * c.x + c.y * c.y) / dist2;
+        if (!(g > 0.0)) return false;
+        const double e1x2 = rho2 > 0.0 ? c.x * c.x / dist2 / rho2 : 1.0, e1y2 = 1.0 - e1x2;
+        const double f = view.focalLength, k = f * std::sqrt(s2) / g, cz = c.z / std::sqrt(dist2);
+        mid = (f * cz / g / std::sqrt(dist2)) * glm::dvec2(c.x, c.y);
+        half = k * glm::dvec2(std::sqrt((1.0 - s2) * e1x2 + g * e1y2),
+                              std::sqrt((1.0 - s2) * e1y2 + g * e1x2));
+    }
+    if (!(std::isfinite(mid.x) && std::isfinite(mid.y) && std::isfinite(half.x) &&
+          std::isfinite(half.y)))
+        return false;
+    return detail::pixelRect(mid - half, mid + half, w, h, rect);
+}
+
+/// Rows [y0, y1] of the canvas (whole tile rows) and what one worker draws there: the records
+/// whose rectangles meet them, in the serial order, so each pixel sees the serial operations.
+struct Band {
+    std::uint32_t y0 = 0, y1 = 0;
+    std::vector<std::uint32_t> records;    ///< indices of the chunk's records
+    std::vector<std::uint32_t> brickFirst; ///< brick j: entries [brickFirst[j], brickFirst[j + 1])
+    std::vector<std::uint8_t> drawn;       ///< per entry: drawn here (not culled)
+    std::vector<std::uint8_t> occluded;    ///< per brick: skipped, its reach in the band opaque
+    std::vector<std::uint32_t> dirty;      ///< the band's slab pixels holding coverage
+};
+
+/// Draws the prepared bricks of each chunk in plan order, in horizontal bands on every core.
+/// Per voxel, in parallel: its record. Serially: where the slabs are cut (voxel order and depth
+/// alone, as if nothing were culled) and which bands each voxel meets. Per band, in parallel:
+/// brick and voxel culling against the band's tiles and drawing its rows. A voxel (brick)
+/// counts as culled when every band it meets culled it: exactly when a serial draw would.
+class ChunkDrawer {
+  public:
+    ChunkDrawer(const Frame& f, const SplatFootprint& fp, const HybridSplatterConfig& config,
+                Canvas& canvas, HybridSplatStats& n);
+
+    /// Marks chunk[j] culled when the tiles under bricks[j] are all opaque already.
+    void cullBricks(const PlannedBrick* bricks, std::vector<PreparedBrick>& chunk);
+    /// Draws the prepared chunk of the last cullBricks().
+    void draw(const std::vector<PreparedBrick>& chunk);
 
   private:
-    void point(const VoxelDraw& d, double depth, const float* c) {
-        const double R = mF.pointFilter;
-        std::uint32_t r[4];
-        if (!detail::pixelRect(d.image - R, d.image + R, mCanvas.image.width, mCanvas.image.height,
-                               r))
-            return;
-        // Slabs are cut as if nothing were culled, so that culling changes no slab's sum.
-        if (mCanvas.slabOpen() && depth > mCanvas.slabEnd()) mN.slabs += mCanvas.flushSlab();
-        if (!mCanvas.slabOpen()) mCanvas.openSlab(depth + mF.slabMm);
-        if (mF.cull && mCanvas.occluded(r[0], r[1], r[2], r[3])) {
-            ++mN.culled;
-            return;
-        }
-        ++mN.points;
-        // The slab adds coverages: an area average, as a box filter of the pixel would.
-        const std::uint32_t w = mCanvas.image.width, h = mCanvas.image.height;
-        const PointFilter pf = detail::pointFilterOf(mF, mFp, d, w, h);
-        if (!(pf.sum > 0.0)) {
-            const long nx = std::lround(pf.fx), ny = std::lround(pf.fy);
-            if (nx >= 0 && ny >= 0 && nx < long(w) && ny < long(h))
-                mCanvas.deposit(std::uint32_t(nx), std::uint32_t(ny), float(pf.total), c);
-            return;
-        }
-        for (std::uint32_t y = r[1]; y <= r[3]; ++y)
-            for (std::uint32_t x = r[0]; x <= r[2]; ++x) {
-                const double fp = detail::pointWeight(mF, mFp, pf, int(x), int(y));
-                if (fp > 0.0) mCanvas.deposit(x, y, float(pf.total * fp / pf.sum), c);
-            }
-    }
-
-    void splat(const glm::dvec3& centre, const float* c, double lnT) {
-        const SplatProjection proj = projectSphere(mF.view, centre, mF.radiusMm);
-        if (!proj.ok()) return;
-        const SplatEllipse& e = proj.ellipse;
-        const glm::dvec2 half = e.halfExtent();
-        std::uint32_t r[4];
-        const std::uint32_t w = mCanvas.image.width, h = mCanvas.image.height;
-        if (!detail::pixelRect(e.centre - half, e.centre + half, w, h, r)) return;
-        mN.slabs += mCanvas.flushSlab(); // points in front go first, culled or not
-        if (mF.cull && mCanvas.occluded(r[0], r[1], r[2], r[3])) {
-            ++mN.culled;
-            return;
-        }
-        ++mN.splats;
-        const double k = lnT * mF.depthScale;
-        for (std::uint32_t y = r[1]; y <= r[3]; ++y)
-            for (std::uint32_t x = r[0]; x <= r[2]; ++x) {
-                const double i =
-                    coneIndex(mF.view, centre, mF.radiusMm, SplatView::pixelCentre(x, y, w, h));
-                if (!(i < 1.0)) continue;
-                const double fp = mFp.lookup(i, e.halfAngleRad);
-                if (fp > 0.0) mCanvas.over(x, y, float(1.0 - std::exp(-k * fp)), c);
-            }
-    }
+    void makeRecords(const std::vector<PreparedBrick>& chunk);
+    DrawRecord record(const Visible& v) const;
+    void pointRecord(const VoxelDraw& d, DrawRecord& r) const;
+    void splatRecord(const glm::dvec3& centre, double lnT, DrawRecord& r) const;
+    void cutSlabs(const std::vector<PreparedBrick>& chunk);
+    void drawBand(Band& band, const std::vector<PreparedBrick>& chunk);
+    void drawPoint(Band& band, const DrawRecord& r, std::uint32_t y0, std::uint32_t y1);
+    void drawSplat(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1);
+    void drawSplatByIndex(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1);
+    void count(const std::vector<PreparedBrick>& chunk);
 
     const Frame& mF;
     const SplatFootprint& mFp;
     Canvas& mCanvas;
     HybridSplatStats& mN;
+    const bool mExact;
+    const std::uint32_t mW, mH;
+    const float mInvFilter2;   ///< 1 / pointFilter^2
+    const float mPerspective2; ///< 1 / focalLength^2, 0 orthographic
+    std::uint32_t mBandRows = 1;
+    std::vector<Band> mBands;
+    std::vector<BrickReach> mReach;
+    std::vector<DrawRecord> mRecords;
+    std::vector<std::uint32_t> mBrickFirst; ///< brick j's records: [mBrickFirst[j], [j + 1])
+    std::vector<std::uint32_t> mBrickSlab;  ///< slab cuts before brick j
+    std::vector<std::uint32_t> mBrickSlabs; ///< slabs composited in brick j
+    std::vector<std::uint8_t> mDrawn;       ///< per record: drawn in some band
 };
+
+ChunkDrawer::ChunkDrawer(const Frame& f, const SplatFootprint& fp,
+                         const HybridSplatterConfig& config, Canvas& canvas, HybridSplatStats& n)
+    : mF(f), mFp(fp), mCanvas(canvas), mN(n), mExact(config.exactDistanceFootprint),
+      mW(canvas.image.width), mH(canvas.image.height),
+      mInvFilter2(float(1.0 / (f.pointFilter * f.pointFilter))),
+      mPerspective2(f.view.orthographic ? 0.0f
+                                        : float(1.0 / (f.view.focalLength * f.view.focalLength))) {
+    // A few bands per worker: the bands of a view differ in work, TBB balances them.
+    const std::uint32_t tile = canvas.tile(), tileRows = (mH + tile - 1) / tile;
+    const std::uint32_t want =
+        config.parallelDraw ? 4 * std::uint32_t(tbb::this_task_arena::max_concurrency()) : 1;
+    const std::uint32_t bands = std::clamp(want, 1u, tileRows);
+    mBandRows = tile * ((tileRows + bands - 1) / bands);
+    for (std::uint32_t y = 0; y < mH; y += mBandRows) {
+        mBands.emplace_back();
+        mBands.back().y0 = y;
+        mBands.back().y1 = std::min(y + mBandRows, mH) - 1;
+    }
+}
+
+void ChunkDrawer::cullBricks(const PlannedBrick* bricks, std::vector<PreparedBrick>& chunk) {
+    mReach.resize(chunk.size());
+    for (std::size_t j = 0; j < chunk.size(); ++j) {
+        mReach[j] = brickReach(mF, bricks[j], mW, mH);
+        chunk[j].culled = mF.cull && occludedIn(mCanvas, mReach[j], 0, mH - 1);
+    }
+}
+
+void ChunkDrawer::draw(const std::vector<PreparedBrick>& chunk) {
+    makeRecords(chunk);
+    cutSlabs(chunk);
+    tbb::parallel_for(std::size_t(0), mBands.size(),
+                      [&](std::size_t b) { drawBand(mBands[b], chunk); });
+    count(chunk);
+}
+
+void ChunkDrawer::makeRecords(const std::vector<PreparedBrick>& chunk) {
+    mBrickFirst.assign(chunk.size() + 1, 0);
+    for (std::size_t j = 0; j < chunk.size(); ++j)
+        mBrickFirst[j + 1] =
+            mBrickFirst[j] + std::uint32_t(chunk[j].culled ? 0 : chunk[j].voxels.size());
+    mRecords.resize(mBrickFirst.back());
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, mBrickFirst.back(), 1024),
+                      [&](const tbb::blocked_range<std::uint32_t>& range) {
+                          std::size_t j =
+                              std::size_t(std::upper_bound(mBrickFirst.begin(), mBrickFirst.end(),
+                                                           range.begin()) -
+                                          mBrickFirst.begin()) -
+                              1;
+                          for (std::uint32_t i = range.begin(); i != range.end(); ++i) {
+                              while (i >= mBrickFirst[j + 1])
+                                  ++j;
+                              mRecords[i] = record(chunk[j].voxels[i - mBrickFirst[j]]);
+                          }
+                      });
+}
+
+DrawRecord ChunkDrawer::record(const Visible& v) const {
+    DrawRecord r;
+    r.voxel = &v;
+    const VoxelDraw d = detail::classifyDraw(mF, v.centre, v.rgba[3]);
+    if (d.kind == VoxelDraw::Kind::Point)
+        pointRecord(d, r);
+    else if (d.kind == VoxelDraw::Kind::Splat)
+        splatRecord(v.centre, d.lnT, r);
+    return r;
+}
+
+void ChunkDrawer::pointRecord(const VoxelDraw& d, DrawRecord& r) const {
+    // A point covers its voxel's projected area (pixels^2) with the voxel's opacity over one
+    // voxel of path; that coverage is spread by the footprint at each pixel centre,
+    // normalised over the unclipped lattice, so no point is lost between pixel centres.
+    const double R = mF.pointFilter;
+    std::uint32_t rect[4];
+    if (!detail::pixelRect(d.image - R, d.image + R, mW, mH, rect)) return;
+    const double fx = d.image.x + 0.5 * mW - 0.5, fy = 0.5 * mH - 0.5 - d.image.y;
+    r.dx = float(rect[0] - fx);
+    r.dy = float(rect[1] - fy);
+    const int i0 = int(std::ceil(fx - R)) - int(rect[0]),
+              i1 = int(std::floor(fx + R)) - int(rect[0]);
+    const int j0 = int(std::ceil(fy - R)) - int(rect[1]),
+              j1 = int(std::floor(fy + R)) - int(rect[1]);
+    float sum = 0.0f;
+    for (int j = j0; j <= j1; ++j)
+        for (int i = i0; i <= i1; ++i)
+            sum += mFp.bySquaredDistance(pointDistance2(r, i, j, mInvFilter2));
+    const double total =
+        (1.0 - std::exp(-d.lnT * mF.voxelSteps)) * mF.voxelAreaMm2 * d.scale * d.scale;
+    if (sum > 0.0f) {
+        r.scale = float(total / sum);
+    } else { // the whole coverage to the nearest pixel
+        r.nearest = true;
+        r.scale = float(total);
+        const long nx = std::lround(fx), ny = std::lround(fy);
+        if (nx >= 0 && ny >= 0 && nx < long(mW) && ny < long(mH)) {
+            r.nearX = std::int32_t(nx);
+            r.nearY = std::int32_t(ny);
+        }
+    }
+    r.kind = DrawRecord::Kind::Point;
+    std::copy(rect, rect + 4, r.rect);
+}
+
+void ChunkDrawer::splatRecord(const glm::dvec3& centre, double lnT, DrawRecord& r) const {
+    std::uint32_t rect[4];
+    if (!splatRect(mF.view, centre, mF.radiusMm, mW, mH, rect)) return;
+    const glm::dvec3 rel = centre - mF.view.eye;
+    const glm::dvec3 c(glm::dot(rel, mF.view.right), glm::dot(rel, mF.view.up),
+                       glm::dot(rel, mF.view.forward));
+    const glm::dvec2 p0 = SplatView::pixelCentre(rect[0], rect[1], mW, mH);
+    if (mF.view.orthographic) {
+        const double s = mF.view.orthoScale;
+        r.dx = float(p0.x - s * c.x);
+        r.dy = float(p0.y - s * c.y);
+        r.scale = float(1.0 / (s * mF.radiusMm * s * mF.radiusMm));
+    } else {
+        const double fl = mF.view.focalLength, q = c.z / (fl * mF.radiusMm);
+        r.tanX = float(c.x / c.z);
+        r.tanY = float(c.y / c.z);
+        r.dx = float(p0.x - fl * c.x / c.z);
+        r.dy = float(p0.y - fl * c.y / c.z);
+        r.scale = float(q * q);
+    }
+    r.opticalDepth = float(lnT * mF.depthScale);
+    r.kind = DrawRecord::Kind::Splat;
+    std::copy(rect, rect + 4, r.rect);
+}
+
+void ChunkDrawer::cutSlabs(const std::vector<PreparedBrick>& chunk) {
+    for (Band& band : mBands) {
+        band.records.clear();
+        band.brickFirst.clear();
+    }
+    mBrickSlab.assign(chunk.size(), 0);
+    mBrickSlabs.assign(chunk.size(), 0);
+    std::uint32_t cuts = 0;
+    for (std::size_t j = 0; j < chunk.size(); ++j) {
+        for (Band& band : mBands)
+            band.brickFirst.push_back(std::uint32_t(band.records.size()));
+        mBrickSlab[j] = cuts;
+        const std::uint32_t before = cuts;
+        bool open = false;
+        double end = 0.0;
+        for (std::uint32_t i = mBrickFirst[j]; i < mBrickFirst[j + 1]; ++i) {
+            DrawRecord& r = mRecords[i];
+            if (r.kind == DrawRecord::Kind::None) continue;
+            const double depth = r.voxel->depth;
+            if (open && (r.kind == DrawRecord::Kind::Splat || depth > end)) {
+                ++cuts; // points in front go first, culled or not
+                open = false;
+            }
+            if (!open && r.kind == DrawRecord::Kind::Point) {
+                open = true;
+                end = depth + mF.slabMm;
+            }
+            r.slab = cuts;
+            for (std::uint32_t b = r.rect[1] / mBandRows; b <= r.rect[3] / mBandRows; ++b)
+                mBands[b].records.push_back(i);
+        }
+        cuts += open; // the next brick may lie in front of this slab
+        mBrickSlabs[j] = cuts - before;
+    }
+    for (Band& band : mBands)
+        band.brickFirst.push_back(std::uint32_t(band.records.size()));
+}
+
+void ChunkDrawer::drawBand(Band& band, const std::vector<PreparedBrick>& chunk) {
+    band.drawn.assign(band.records.size(), 0);
+    band.occluded.assign(chunk.size(), 0);
+    for (std::size_t j = 0; j < chunk.size(); ++j) {
+        if (chunk[j].culled) continue;
+        // Bricks drawn earlier in the chunk may have covered this one since.
+        if (mF.cull && occludedIn(mCanvas, mReach[j], band.y0, band.y1)) {
+            band.occluded[j] = 1;
+            continue;
+        }
+        std::uint32_t slab = mBrickSlab[j];
+        for (std::uint32_t e = band.brickFirst[j]; e < band.brickFirst[j + 1]; ++e) {
+            const DrawRecord& r = mRecords[band.records[e]];
+            if (r.slab != slab) { // cut since this band's last voxel: composite its part
+                mCanvas.flushSlab(band.dirty);
+                slab = r.slab;
+            }
+            const std::uint32_t y0 = std::max<std::uint32_t>(r.rect[1], band.y0);
+            const std::uint32_t y1 = std::min<std::uint32_t>(r.rect[3], band.y1);
+            if (mF.cull && mCanvas.occluded(r.rect[0], y0, r.rect[2], y1)) continue;
+            band.drawn[e] = 1;
+            if (r.kind == DrawRecord::Kind::Point)
+                drawPoint(band, r, y0, y1);
+            else if (mExact)
+                drawSplat(r, y0, y1);
+            else
+                drawSplatByIndex(r, y0, y1);
+        }
+        mCanvas.flushSlab(band.dirty);
+    }
+}
+
+void ChunkDrawer::drawPoint(Band& band, const DrawRecord& r, std::uint32_t y0, std::uint32_t y1) {
+    // The slab adds coverages: an area average, as a box filter of the pixel would.
+    const float* c = r.voxel->rgba.data();
+    if (r.nearest) {
+        if (r.nearX >= 0 && std::uint32_t(r.nearY) >= y0 && std::uint32_t(r.nearY) <= y1)
+            mCanvas.deposit(std::uint32_t(r.nearX), std::uint32_t(r.nearY), r.scale, c, band.dirty);
+        return;
+    }
+    for (std::uint32_t y = y0; y <= y1; ++y)
+        for (std::uint32_t x = r.rect[0]; x <= r.rect[2]; ++x) {
+            const float w = mFp.bySquaredDistance(
+                pointDistance2(r, int(x - r.rect[0]), int(y - r.rect[1]), mInvFilter2));
+            if (w > 0.0f) mCanvas.deposit(x, y, r.scale * w, c, band.dirty);
+        }
+}
+
+void ChunkDrawer::drawSplat(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1) {
+    // The exact ray-centre distance: the same footprint as correctedDistance(coneIndex, alpha)
+    // without the 2D table's interpolation error.
+    const float* c = r.voxel->rgba.data();
+    const float halfW = 0.5f * float(mW), halfH = 0.5f * float(mH), g = mPerspective2;
+    for (std::uint32_t y = y0; y <= y1; ++y) {
+        const float db = r.dy - float(y - r.rect[1]), sy = halfH - float(y) - 0.5f;
+        const float rowDenominator = 1.0f + g * sy * sy;
+        for (std::uint32_t x = r.rect[0]; x <= r.rect[2]; ++x) {
+            const float da = r.dx + float(x - r.rect[0]), sx = float(x) + 0.5f - halfW;
+            const float u = splatDistance2(r, da, db, rowDenominator, sx, g);
+            if (!(u < 1.0f)) continue;
+            const float fp = mFp.bySquaredDistance(u);
+            if (fp > 0.0f) mCanvas.over(x, y, 1.0f - std::exp(-r.opticalDepth * fp), c);
+        }
+    }
+}
+
+void ChunkDrawer::drawSplatByIndex(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1) {
+    // The paper's path: the exact index, then the 2D (index, half angle) table.
+    const Visible& v = *r.voxel;
+    const double k = detail::classifyDraw(mF, v.centre, v.rgba[3]).lnT * mF.depthScale;
+    const double alpha = projectSphere(mF.view, v.centre, mF.radiusMm).ellipse.halfAngleRad;
+    for (std::uint32_t y = y0; y <= y1; ++y)
+        for (std::uint32_t x = r.rect[0]; x <= r.rect[2]; ++x) {
+            const double i =
+                coneIndex(mF.view, v.centre, mF.radiusMm, SplatView::pixelCentre(x, y, mW, mH));
+            if (!(i < 1.0)) continue;
+            const double fp = mFp.lookup(i, alpha);
+            if (fp > 0.0) mCanvas.over(x, y, float(1.0 - std::exp(-k * fp)), v.rgba.data());
+        }
+}
+
+void ChunkDrawer::count(const std::vector<PreparedBrick>& chunk) {
+    mDrawn.assign(mRecords.size(), 0);
+    for (const Band& band : mBands)
+        for (std::size_t e = 0; e < band.records.size(); ++e)
+            if (band.drawn[e]) mDrawn[band.records[e]] = 1;
+    for (std::size_t j = 0; j < chunk.size(); ++j) {
+        bool culled = chunk[j].culled;
+        if (!culled && mF.cull)
+            culled = std::all_of(mBands.begin(), mBands.end(),
+                                 [&](const Band& band) { return band.occluded[j] != 0; });
+        if (culled) {
+            ++mN.bricksCulled;
+            continue;
+        }
+        mN.leavesSkipped += chunk[j].leavesSkipped;
+        mN.slabs += mBrickSlabs[j];
+        for (std::uint32_t i = mBrickFirst[j]; i < mBrickFirst[j + 1]; ++i) {
+            const DrawRecord& r = mRecords[i];
+            if (r.kind == DrawRecord::Kind::None) continue;
+            if (!mDrawn[i])
+                ++mN.culled;
+            else if (r.kind == DrawRecord::Kind::Point)
+                ++mN.points;
+            else
+                ++mN.splats;
+        }
+    }
+}
 
 } // namespace
 
@@ -204,35 +566,6 @@ HybridSplatter::HybridSplatter(const HybridSplatterConfig& config)
     : mConfig((config.validate(), config)),
       mFootprint(SplatFootprintConfig{config.sigmaOverRadius}) {}
 HybridSplatter::~HybridSplatter() = default;
-
-namespace {
-
-/// True when every pixel brick `b` can touch is opaque: the tiles meeting the screen box of
-/// its world box grown by the sphere radius (and a point's filter) are all at the threshold.
-bool brickOccluded(const Frame& f, const Canvas& canvas, const PlannedBrick& b) {
-    const Box box = f.g.brickBox(b.key.pos);
-    glm::dvec2 lo(1e300), hi(-1e300);
-    for (int corner = 0; corner < 8; ++corner) {
-        const glm::dvec3 c((corner & 1) ? box.max.x + f.radiusMm : box.min.x - f.radiusMm,
-                           (corner & 2) ? box.max.y + f.radiusMm : box.min.y - f.radiusMm,
-                           (corner & 4) ? box.max.z + f.radiusMm : box.min.z - f.radiusMm);
-        const glm::dvec3 rel = c - f.view.eye;
-        const double z = glm::dot(rel, f.view.forward);
-        if (!f.view.orthographic && !(z > 0.0)) return false; // reaches behind the eye
-        const double scale = f.view.orthographic ? f.view.orthoScale : f.view.focalLength / z;
-        const glm::dvec2 p =
-            scale * glm::dvec2(glm::dot(rel, f.view.right), glm::dot(rel, f.view.up));
-        lo = glm::min(lo, p);
-        hi = glm::max(hi, p);
-    }
-    const double grow = f.pointFilter + 1.0;
-    std::uint32_t r[4];
-    if (!detail::pixelRect(lo - grow, hi + grow, canvas.image.width, canvas.image.height, r))
-        return true;
-    return canvas.occluded(r[0], r[1], r[2], r[3]);
-}
-
-} // namespace
 
 Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
                              const TransferFunction& tf, const Camera& camera,
@@ -256,29 +589,16 @@ Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::Br
     const Frame f = detail::frameOf(mConfig, g, basis, options, table);
     Canvas canvas(options.width, options.height, mConfig.tilePixels,
                   options.earlyTermination ? options.ertThreshold : 2.0);
-    Drawer drawer(f, mFootprint, canvas, mLast);
+    ChunkDrawer drawer(f, mFootprint, mConfig, canvas, mLast);
     const auto type = store.info().volume.type;
     for (std::size_t first = 0; first < plan.drawn.size(); first += kChunkBricks) {
-        const std::size_t count = std::min(kChunkBricks, plan.drawn.size() - first);
-        std::vector<PreparedBrick> chunk(count);
-        for (std::size_t i = 0; i < count; ++i)
-            chunk[i].culled = f.cull && brickOccluded(f, canvas, plan.drawn[first + i]);
+        std::vector<PreparedBrick> chunk(std::min(kChunkBricks, plan.drawn.size() - first));
+        drawer.cullBricks(plan.drawn.data() + first, chunk);
         const auto prepareStart = Clock::now();
         detail::prepareChunk(f, plan, first, cache, type, octree ? mOccupancy.get() : nullptr,
                              chunk);
         stats.uploadMs += msSince(prepareStart);
-        for (std::size_t i = 0; i < count; ++i) {
-            PreparedBrick& p = chunk[i];
-            // Bricks drawn earlier in the chunk may have covered this one since.
-            if (p.culled || (f.cull && brickOccluded(f, canvas, plan.drawn[first + i]))) {
-                ++mLast.bricksCulled;
-                continue;
-            }
-            mLast.leavesSkipped += p.leavesSkipped;
-            for (const Visible& vis : p.voxels)
-                drawer.draw(vis.centre, vis.depth, vis.rgba.data(), vis.rgba[3]);
-            mLast.slabs += canvas.flushSlab(); // the next brick may lie in front of this slab
-        }
+        drawer.draw(chunk);
     }
     for (float& v : canvas.image.rgba)
         v = std::clamp(v, 0.0f, 1.0f);

@@ -8,8 +8,10 @@
 // the same footprint with radius pointFilterPixels (weights normalised to sum to 1) and added
 // into a slab buffer about one voxel (max spacing) deep; the slab is composited 'over' when
 // the voxels move past it (coverage clamped to 1: an area average, as a box filter would
-// give). Larger voxels are perspective splats: the exact ellipse (projectSphere), the exact
-// index (coneIndex) and the footprint lookup, composited 'over' at once.
+// give). Larger voxels are perspective splats: the exact ellipse (projectSphere), composited
+// 'over' at once with the footprint of each pixel's exact ray-centre distance (a 1D table over
+// d^2, in float), or with exactDistanceFootprint off the paper's exact index (coneIndex) and
+// 2D table; the two agree to the 2D table's error.
 //
 // Optics: a voxel's opacity per unit step a (render/OPTICS.md, one voxel of the smallest
 // spacing) is applied for the footprint's line integral through its sphere, in voxel units:
@@ -24,8 +26,10 @@
 // (ertThreshold, with earlyTermination on), and a planned brick is skipped unpinned when the
 // tiles under its screen box are; pixels at the threshold take no more colour either way, so
 // culling changes no pixel. Bricks are pinned, classified, shaded and sorted on every core
-// (TBB, 16 bricks at a time); drawing is serial, in order. Not thread-safe: one frame at a
-// time per instance.
+// (TBB, 16 bricks at a time), then drawn in order in horizontal bands of whole tiles, one
+// worker per band (parallelDraw): slab cuts are decided once for all bands, culling per band,
+// so every pixel sees the serial operations and the image and counts are those of one band.
+// Not thread-safe: one frame at a time per instance.
 #include "render/Camera.h"
 #include "render/Image.h"
 #include "render/RenderTypes.h"
@@ -53,6 +57,13 @@ struct HybridSplatterConfig {
     double pointFilterPixels = 1.0;    ///< radius of a point's circular screen filter
     bool occlusionCulling = true;      ///< skip voxels whose tiles are all opaque
     std::uint32_t tilePixels = 8;      ///< edge of a culling tile
+    /// Splats: the footprint of the exact ray-centre distance from a 1D table over d^2
+    /// (fast); false: the paper's exact index and 2D (index, half angle) table. The two
+    /// differ by the 2D table's error (SplatFootprint::kTableRelativeError).
+    bool exactDistanceFootprint = true;
+    /// Draw in horizontal bands of whole tiles on every core (TBB); the same image and
+    /// counts, to the bit, as false (one band, the calling thread drawing).
+    bool parallelDraw = true;
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;
 };

@@ -38,6 +38,9 @@ SplatFootprint::SplatFootprint(const SplatFootprintConfig& config) {
         for (std::uint32_t k = 0; k < kIndexSamples; ++k)
             mTable[std::size_t(j) * kIndexSamples + k] =
                 float(evaluate(k / kIndexSteps, j * kAngleStepRad));
+    mSquared.resize(kSquaredSamples);
+    for (std::uint32_t k = 0; k < kSquaredSamples; ++k)
+        mSquared[k] = float(lineIntegral(std::sqrt(k / double(kSquaredSamples - 1))));
 }
 
 double SplatFootprint::lineIntegral(double distanceRadii) const {

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include <glm/geometric.hpp>
 
@@ -67,7 +68,15 @@ std::vector<Visible> visibleVoxels(const Frame& f, const BrickJob& job, std::uin
     const T* v = static_cast<const T*>(job.voxels);
     const std::uint32_t leaf = job.occupancy ? job.occupancy->leafVoxels() : b;
     const std::uint32_t depth = job.occupancy ? job.occupancy->depth() : 0;
-    std::vector<Visible> out;
+    auto centreOf = [&](std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+        const glm::dvec3 voxel{double(pos[0]) * b + x, double(pos[1]) * b + y,
+                               double(pos[2]) * b + z};
+        return (voxel + 0.5) * g.spacing;
+    };
+    auto valueOf = [&](std::uint32_t s) { return v ? float(v[s]) : job.brick->constantValue; };
+    // Sorted as (depth, stored index) keys, the voxels built after: a quarter of the data
+    // moved, and the same comparisons, so the same order as sorting the voxels themselves.
+    std::vector<std::pair<double, std::uint32_t>> keys;
     for (std::uint32_t lz = 0; lz * leaf < extent[2]; ++lz)
         for (std::uint32_t ly = 0; ly * leaf < extent[1]; ++ly)
             for (std::uint32_t lx = 0; lx * leaf < extent[0]; ++lx) {
@@ -81,19 +90,21 @@ std::vector<Visible> visibleVoxels(const Frame& f, const BrickJob& job, std::uin
                         for (std::uint32_t x = lx * leaf; x < std::min(extent[0], (lx + 1) * leaf);
                              ++x) {
                             const std::uint32_t s = ((z + a) * edge + (y + a)) * edge + (x + a);
-                            const float value = v ? float(v[s]) : job.brick->constantValue;
-                            if (f.table->lookup(value)[3] <= 0.0f) continue;
-                            const glm::dvec3 voxel{double(pos[0]) * b + x, double(pos[1]) * b + y,
-                                                   double(pos[2]) * b + z};
-                            const glm::dvec3 c = (voxel + 0.5) * g.spacing;
-                            const glm::dvec3 rel = c - f.view.eye;
+                            if (f.table->lookup(valueOf(s))[3] <= 0.0f) continue;
+                            const glm::dvec3 rel = centreOf(x, y, z) - f.view.eye;
                             const double d = f.view.orthographic ? glm::dot(rel, f.view.forward)
                                                                  : glm::length(rel);
-                            out.push_back({d, s, c, value});
+                            keys.emplace_back(d, s);
                         }
             }
-    std::sort(out.begin(), out.end(),
-              [](const Visible& l, const Visible& r) { return l.depth < r.depth; });
+    std::sort(keys.begin(), keys.end(),
+              [](const auto& l, const auto& r) { return l.first < r.first; });
+    std::vector<Visible> out;
+    out.reserve(keys.size());
+    for (const auto& [d, s] : keys) {
+        const std::uint32_t x = s % edge - a, y = s / edge % edge - a, z = s / edge / edge - a;
+        out.push_back({d, s, centreOf(x, y, z), valueOf(s)});
+    }
     return out;
 }
 

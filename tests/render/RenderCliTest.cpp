@@ -130,9 +130,14 @@ TEST(SplatBenchCli, PrintsTheFigure9ViewsBesideTheRaycasterSweepAndNamesBadInput
         ++splatRows;
         const double splats = std::stod(cell[10]), points = std::stod(cell[11]);
         EXPECT_GT(std::stod(cell[8]), 20.0) << line;
-        if (cell[2] == "all splats") EXPECT_TRUE(splats > 0 && points == 0) << line;
-        if (cell[2] == "mixed") EXPECT_TRUE(splats > 0 && points > 0) << line;
-        if (cell[2] == "all points") EXPECT_TRUE(splats == 0 && points > 0) << line;
+        if (cell[2] == "all splats") {
+            EXPECT_TRUE(splats > 0 && points == 0) << line;
+        } else if (cell[2] == "mixed") {
+            EXPECT_TRUE(splats > 0 && points > 0) << line;
+        } else {
+            EXPECT_EQ(cell[2], "all points");
+            EXPECT_TRUE(splats == 0 && points > 0) << line;
+        }
     }
     EXPECT_EQ(splatRows, 6) << "3 views x 2 datasets";
     EXPECT_EQ(raycastRows, 12) << "2 steps x 3 views x 2 datasets";

@@ -482,6 +482,32 @@ TEST(SplatFootprintTest, TableMatchesDirectEvaluationWithinTheStatedBound) {
     }
 }
 
+// The CPU splatter's per-pixel table over u = d^2 against the closed form: no erf or square
+// root per pixel, and an error far below the 2D table's.
+TEST(SplatFootprintTest, SquaredDistanceTableMatchesTheLineIntegralWithinTheStatedBound) {
+    for (const double sigma : {0.3, 0.5, 0.7, 1.0}) {
+        const SplatFootprint fp({sigma});
+        const double peak = fp.lineIntegral(0.0);
+        double worst = 0.0, worstU = 0.0;
+        for (int k = 0; k <= 1 << 20; ++k) {
+            const double u = k / double(1 << 20);
+            const double exact = fp.lineIntegral(std::sqrt(u));
+            const double err = std::abs(fp.bySquaredDistance(float(u)) - exact) / peak;
+            if (err > worst) worst = err, worstU = u;
+        }
+        std::printf("[splat] footprint over d^2, %u entries, sigma %.1f r: worst error %.2e of the "
+                    "centre value (at d^2 %.5f)\n",
+                    SplatFootprint::kSquaredSamples, sigma, worst, worstU);
+        EXPECT_LT(worst, SplatFootprint::kSquaredTableRelativeError) << "sigma " << sigma;
+    }
+    const SplatFootprint fp;
+    EXPECT_EQ(fp.bySquaredDistance(1.0f), 0.0f);
+    EXPECT_EQ(fp.bySquaredDistance(2.0f), 0.0f);
+    EXPECT_EQ(fp.bySquaredDistance(std::nanf("")), 0.0f);
+    EXPECT_EQ(fp.bySquaredDistance(-0.5f), fp.bySquaredDistance(0.0f));
+    EXPECT_NEAR(fp.bySquaredDistance(0.0f), fp.lineIntegral(0.0), 1e-7 * fp.lineIntegral(0.0));
+}
+
 TEST(SplatFootprintTest, BeyondFifteenDegreesLookupIsDirectEvaluation) {
     const SplatFootprint fp;
     for (const double alphaDeg : {15.001, 20.0, 45.0, 80.0})
