@@ -208,30 +208,5 @@ TEST(GpuSplatter, RejectsABadConfigNamingTheField) {
     }
 }
 
-// Timings at 256^2 (not run by default: --gtest_also_run_disabled_tests).
-TEST(GpuSplatterTiming, DISABLED_ReportsMsAt256) {
-    auto spec = test::realScan("headsq");
-    if (!spec) GTEST_SKIP();
-    test::glContext();
-    auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("mr", t->stats);
-    for (double distance : {1.0, 1.6}) {
-        const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20, distance);
-        HybridSplatter cpu(noCulling());
-        GpuSplatter gpu;
-        double cpuMs = 0, gpuMs = 0;
-        FrameStats gs;
-        frame(*t, gpu, tf, camera, options(256), gpuMs); // warm-up: shaders, targets
-        const Image a = frame(*t, cpu, tf, camera, options(256), cpuMs);
-        const Image b = frame(*t, gpu, tf, camera, options(256), gpuMs, &gs);
-        const auto c = compareImages(b, a);
-        test::printComparison(
-            "headsq mr x" + std::to_string(distance).substr(0, 3) + " 256^2 GPU vs CPU splat", c);
-        std::printf("[gpusplat] headsq mr x%.1f 256^2: max abs %.2e; CPU %.1f ms, GPU %.1f ms "
-                    "(prepare+upload %.1f, draw %.1f, %u batches)\n",
-                    distance, c.maxAbs, cpuMs, gpuMs, gs.uploadMs, gs.renderMs, gs.batches);
-    }
-}
-
 } // namespace
 } // namespace bc::render
