@@ -19,7 +19,7 @@ struct Daemon::Impl {
         : config(std::move(c)), log(l), catalog(config, log),
           render(RenderServiceConfig{config.gpuBudgetBytes, config.restMs, config.prefetch}, catalog, log),
           acceptor(io), signals(io), drainTimer(io),
-          context{config, catalog, render, log, capabilities(), {}} {
+          context{config, catalog, render, log, capabilities(), {}, {}, 0} {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };
         context.collect = [this](MetricSet& m) { collect(m); };
         bind();

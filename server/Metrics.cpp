@@ -137,13 +137,19 @@ void MetricSet::counter(const std::string& name, const std::string& help, double
     if (!name.ends_with("_total"))
         throw std::invalid_argument("counter '" + name + "' must end in _total");
     checkLabels(labels);
-    family(name, help, Type::Counter).samples.push_back({std::move(labels), value});
+    Sample sample;
+    sample.labels = std::move(labels);
+    sample.value = value;
+    family(name, help, Type::Counter).samples.push_back(std::move(sample));
 }
 
 void MetricSet::gauge(const std::string& name, const std::string& help, double value,
                       std::vector<std::pair<std::string, std::string>> labels) {
     checkLabels(labels);
-    family(name, help, Type::Gauge).samples.push_back({std::move(labels), value});
+    Sample sample;
+    sample.labels = std::move(labels);
+    sample.value = value;
+    family(name, help, Type::Gauge).samples.push_back(std::move(sample));
 }
 
 void MetricSet::histogram(const std::string& name, const std::string& help, const Histogram& h,
