@@ -81,7 +81,8 @@ enum Technique : std::uint32_t {
     kTechEarlyTermination = 1u << 2,
     kTechOcclusionFrustums = 1u << 3, ///< needs kTechBrickSkipping
     kTechShading = 1u << 4,
-    kTechAll = (1u << 5) - 1,
+    kTechRayGuided = 1u << 5, ///< GPU raycaster: defer bricks behind saturated rays
+    kTechAll = (1u << 6) - 1,
 };
 
 enum class Codec : std::uint8_t { Raw = 0, Zstd = 1, ZstdDelta = 2, Jpeg = 3 };

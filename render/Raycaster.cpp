@@ -8,6 +8,7 @@
 #include "render/TransferFunction.h"
 #include "render/detail/Gl.h"
 #include "render/detail/OcclusionFrustums.h"
+#include "render/detail/RayGuide.h"
 #include "render/detail/RaycastShader.h"
 
 #include <algorithm>
@@ -23,6 +24,9 @@ double msSince(Clock::time_point t) {
 }
 
 constexpr std::uint32_t kTfEntries = 4096;
+/// Ray-guided frames: after this many passes that each loaded what rays asked for, every
+/// deferred brick left is loaded at once (so a frame takes at most this many + 2 passes).
+constexpr int kMaxRequestRounds = 6;
 
 } // namespace
 
@@ -34,8 +38,12 @@ struct Raycaster::Gpu {
     gl::Buffer occupancy; ///< OccupancyTrees::words() of the level in mOccupancy
     std::uint64_t occupancyWords = 0;
     std::unique_ptr<detail::OcclusionFrustums> occlusion; ///< created on first use
+    gl::Buffer feedback; ///< per brick of the level: entered, then asked for (2 uints)
+    std::uint64_t feedbackBricks = 0;
+    detail::RayGuide guide;
     gl::Texture accum[2];
     gl::Framebuffer fbo[2];
+    gl::Texture resumeAt; ///< R32I: the sample a stopped ray goes on from, or -1
     std::uint32_t width = 0, height = 0;
 
     void ensureTargets(std::uint32_t w, std::uint32_t h) {
@@ -53,6 +61,8 @@ struct Raycaster::Gpu {
                 throw RenderError("raycaster render target " + std::to_string(w) + "x" +
                                   std::to_string(h) + " is incomplete");
         }
+        resumeAt = gl::createTexture(GL_TEXTURE_2D);
+        glTextureStorage2D(resumeAt.get(), 1, GL_R32I, GLsizei(w), GLsizei(h));
         width = w;
         height = h;
         gl::glCheck("allocating raycaster render targets");
@@ -274,7 +284,24 @@ Image Raycaster::readBack(int passes, std::uint32_t width, std::uint32_t height,
     return image;
 }
 
-void Raycaster::bindFrame(std::size_t pageInts, const RenderOptions& options) {
+void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount,
+                          const RenderOptions& options) {
+    const GLuint program = mGpu->program.get();
+    if (mGpu->feedbackBricks != brickCount || !mGpu->feedback) {
+        mGpu->feedback = gl::createBuffer();
+        glNamedBufferStorage(mGpu->feedback.get(), GLsizeiptr(2 * brickCount * 4), nullptr,
+                             GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
+        mGpu->feedbackBricks = brickCount;
+    }
+    const std::uint32_t zeroFlag = 0;
+    glClearNamedBufferData(mGpu->feedback.get(), GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT,
+                           &zeroFlag);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, mGpu->feedback.get());
+    glBindImageTexture(1, mGpu->resumeAt.get(), 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32I);
+    glProgramUniform1i(program, glGetUniformLocation(program, "uBrickCount"), GLint(brickCount));
+    glProgramUniform1i(program, glGetUniformLocation(program, "uFeedback"), options.rayGuided);
+    glProgramUniform1i(program, glGetUniformLocation(program, "uGuided"), 0);
+    glProgramUniform1i(program, glGetUniformLocation(program, "uResume"), 0);
     mGpu->pages = gl::createBuffer();
     glNamedBufferStorage(mGpu->pages.get(), GLsizeiptr(pageInts * 4), nullptr,
                          GL_DYNAMIC_STORAGE_BIT);
@@ -402,11 +429,14 @@ std::uint32_t Raycaster::prefetch(const brickstore::BrickStore& store,
     const OccupancyTrees* occupancy = prepareOccupancy(store, level, table, options, ignored);
     const BrickPlan plan = planBricks(store, g, table, view, options.skip, occupancy);
     const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
+    const std::uint64_t scene = sceneKey(store, level, table, options);
     BatchPins pins{*mPool};
     std::uint32_t uploaded = 0;
     for (const PlannedBrick& b : plan.drawn) {
         if (uploaded >= maxUploads) break;
         if (b.draw == BrickDraw::Constant || mPool->resident(levelFirst + b.index)) continue;
+        // Behind the last frame's saturated rays: the frame asks for it if it is needed.
+        if (options.rayGuided && mGpu->guide.hidden(scene, b.index)) continue;
         brickstore::BrickPin pin;
         const auto slot = mPool->acquire(levelFirst + b.index, [&] {
             pin = cache.pin(b.key);
@@ -446,26 +476,31 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
                        options.occlusionFrustums);
     const std::uint64_t uploadsBefore = mPool->stats().uploads,
                         bytesBefore = mPool->stats().bytesUploaded;
+    const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
     std::vector<std::int32_t> pages(2 * std::max<std::uint64_t>(g.brickCount(), 1),
                                     detail::kPageAbsent);
-    bindFrame(pages.size(), options);
-    std::size_t next = 0;
+    bindFrame(pages.size(), g.brickCount(), options);
     int pass = 0;
-    do { // one batch: consecutive bricks of the front-to-back order while slots last
-        BatchPins pins{*mPool};
-        const auto uploadStart = Clock::now();
-        const auto batch =
-            fillBatch(plan, next, store.layout().levels()[level].firstBrick, cache, pages);
-        glNamedBufferSubData(mGpu->pages.get(), 0, GLsizeiptr(pages.size() * 4), pages.data());
-        glFinish();
-        stats.uploadMs += msSince(uploadStart);
-        const auto renderStart = Clock::now();
-        drawPass(pass++);
-        stats.renderMs += msSince(renderStart);
-        for (std::uint64_t i : batch)
-            pages[2 * i] = detail::kPageAbsent;
-    } while (next < plan.drawn.size());
-    stats.batches = std::uint32_t(pass);
+    std::vector<std::size_t> deferred;
+    if (options.rayGuided) {
+        // When the plan fits the pool, hidden bricks already resident are drawn as they are;
+        // when it does not, every hidden brick waits to be asked for (a resident one costs no
+        // upload then), so that no slot is held by a brick no ray reaches.
+        const bool fits = plan.sampled <= mPool->capacity();
+        deferred = mGpu->guide.deferrable(plan, scene, g.brickCount(), [&](std::uint64_t i) {
+            return fits && mPool->resident(levelFirst + i);
+        });
+    }
+    mGpu->guide.reset(); // this frame's findings replace it (none if the frame throws)
+    if (deferred.empty() || !drawGuided(plan, deferred, levelFirst, cache, pages, pass, stats)) {
+        if (!deferred.empty()) { // requests overflowed the pool: draw the frame in batches
+            stats.guidedFallback = true;
+            std::fill(pages.begin(), pages.end(), detail::kPageAbsent);
+            bindFrame(pages.size(), g.brickCount(), options); // counters and feedback from zero
+            pass = 0;
+        }
+        drawBatches(plan, levelFirst, cache, pages, pass, stats);
+    }
 
     const auto readStart = Clock::now();
     Image image = readBack(pass, options.width, options.height, stats);
@@ -475,10 +510,115 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
         mGpu->occlusion->capture(view, scene, msSince(frameStart), useStarts, options.occlusion);
         stats.occlusionBuildMs += msSince(captureStart);
     }
+    if (options.rayGuided) {
+        std::vector<std::uint32_t> entered(g.brickCount());
+        glGetNamedBufferSubData(mGpu->feedback.get(), 0, GLsizeiptr(entered.size() * 4),
+                                entered.data());
+        gl::glCheck("reading ray feedback");
+        for (const PlannedBrick& b : plan.drawn)
+            stats.bricksEntered += b.draw == BrickDraw::Sampled && entered[b.index] != 0;
+        mGpu->guide.record(plan, scene, entered);
+    }
     stats.bricksUploaded = mPool->stats().uploads - uploadsBefore;
     stats.bytesUploaded = mPool->stats().bytesUploaded - bytesBefore;
     stats.totalMs = msSince(frameStart);
     return image;
+}
+
+void Raycaster::drawBatches(const BrickPlan& plan, std::uint64_t levelFirst,
+                            brickstore::BrickCache& cache, std::vector<std::int32_t>& pages,
+                            int& pass, FrameStats& stats) {
+    std::size_t next = 0;
+    const int first = pass;
+    do { // one batch: consecutive bricks of the front-to-back order while slots last
+        BatchPins pins{*mPool};
+        const auto uploadStart = Clock::now();
+        const auto batch = fillBatch(plan, next, levelFirst, cache, pages);
+        glNamedBufferSubData(mGpu->pages.get(), 0, GLsizeiptr(pages.size() * 4), pages.data());
+        glFinish();
+        stats.uploadMs += msSince(uploadStart);
+        const auto renderStart = Clock::now();
+        drawPass(pass++);
+        stats.renderMs += msSince(renderStart);
+        for (std::uint64_t i : batch)
+            pages[2 * i] = detail::kPageAbsent;
+    } while (next < plan.drawn.size());
+    stats.batches = std::uint32_t(pass - first);
+}
+
+bool Raycaster::drawGuided(const BrickPlan& plan, const std::vector<std::size_t>& deferred,
+                           std::uint64_t levelFirst, brickstore::BrickCache& cache,
+                           std::vector<std::int32_t>& pages, int& pass, FrameStats& stats) {
+    // One batch of everything but the deferred bricks, or nothing (the caller draws batches).
+    BrickPlan now;
+    now.drawn.reserve(plan.drawn.size() - deferred.size());
+    std::uint64_t sampled = 0;
+    for (std::size_t i = 0, d = 0; i < plan.drawn.size(); ++i) {
+        if (d < deferred.size() && deferred[d] == i) {
+            ++d;
+            continue;
+        }
+        now.drawn.push_back(plan.drawn[i]);
+        sampled += plan.drawn[i].draw == BrickDraw::Sampled;
+    }
+    if (sampled >= mPool->capacity()) return false; // no slot would be left for a request
+    const GLuint program = mGpu->program.get();
+    auto uniform = [&](const char* name, bool on) {
+        glProgramUniform1i(program, glGetUniformLocation(program, name), on);
+    };
+    BatchPins pins{*mPool};
+    auto uploadStart = Clock::now();
+    std::size_t next = 0;
+    fillBatch(now, next, levelFirst, cache, pages);
+    for (std::size_t i : deferred)
+        pages[2 * plan.drawn[i].index] = detail::kPageDeferred;
+    stats.bricksDeferred = deferred.size();
+    const GLint none = -1;
+    glClearTexImage(mGpu->resumeAt.get(), 0, GL_RED_INTEGER, GL_INT, &none);
+    uniform("uGuided", true);
+    std::vector<std::uint32_t> asked(mGpu->feedbackBricks);
+    bool complete = true;
+    for (int round = 0;; ++round) {
+        glNamedBufferSubData(mGpu->pages.get(), 0, GLsizeiptr(pages.size() * 4), pages.data());
+        glFinish();
+        stats.uploadMs += msSince(uploadStart);
+        const auto renderStart = Clock::now();
+        uniform("uResume", round > 0);
+        drawPass(pass++);
+        stats.renderMs += msSince(renderStart);
+        stats.resumePasses += round > 0;
+        // What the stopped rays ask for; past the last round, every deferred brick left.
+        glGetNamedBufferSubData(mGpu->feedback.get(), GLintptr(asked.size() * 4),
+                                GLsizeiptr(asked.size() * 4), asked.data());
+        uploadStart = Clock::now();
+        std::uint64_t loaded = 0;
+        for (std::size_t i : deferred) {
+            const PlannedBrick& b = plan.drawn[i];
+            if (pages[2 * b.index] != detail::kPageDeferred) continue;
+            if (asked[b.index] == 0 && round < kMaxRequestRounds) continue;
+            brickstore::BrickPin pin;
+            const auto slot = mPool->acquire(levelFirst + b.index, [&] {
+                pin = cache.pin(b.key);
+                return pin.data();
+            });
+            if (!slot) {
+                complete = false;
+                break;
+            }
+            pages[2 * b.index] = std::int32_t(*slot);
+            ++loaded;
+        }
+        if (!complete || loaded == 0) break;
+        stats.bricksRequested += loaded;
+        const std::uint32_t zeroFlag = 0;
+        glClearNamedBufferSubData(mGpu->feedback.get(), GL_R32UI, GLintptr(asked.size() * 4),
+                                  GLsizeiptr(asked.size() * 4), GL_RED_INTEGER, GL_UNSIGNED_INT,
+                                  &zeroFlag);
+    }
+    uniform("uGuided", false);
+    uniform("uResume", false);
+    stats.batches = 1;
+    return complete;
 }
 
 } // namespace bc::render

@@ -78,7 +78,17 @@ class Raycaster {
     std::vector<std::uint64_t> fillBatch(const BrickPlan& plan, std::size_t& next,
                                          std::uint64_t levelFirst, brickstore::BrickCache& cache,
                                          std::vector<std::int32_t>& pages);
-    void bindFrame(std::size_t pageInts, const RenderOptions& options);
+    void bindFrame(std::size_t pageInts, std::uint64_t brickCount, const RenderOptions& options);
+    /// Draws `plan` in front-to-back batches that fit the pool; `pass` counts the passes.
+    void drawBatches(const BrickPlan& plan, std::uint64_t levelFirst,
+                     brickstore::BrickCache& cache, std::vector<std::int32_t>& pages, int& pass,
+                     FrameStats& stats);
+    /// Draws `plan` in one batch without its `deferred` bricks (indices into plan.drawn), then
+    /// loads those that stopped rays ask for and continues them, until none asks. False, with
+    /// the image unfinished, when the rest of the plan or a request does not fit the pool.
+    bool drawGuided(const BrickPlan& plan, const std::vector<std::size_t>& deferred,
+                    std::uint64_t levelFirst, brickstore::BrickCache& cache,
+                    std::vector<std::int32_t>& pages, int& pass, FrameStats& stats);
     /// The octrees of `level` brought up to `table` and uploaded, or nullptr when the frame
     /// does not use the second stage.
     const OccupancyTrees* prepareOccupancy(const brickstore::BrickStore& store,

@@ -49,6 +49,11 @@ struct RenderOptions {
     /// Start rays at the previous frame's occlusion frustums (same raycaster, same scene).
     bool occlusionFrustums = true;
     OcclusionConfig occlusion;
+    /// GPU only: ray-guided residency (render/RESIDENCY.md). Bricks the last frame of the same
+    /// scene planned but no unsaturated ray entered are not uploaded while the pool lacks them;
+    /// a ray that reaches one stops there and goes on in a further pass once it is loaded.
+    /// Images are those without it; only uploads and passes change.
+    bool rayGuided = true;
 
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;
@@ -80,6 +85,16 @@ struct FrameStats {
     std::uint64_t bricksUploaded = 0; ///< host -> GPU uploads this frame
     std::uint64_t bytesUploaded = 0;
     std::uint32_t batches = 0; ///< front-to-back passes (> 1 when the budget is short)
+    /// Ray-guided residency (RenderOptions::rayGuided): bricks unsaturated rays entered (the
+    /// frame's true working set); planned bricks left unloaded because the last frame found
+    /// them hidden; of those, the ones loaded later in the frame (rays reached them, or a
+    /// frame out of request rounds loaded the rest); passes that continued rays stopped at one;
+    /// and whether the deferral did not fit the pool so the frame was drawn in batches.
+    std::uint64_t bricksEntered = 0;
+    std::uint64_t bricksDeferred = 0;
+    std::uint64_t bricksRequested = 0;
+    std::uint32_t resumePasses = 0;
+    bool guidedFallback = false;
     std::uint64_t octreeLeaps = 0;          ///< empty octree nodes leapt by rays
     std::uint64_t octreeBricksRebuilt = 0;  ///< octrees rebuilt for this frame's TF (0: reused)
     double octreeRebuildMs = 0.0;

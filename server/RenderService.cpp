@@ -201,6 +201,12 @@ struct RenderService::Renderers {
     }
 };
 
+/// Bricks a frame held resident: those it drew, less constant ones (no texture) and those
+/// ray-guided residency left unloaded.
+std::uint64_t residentBricks(const render::FrameStats& s) {
+    return s.bricksVisited - s.bricksConstant - s.bricksDeferred + s.bricksRequested;
+}
+
 /// Bytes of one stored brick (apron included), as the pool and the host cache hold it.
 std::uint64_t slotBytesOf(const brickstore::BrickStore& store) {
     const std::uint64_t e = store.layout().storedEdge();
@@ -238,6 +244,7 @@ struct RenderService::Counters {
     std::map<std::string, double> poolBudget;
     /// Per volume: bricks uploaded while a frame waited for them, and by prefetch while idle.
     std::map<std::string, double> frameUploads, prefetchUploads, prefetchBytes;
+    std::map<std::string, double> deferred, requested; ///< ray-guided residency, per volume
     double prefetchMs = 0;
 };
 
@@ -349,7 +356,7 @@ void RenderService::collect(MetricSet& m) {
     m.histogram("frame_upload_ms", "Host -> GPU uploads (CPU renderers: brick preparation) of one frame",
                 c.uploadMs);
     m.histogram("frame_encode_ms", "Encoding one frame", c.encodeMsHist);
-    m.histogram("frame_working_set_bytes", "Bytes of the distinct bricks one frame sampled",
+    m.histogram("frame_working_set_bytes", "Bytes of the bricks one frame held on the GPU (drawn, less constant and deferred ones)",
                 c.workingSet);
     m.histogram("frame_encoded_bytes", "Encoded bytes of one frame message", c.frameBytes);
     m.counter("prefetch_ms_total", "Milliseconds the render thread spent prefetching", c.prefetchMs);
@@ -379,6 +386,13 @@ void RenderService::collect(MetricSet& m) {
                   "Bricks uploaded ahead of need, for a predicted next view, while idle",
                   of(c.prefetchUploads, name), l);
         m.counter("gpu_prefetch_bytes_total", "Bytes uploaded by prefetch", of(c.prefetchBytes, name), l);
+        m.counter("gpu_deferred_bricks_total",
+                  "Planned bricks a frame left unloaded: its last frame found them behind "
+                  "saturated rays (ray-guided residency)",
+                  of(c.deferred, name), l);
+        m.counter("gpu_requested_bricks_total",
+                  "Deferred bricks loaded after all, when rays reached them",
+                  of(c.requested, name), l);
         const auto b = c.poolBudget.find(name);
         m.gauge("gpu_pool_budget_bytes", "The volume's share of the GPU budget",
                 b == c.poolBudget.end() ? 0.0 : b->second, l);
@@ -439,6 +453,8 @@ void RenderService::record(const FrameRecord& f, double bytes, const std::string
     c.frameBytes.observe(bytes);
     if (pool) {
         c.frameUploads[volume] += f.bricksUploaded;
+        c.deferred[volume] += f.bricksDeferred;
+        c.requested[volume] += f.bricksRequested;
         c.poolLive[volume] = pool->stats();
         c.poolBudget[volume] = double(pool->capacity()) * double(pool->slotBytes());
     }
@@ -581,7 +597,7 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
         if (mConfig.prefetch && mine.previousCamera)
             mine.prefetch = SessionRenderers::Prefetch{
                 s.volume, s.tf, predictNext(*mine.previousCamera, camera), options,
-                stats.bricksVisited - stats.bricksConstant};
+                residentBricks(stats)};
         break;
     }
     case protocol::Renderer::CpuRaycaster: {
@@ -641,7 +657,9 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     rec.encodeMs = h.encodeMs;
     rec.uploadMs = stats.uploadMs;
     rec.latencyMs = msSince(job.queuedAt);
-    rec.bricks = double(stats.bricksVisited - stats.bricksConstant);
+    rec.bricks = double(residentBricks(stats));
+    rec.bricksDeferred = double(stats.bricksDeferred);
+    rec.bricksRequested = double(stats.bricksRequested);
     rec.workingSetBytes = rec.bricks * double(slotBytesOf(*s.volume->store));
     rec.bricksUploaded = double(stats.bricksUploaded);
     return frame;

@@ -124,6 +124,7 @@ class RenderService {
         std::string renderer;
         double latencyMs = 0, renderMs = 0, uploadMs = 0, encodeMs = 0;
         double workingSetBytes = 0, bricks = 0, bricksUploaded = 0;
+        double bricksDeferred = 0, bricksRequested = 0; ///< ray-guided residency
     };
     void run();
     void notify();

@@ -26,6 +26,14 @@ layout(r32f, binding = 0) uniform image2D uFirstHit;
 uniform bool uUseStart, uWriteFirstHit;
 // Per brick of the level, the occupancy bits of its octree levels 1..uOctDepth (OCCUPANCY.md).
 layout(std430, binding = 2) readonly buffer Occupancy { uint occ[]; };
+// Ray-guided residency: feedback[b] = 1 once an unsaturated ray enters resident brick b, and
+// feedback[uBrickCount + b] = 1 once one reaches deferred brick b (planned, not uploaded). A
+// ray stops at a deferred brick; uResumeAt holds the sample it goes on from in the next pass
+// (-1: done). uResume passes start there; pixels with nothing to resume keep their colour.
+layout(std430, binding = 3) buffer Feedback { uint feedback[]; };
+layout(r32i, binding = 1) uniform iimage2D uResumeAt;
+uniform bool uFeedback, uGuided, uResume;
+uniform int uBrickCount;
 
 uniform vec2 uViewport;
 uniform vec3 uEye, uForward, uRight, uUp;
@@ -123,7 +131,8 @@ float exitParameter(vec3 p0, vec3 dv, vec3 lo, float size) {
 
 void main() {
     vec4 acc = uFirstPass ? vec4(0.0) : texelFetch(uPrev, ivec2(gl_FragCoord.xy), 0);
-    if (acc.a >= uErt) { outColor = acc; return; }
+    int resumeAt = uResume ? imageLoad(uResumeAt, ivec2(gl_FragCoord.xy)).r : 0;
+    if (acc.a >= uErt || resumeAt < 0) { outColor = acc; return; }
     vec2 s = 2.0 * gl_FragCoord.xy / uViewport - 1.0;
     vec3 o = uOrtho ? uEye + s.x * uRight + s.y * uUp : uEye;
     vec3 d = uOrtho ? uForward : normalize(uForward + s.x * uRight + s.y * uUp);
@@ -142,8 +151,8 @@ void main() {
 
     // Occlusion frustums: no sample before the proxies' nearest face can be non-empty. The
     // lattice of sample positions stays that of the box entry; the start only drops samples.
-    int k = 0;
-    if (uUseStart) {
+    int k = resumeAt;
+    if (uUseStart && !uResume) {
         float ts = texelFetch(uStart, ivec2(gl_FragCoord.xy), 0).r;
         k = ts >= 1.0e37 ? total : clamp(int(floor((ts - t0) / uStepMm - 0.5)) - 1, 0, total);
         if (k > 0) atomicAdd(savedCount, uint(k));
@@ -155,20 +164,26 @@ void main() {
     vec3 pin = ov + dv * (t0 + float(k) * uStepMm);
     ivec3 cell = clamp(ivec3(floor(pin / float(uBrick))), ivec3(0), uGrid - 1);
     ivec3 stepDir = ivec3(sign(dv));
-    vec3 tDelta, tMax;
-    for (int a = 0; a < 3; ++a) {
-        if (stepDir[a] == 0) { tDelta[a] = 3.0e38; tMax[a] = 3.0e38; continue; }
-        tDelta[a] = float(uBrick) / abs(dv[a]);
-        float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * uBrick);
-        tMax[a] = (plane - ov[a]) / dv[a];
-    }
+    // Each exit parameter comes from its plane directly (not by adding brick widths up), so a
+    // ray resumed in a later pass meets the same brick boundaries as one marched throughout.
+    vec3 tMax;
+    for (int a = 0; a < 3; ++a)
+        tMax[a] = stepDir[a] == 0 ? 3.0e38
+                                  : (float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * uBrick) - ov[a]) / dv[a];
     uint taken = 0u, leaps = 0u;
+    int suspendAt = -1;
     while (k < total) {
         float tOut = min(min(tMax.x, tMax.y), tMax.z);
         int kEnd = min(total, int(ceil((tOut - t0) / uStepMm - 0.5)));
         int brickIndex = (cell.z * uGrid.y + cell.y) * uGrid.x + cell.x;
         ivec2 e = page[brickIndex];
+        if (e.x == -3 && kEnd > k) { // deferred: wait for it, drawing nothing beyond
+            feedback[uBrickCount + brickIndex] = 1u;
+            suspendAt = k;
+            break;
+        }
         if (e.x >= 0 && kEnd > k) {
+            if (uFeedback) feedback[brickIndex] = 1u;
             ivec3 slot = slotOrigin(e.x);
             vec3 local = ov - vec3(cell * uBrick);   // brick-local voxel position at t = 0
             vec3 rel = local + (float(uApron) - 0.5);
@@ -217,13 +232,14 @@ void main() {
         k = max(k, kEnd);
         int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
         cell[a] += stepDir[a];
-        tMax[a] += tDelta[a];
+        tMax[a] = (float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * uBrick) - ov[a]) / dv[a];
         if (cell[a] < 0 || cell[a] >= uGrid[a]) break;
     }
     if (uWriteFirstHit && tHit < 1.0e37) {
         ivec2 px = ivec2(gl_FragCoord.xy);
         if (tHit < imageLoad(uFirstHit, px).r) imageStore(uFirstHit, px, vec4(tHit));
     }
+    if (uGuided) imageStore(uResumeAt, ivec2(gl_FragCoord.xy), ivec4(suspendAt));
     atomicAdd(sampleCount, taken);
     if (leaps > 0u) atomicAdd(leapCount, leaps);
     outColor = acc;

@@ -671,8 +671,8 @@ TEST(DecoderRejects, EarlyTerminationThresholdOutsideZeroToOne) {
 }
 
 TEST(DecoderRejects, TechniqueBitsUndefinedOrMissingBrickSkipping) {
-    expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, 1u << 5), ErrorCode::OutOfRange,
-                   "SetRenderOptions.techniques: 0x20 has bits outside 0x1f");
+    expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, 1u << 6), ErrorCode::OutOfRange,
+                   "SetRenderOptions.techniques: 0x40 has bits outside 0x3f");
     expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, kTechOctreeSkipping),
                    ErrorCode::OutOfRange, "SetRenderOptions.techniques: octree");
     expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, kTechOcclusionFrustums),

@@ -221,7 +221,7 @@ TEST(Messages, SetRenderOptionsGoldenBytesRoundTrip) {
         0x80, 0x02,             // width 640
         0xE0, 0x01,             // height 480
         0x00, 0x00, 0x00, 0x3F, // stepVoxels 0.5
-        0x1F, 0x00, 0x00, 0x00, // techniques: all five
+        0x3F, 0x00, 0x00, 0x00, // techniques: all six
         0xA4, 0x70, 0x7D, 0x3F, // ertThreshold 0.99f
         0x01,                   // renderer: CPU raycaster
         0x01,                   // quality: always refined
