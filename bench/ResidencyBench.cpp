@@ -111,10 +111,10 @@ struct Volume {
 std::unique_ptr<Volume> openVolume(const std::string& scan, const Options& o) {
     brickstore::SourceSpec spec;
     std::string file;
-    if (scan == "phantom") {
-        spec.input = "synth:phantom";
+    if (scan == "phantom" || scan == "vessels") {
+        spec.input = "synth:" + scan;
         spec.dims = std::array<std::uint64_t, 3>{o.edge, o.edge, o.edge};
-        file = "phantom_" + std::to_string(o.edge) + "_b" + std::to_string(o.brick) + ".bcs";
+        file = scan + "_" + std::to_string(o.edge) + "_b" + std::to_string(o.brick) + ".bcs";
     } else if (scan == "cthead") {
         spec.input = (std::filesystem::path(o.dataDir) / "stanford_cthead_256x256x113_uint16.raw").string();
         spec.spacingMm = std::array<double, 3>{1, 1, 2};
@@ -124,10 +124,11 @@ std::unique_ptr<Volume> openVolume(const std::string& scan, const Options& o) {
         }
         file = "cthead_b" + std::to_string(o.brick) + ".bcs";
     } else {
-        throw std::invalid_argument("--scans: unknown scan '" + scan + "' (phantom, cthead)");
+        throw std::invalid_argument("--scans: unknown scan '" + scan + "' (phantom, vessels, cthead)");
     }
     auto v = std::make_unique<Volume>();
-    v->name = scan == "phantom" ? "phantom " + std::to_string(o.edge) + "^3 u16" : "cthead 256x256x113 u16";
+    v->name = scan == "cthead" ? "cthead 256x256x113 u16"
+              : scan + " " + std::to_string(o.edge) + "^3 " + (scan == "phantom" ? "u16" : "u8");
     const std::string path = (std::filesystem::path(o.storeDir) / file).string();
     if (!std::filesystem::exists(path)) {
         auto source = brickstore::openSource(spec);
@@ -146,6 +147,7 @@ std::unique_ptr<Volume> openVolume(const std::string& scan, const Options& o) {
 struct Run {
     double planned = 0, entered = 0, uploads = 0, hits = 0, passes = 0, resumes = 0;
     double deferred = 0, requested = 0, frameMs = 0, fallbacks = 0, worst = 0;
+    std::uint32_t slots = 0; ///< the pool's capacity
     std::vector<render::Image> images;
 };
 
@@ -179,6 +181,7 @@ Run fly(Volume& v, const render::TransferFunction& tf, std::uint64_t budgetBytes
     }
     const double n = double(o.frames - o.warmup);
     run.hits = double(r.pool()->stats().hits - hitsBefore);
+    run.slots = r.pool()->capacity();
     for (double* x : {&run.planned, &run.entered, &run.uploads, &run.passes, &run.resumes,
                       &run.deferred, &run.requested, &run.frameMs})
         *x /= n;
@@ -222,7 +225,7 @@ void runAll(const Options& o) {
                 const auto slots = std::max<std::uint64_t>(1, std::uint64_t(m * full.planned));
                 for (bool guided : {false, true}) {
                     const Run run = fly(*v, tf, slots * v->slotBytes, guided, o, &full.images);
-                    t.rows.push_back({fmt("%.2f", m), std::to_string(slots), guided ? "on" : "off",
+                    t.rows.push_back({fmt("%.2f", m), std::to_string(run.slots), guided ? "on" : "off",
                                       fmt("%.1f%%", 100.0 * run.hits / std::max(run.hits + run.uploads, 1e-9)),
                                       fmt("%.1f", run.uploads),
                                       fmt("%.2f", run.uploads * double(v->slotBytes) / kMiB),
@@ -266,7 +269,7 @@ int main(int argc, char** argv) {
     app.add_option("--brick", o.brick, "Brick edge (voxels)")->capture_default_str()->check(CLI::IsMember({8, 16, 32, 64}));
     app.add_option("--budgets", o.budgets, "Pool budgets, multiples of the plan P")->capture_default_str();
     app.add_option("--tfs", o.tfs, "Transfer functions: opaque-skin or presets")->capture_default_str();
-    app.add_option("--scans", o.scans, "phantom (generated), cthead (../shared/data)")->capture_default_str();
+    app.add_option("--scans", o.scans, "phantom, vessels (generated), cthead (../shared/data)")->capture_default_str();
     app.add_option("--data-dir", o.dataDir, "Where the real scans are")->capture_default_str();
     app.add_option("--store-dir", o.storeDir, "Where ingested stores are kept (default: a temporary folder)");
     app.add_option("--csv", o.csv, "Write every table cell as CSV");

@@ -34,6 +34,23 @@ TexFormat texFormat(brickstore::VoxelType t) {
 
 } // namespace
 
+std::array<std::uint32_t, 3> BrickPool::slotGridFor(std::uint64_t n, std::uint64_t perAxis) {
+    // The most slots, at most n, in a grid of at most perAxis a side; of equal counts the one
+    // with the shortest longest side. For each depth the rest is a near-square layer.
+    std::array<std::uint64_t, 3> best{1, 1, 1};
+    auto longest = [](const std::array<std::uint64_t, 3>& g) { return std::max({g[0], g[1], g[2]}); };
+    for (std::uint64_t nz = 1; nz <= std::min(perAxis, n); ++nz) {
+        const std::uint64_t layer = n / nz;
+        const std::uint64_t nx = std::min<std::uint64_t>(
+            perAxis, std::max<std::uint64_t>(1, std::uint64_t(std::sqrt(double(layer)))));
+        const std::uint64_t ny = std::min<std::uint64_t>(perAxis, std::max<std::uint64_t>(1, layer / nx));
+        const std::array<std::uint64_t, 3> g{nx, ny, nz};
+        const std::uint64_t count = nx * ny * nz, bestCount = best[0] * best[1] * best[2];
+        if (count > bestCount || (count == bestCount && longest(g) < longest(best))) best = g;
+    }
+    return {std::uint32_t(best[0]), std::uint32_t(best[1]), std::uint32_t(best[2])};
+}
+
 struct BrickPool::Gpu {
     gl::Texture texture;
 };
@@ -48,14 +65,8 @@ BrickPool::BrickPool(brickstore::VoxelType type, std::uint32_t edge, const Brick
         throw RenderError("GPU budget " + std::to_string(config.budgetBytes >> 20) +
                           " MiB holds no brick slot of " + std::to_string(edge) +
                           "^3 voxels (max 3D texture " + std::to_string(max3d) + ")");
-    const std::uint64_t n = std::min(wanted, perAxis * perAxis * perAxis);
-    const std::uint64_t nx =
-        std::min<std::uint64_t>(perAxis, std::uint64_t(std::ceil(std::cbrt(double(n)))));
-    const std::uint64_t ny = std::min<std::uint64_t>(perAxis, std::max<std::uint64_t>(1, n / nx));
-    const std::uint64_t nz =
-        std::min<std::uint64_t>(perAxis, std::max<std::uint64_t>(1, n / (nx * ny)));
-    mSlotGrid = {std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz)};
-    mCapacity = std::uint32_t(nx * ny * nz);
+    mSlotGrid = slotGridFor(std::min(wanted, perAxis * perAxis * perAxis), perAxis);
+    mCapacity = mSlotGrid[0] * mSlotGrid[1] * mSlotGrid[2];
 
     const TexFormat f = texFormat(type);
     mGpu->texture = gl::createTexture(GL_TEXTURE_3D);

@@ -54,6 +54,9 @@ class BrickPool {
     brickstore::VoxelType type() const { return mType; }
     std::uint32_t edge() const { return mEdge; }
     std::uint32_t capacity() const { return mCapacity; }
+    /// The slot grid a pool of at most `n` slots uses when a 3D texture holds at most
+    /// `perAxis` slots a side: the most slots that fit, as near a cube as that allows.
+    static std::array<std::uint32_t, 3> slotGridFor(std::uint64_t n, std::uint64_t perAxis);
     std::array<std::uint32_t, 3> slotGrid() const { return mSlotGrid; }
     std::array<std::uint32_t, 3> textureSize() const;
     std::uint64_t slotBytes() const;

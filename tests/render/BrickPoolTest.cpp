@@ -26,6 +26,26 @@ struct Fixture {
     std::vector<std::byte> voxels;
 };
 
+// The slot grid uses the budget: the old layout (a cube root wide, the rest in one row, then
+// depth) lost up to 45% of the slots once the row met the texture's size limit.
+TEST(BrickPool, SlotGridHoldsNearlyEverySlotTheBudgetPays) {
+    for (std::uint64_t perAxis : {4, 30, 102, 240, 2048})
+        for (std::uint64_t n = 1; n <= std::min<std::uint64_t>(perAxis * perAxis * perAxis, 20000);
+             n += 1 + n / 7) {
+            const auto g = BrickPool::slotGridFor(n, perAxis);
+            const std::uint64_t count = std::uint64_t(g[0]) * g[1] * g[2];
+            ASSERT_LE(count, n) << n << " slots, " << perAxis << " a side";
+            for (std::uint32_t side : g) {
+                ASSERT_LE(side, perAxis);
+            }
+            if (n >= 100 && n * 8 <= perAxis * perAxis * perAxis) {
+                EXPECT_GE(double(count), 0.95 * double(n)) << n << " slots, " << perAxis << " a side";
+            }
+        }
+    const auto g = BrickPool::slotGridFor(2796, 102); // 16^3 u16 bricks on llvmpipe: was 1530
+    EXPECT_GE(std::uint64_t(g[0]) * g[1] * g[2], 2700u);
+}
+
 TEST(BrickPool, CountsHitsUploadsEvictionsAndRefetchesOfAScriptedPath) {
     Fixture f(4);
     ASSERT_EQ(f.pool.capacity(), 4u);
