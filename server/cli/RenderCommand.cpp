@@ -16,10 +16,14 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
+#include <memory>
 #include <thread>
+#include <vector>
 
 namespace bc::cli {
 namespace {
@@ -32,6 +36,7 @@ struct RenderCliOptions {
     bool ortho = false, noShading = false, reference = false, interactive = false;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
+    std::uint32_t repeat = 1;
 };
 
 glm::dvec3 vec3Of(const std::string& text, const std::string& what) {
@@ -130,40 +135,69 @@ void runRender(const RenderCliOptions& o) {
         o.renderer != "splat-gpu")
         throw std::invalid_argument("--renderer: '" + o.renderer +
                                     "' is not gpu, cpu, splat or splat-gpu");
+    // One renderer draws the view --repeat times: the later frames are warm (host cache, GPU
+    // pool, octrees and, for the GPU raycaster, occlusion frustums of the same view).
+    std::unique_ptr<render::EglContext> context;
+    std::unique_ptr<brickstore::BrickCache> cache;
+    std::function<render::Image(render::FrameStats&)> draw;
+    std::function<std::string()> describe;
     if (o.reference) {
         const auto level = std::min<std::uint32_t>(
             std::uint32_t(o.level), std::uint32_t(store->layout().levels().size() - 1));
-        render::ReferenceVolume volume(*store, level);
-        image = render::renderReference(*store, volume, tf, camera, options, stats);
-        renderer = "CPU reference (double)";
-    } else if (o.renderer == "splat") {
-        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
-        render::HybridSplatter splatter;
-        image = splatter.render(*store, cache, tf, camera, options, stats);
-        const auto& f = splatter.lastFrame();
-        renderer = "hybrid splatter (CPU, " + std::to_string(f.points) + " points, " +
-                   std::to_string(f.splats) + " splats, " + std::to_string(f.culled) + " culled)";
-    } else if (o.renderer == "splat-gpu") {
-        render::EglContext context;
-        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
-        render::GpuSplatter splatter;
-        image = splatter.render(*store, cache, tf, camera, options, stats);
-        const auto& f = splatter.lastFrame();
-        renderer = "hybrid splatter (" + context.renderer() + ", " + std::to_string(f.points) +
-                   " points, " + std::to_string(f.splats) + " splats)";
-    } else if (o.renderer == "cpu") {
-        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
-        render::CpuRaycaster raycaster;
-        image = raycaster.render(*store, cache, tf, camera, options, stats);
-        renderer = "CPU raycaster (float, " + std::to_string(std::thread::hardware_concurrency()) +
-                   " threads)";
+        auto volume = std::make_shared<render::ReferenceVolume>(*store, level);
+        draw = [&, volume](render::FrameStats& s) {
+            return render::renderReference(*store, *volume, tf, camera, options, s);
+        };
+        describe = [] { return std::string("CPU reference (double)"); };
     } else {
-        render::EglContext context;
-        brickstore::BrickCache cache(*store, {o.hostBudgetMb << 20});
-        render::Raycaster raycaster({o.gpuBudgetMb << 20});
-        image = raycaster.render(*store, cache, tf, camera, options, stats);
-        renderer = context.renderer() + " via EGL " + context.platform();
+        if (o.renderer == "gpu" || o.renderer == "splat-gpu")
+            context = std::make_unique<render::EglContext>();
+        cache = std::make_unique<brickstore::BrickCache>(*store,
+                                                         brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
+        if (o.renderer == "splat") {
+            auto splatter = std::make_shared<render::HybridSplatter>();
+            draw = [&, splatter](render::FrameStats& s) {
+                return splatter->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [splatter] {
+                const auto& f = splatter->lastFrame();
+                return "hybrid splatter (CPU, " + std::to_string(f.points) + " points, " +
+                       std::to_string(f.splats) + " splats, " + std::to_string(f.culled) + " culled)";
+            };
+        } else if (o.renderer == "splat-gpu") {
+            auto splatter = std::make_shared<render::GpuSplatter>();
+            draw = [&, splatter](render::FrameStats& s) {
+                return splatter->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [&, splatter] {
+                const auto& f = splatter->lastFrame();
+                return "hybrid splatter (" + context->renderer() + ", " + std::to_string(f.points) +
+                       " points, " + std::to_string(f.splats) + " splats)";
+            };
+        } else if (o.renderer == "cpu") {
+            auto raycaster = std::make_shared<render::CpuRaycaster>();
+            draw = [&, raycaster](render::FrameStats& s) {
+                return raycaster->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [] {
+                return "CPU raycaster (float, " + std::to_string(std::thread::hardware_concurrency()) +
+                       " threads)";
+            };
+        } else {
+            auto raycaster =
+                std::make_shared<render::Raycaster>(render::RaycasterConfig{o.gpuBudgetMb << 20});
+            draw = [&, raycaster](render::FrameStats& s) {
+                return raycaster->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [&] { return context->renderer() + " via EGL " + context->platform(); };
+        }
     }
+    std::vector<double> frameMs;
+    for (std::uint32_t i = 0; i < o.repeat; ++i) {
+        image = draw(stats);
+        frameMs.push_back(stats.totalMs);
+    }
+    renderer = describe();
     render::writePng(o.output, image);
     std::printf(
         "%s: %ux%u, level %u, %.1f ms (upload %.1f, render %.1f, readback %.1f), %.1f "
@@ -175,9 +209,17 @@ void runRender(const RenderCliOptions& o) {
         (unsigned long long)stats.bricksVisited, (unsigned long long)stats.bricksSkipped,
         (unsigned long long)stats.bricksCulled, (unsigned long long)stats.bricksUploaded,
         formatBytes(double(stats.bytesUploaded)).c_str(), stats.batches, renderer.c_str());
+    if (o.repeat > 1) {
+        std::vector<double> warm(frameMs.begin() + 1, frameMs.end());
+        std::sort(warm.begin(), warm.end());
+        std::printf("%u frames: first %.1f ms, warm median %.1f ms (min %.1f, max %.1f)\n",
+                    o.repeat, frameMs.front(), warm[warm.size() / 2], warm.front(), warm.back());
+    }
     if (!o.statsPath.empty()) {
+        auto j = statsJson(stats, renderer, options);
+        j["frameMs"] = frameMs; // every frame's totalMs; the other fields are the last frame's
         std::ofstream f(o.statsPath);
-        f << statsJson(stats, renderer, options).dump(2) << "\n";
+        f << j.dump(2) << "\n";
         if (!f) throw std::runtime_error(o.statsPath + ": cannot write the stats");
     }
 }
@@ -253,6 +295,11 @@ void addRenderCommand(CLI::App& app) {
         ->capture_default_str();
     cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
     cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");
+    cmd->add_option("--repeat", o->repeat,
+                    "Draw the view this many times with one renderer (later frames warm); the "
+                    "image and stats are the last frame's, frameMs lists every frame's time")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 10000));
     cmd->callback([o] { runRender(*o); });
 }
 

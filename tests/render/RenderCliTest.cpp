@@ -62,6 +62,28 @@ TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
     EXPECT_EQ(c.exitCode, 0) << c.text;
 }
 
+// --repeat: one renderer draws the view again and again; the last (warm) image is the first's.
+TEST_F(RenderCli, RepeatDrawsWarmFramesOfTheSameImage) {
+    for (const std::string renderer : {"cpu", "gpu"}) {
+        const std::string one = dir.file(renderer + "1.png"), three = dir.file(renderer + "3.png"),
+                          stats = dir.file(renderer + ".json");
+        const std::string args = " --size 64,48 --tf ct-bone --orbit 40,25 --renderer " + renderer;
+        auto a = brickcast("render " + store + " -o " + one + args);
+        ASSERT_EQ(a.exitCode, 0) << a.text;
+        auto b = brickcast("render " + store + " -o " + three + args + " --repeat 3 --stats " + stats);
+        ASSERT_EQ(b.exitCode, 0) << b.text;
+        EXPECT_TRUE(contains(b.text, "3 frames: first")) << b.text;
+        EXPECT_LE(compareImages(readPng(one), readPng(three)).maxAbs, 1.0 / 255.0) << renderer;
+        std::ifstream f(stats);
+        const auto j = nlohmann::json::parse(f);
+        EXPECT_EQ(j.at("frameMs").size(), 3u);
+        EXPECT_EQ(j.at("bricksUploaded").get<int>(), 0) << renderer << ": the last frame is warm";
+    }
+    auto bad = brickcast("render " + store + " -o " + dir.file("x.png") + " --repeat 0");
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_TRUE(contains(bad.text, "--repeat")) << bad.text;
+}
+
 // `brickcast bench` on the smallest real scan: every technique set of every path, speed-ups
 // over plain taken in the run, errors against the reference, a step sweep; bad lists named.
 TEST(BenchCli, PrintsEveryTechniqueSetWithErrorsAndASweepAndNamesBadInput) {
