@@ -15,6 +15,7 @@
 #include "render/ImageMetrics.h"
 #include "render/Raycaster.h"
 #include "render/TransferFunction.h"
+#include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>
 
@@ -207,7 +208,7 @@ void runAll(const Options& o) {
         for (const std::string& tfName : names(o.tfs)) {
             const auto tf = tfName == "opaque-skin"
                                 ? render::TransferFunction::parse(kOpaqueSkin, "<opaque-skin>", v->stats)
-                                : render::TransferFunction::load(tfName, v->stats);
+                                : tools::loadTransferFunction(tfName, v->stats);
             const std::uint64_t all = (v->store->layout().brickCount() + 1) * v->slotBytes;
             const Run full = fly(*v, tf, all, true, o, nullptr);
             const std::string what = v->name + ", " + tfName;

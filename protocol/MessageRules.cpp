@@ -209,7 +209,7 @@ void check(Rules& r, const Stats& m) {
 }
 
 void check(Rules& r, const Error& m) {
-    r.intRange("code", std::uint16_t(m.code), 1, std::uint16_t(ErrorCode::Internal));
+    r.intRange("code", std::uint16_t(m.code), 1, std::uint16_t(ErrorCode::NotFound));
     r.text("message", m.message, 0, kMaxErrorMessageBytes);
 }
 

@@ -74,6 +74,8 @@ const char* errorName(std::uint16_t code) {
         return "BadState";
     case ErrorCode::Internal:
         return "Internal";
+    case ErrorCode::NotFound:
+        return "NotFound";
     }
     return "unknown";
 }

@@ -64,6 +64,7 @@ enum class ErrorCode : std::uint16_t {
     ShuttingDown = 14,
     BadState = 15,
     Internal = 16,
+    NotFound = 17,
 };
 
 /// Hello.capabilities bits.

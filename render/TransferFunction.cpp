@@ -11,9 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <limits>
-#include <sstream>
 #include <stdexcept>
 
 namespace bc::render {
@@ -21,9 +19,6 @@ namespace bc::render {
 namespace {
 
 using Json = nlohmann::json;
-
-/// Transfer-function files are a few kilobytes; anything far larger is not one.
-constexpr std::uintmax_t kMaxFileBytes = 16u << 20;
 
 std::string formatNumber(double v) {
     char text[32];
@@ -53,6 +48,47 @@ double finiteNumber(const Json& j, const std::string& source, const std::string&
     return v;
 }
 
+const char* placementKey(Placement p) {
+    switch (p) {
+    case Placement::Value: return "value";
+    case Placement::Fraction: return "fraction";
+    case Placement::Percentile: return "percentile";
+    }
+    return "value";
+}
+
+/// Native value of `spec` placed for a volume; `field` names the point ("points[3]").
+ControlPoint place(const PointSpec& spec, const VolumeValueStats& stats, const std::string& source,
+                   const std::string& field) {
+    const std::string f = field + "." + placementKey(spec.placement);
+    const double x = spec.position;
+    if (!std::isfinite(x)) fail(source, f, "not a finite number");
+    for (std::size_t c = 0; c < 4; ++c) {
+        const double v = spec.rgba[c];
+        const std::string fc = field + ".rgba[" + std::to_string(c) + "]";
+        if (!std::isfinite(v)) fail(source, fc, "not a finite number");
+        if (!(v >= 0.0 && v <= 1.0)) fail(source, fc, formatNumber(v) + " outside [0, 1]");
+    }
+    ControlPoint p;
+    p.rgba = spec.rgba;
+    switch (spec.placement) {
+    case Placement::Value: p.value = x; break;
+    case Placement::Fraction:
+        if (!(x >= 0.0 && x <= 1.0)) fail(source, f, formatNumber(x) + " outside [0, 1]");
+        p.value = stats.valueMin + x * (stats.valueMax - stats.valueMin);
+        break;
+    case Placement::Percentile:
+        if (!(x >= 0.0 && x <= 100.0)) fail(source, f, formatNumber(x) + " outside [0, 100]");
+        try {
+            p.value = stats.percentile(x);
+        } catch (const std::invalid_argument& e) {
+            fail(source, f, std::string("no percentile: ") + e.what());
+        }
+        break;
+    }
+    return p;
+}
+
 std::array<float, 4> parseRgba(const Json& j, const std::string& source, const std::string& field) {
     if (!j.is_array() || j.size() != 4)
         fail(source, field, "expected an array of 4 numbers in [0, 1]");
@@ -66,24 +102,7 @@ std::array<float, 4> parseRgba(const Json& j, const std::string& source, const s
     return rgba;
 }
 
-/// Native value of a point placed by `kind` ("value", "fraction" or "percentile") at `x`.
-double place(const std::string& kind, double x, const VolumeValueStats& stats,
-             const std::string& source, const std::string& field) {
-    if (kind == "value") return x;
-    if (kind == "fraction") {
-        if (!(x >= 0.0 && x <= 1.0)) fail(source, field, formatNumber(x) + " outside [0, 1]");
-        return stats.valueMin + x * (stats.valueMax - stats.valueMin);
-    }
-    if (!(x >= 0.0 && x <= 100.0)) fail(source, field, formatNumber(x) + " outside [0, 100]");
-    try {
-        return stats.percentile(x);
-    } catch (const std::invalid_argument& e) {
-        fail(source, field, std::string("no percentile: ") + e.what());
-    }
-}
-
-ControlPoint parsePoint(const Json& j, const VolumeValueStats& stats, const std::string& source,
-                        const std::string& field) {
+PointSpec parsePoint(const Json& j, const std::string& source, const std::string& field) {
     if (!j.is_object())
         fail(source, field, std::string("expected an object, got ") + j.type_name());
     std::string placement;
@@ -102,27 +121,36 @@ ControlPoint parsePoint(const Json& j, const VolumeValueStats& stats, const std:
     if (placement.empty())
         fail(source, field, "not placed: give exactly one of value, fraction, percentile");
     if (!j.contains("rgba")) fail(source, field + ".rgba", "missing");
-    ControlPoint p;
+    PointSpec p;
+    p.placement = placement == "value"      ? Placement::Value
+                  : placement == "fraction" ? Placement::Fraction
+                                            : Placement::Percentile;
     p.rgba = parseRgba(j["rgba"], source, field + ".rgba");
-    const std::string f = field + "." + placement;
-    p.value = place(placement, finiteNumber(j[placement], source, f), stats, source, f);
+    p.position = finiteNumber(j[placement], source, field + "." + placement);
     return p;
 }
 
-std::vector<ControlPoint> parsePoints(const Json& doc, const VolumeValueStats& stats,
-                                      const std::string& source) {
+std::vector<PointSpec> parsePoints(const Json& doc, const std::string& source) {
     if (!doc.contains("points")) fail(source, "points", "missing");
     const Json& points = doc["points"];
     if (!points.is_array())
         fail(source, "points", std::string("expected an array, got ") + points.type_name());
-    if (points.empty()) fail(source, "points", "empty: give at least one point");
-    std::vector<ControlPoint> out;
+    if (points.size() > TransferFunction::kMaxPoints)
+        fail(source, "points",
+             std::to_string(points.size()) + " points, more than " +
+                 std::to_string(TransferFunction::kMaxPoints));
+    std::vector<PointSpec> out;
     for (std::size_t i = 0; i < points.size(); ++i)
-        out.push_back(parsePoint(points[i], stats, source, "points[" + std::to_string(i) + "]"));
-    std::stable_sort(out.begin(), out.end(), [](const ControlPoint& a, const ControlPoint& b) {
-        return a.value < b.value;
-    });
+        out.push_back(parsePoint(points[i], source, "points[" + std::to_string(i) + "]"));
     return out;
+}
+
+/// 64-bit FNV-1a over `bytes`, continuing from `h`.
+std::uint64_t fnv1a(std::uint64_t h, const void* bytes, std::size_t n) {
+    const auto* p = static_cast<const unsigned char*>(bytes);
+    for (std::size_t i = 0; i < n; ++i)
+        h = (h ^ p[i]) * 0x100000001b3ull;
+    return h;
 }
 
 void checkTopLevelKeys(const Json& doc, const std::string& source) {
@@ -144,10 +172,6 @@ void checkStats(const VolumeValueStats& stats) {
         throw std::invalid_argument("VolumeValueStats: value range [" +
                                     formatNumber(stats.valueMin) + ", " +
                                     formatNumber(stats.valueMax) + "] is not a finite interval");
-}
-
-bool looksLikePresetName(const std::string& name) {
-    return name.find('/') == std::string::npos && !name.ends_with(".json");
 }
 
 std::string presetList() {
@@ -269,39 +293,73 @@ TransferFunction TransferFunction::parse(const std::string& jsonText, const std:
     if (!doc.is_object())
         fail(sourceName, "(document)", std::string("expected an object, got ") + doc.type_name());
     checkTopLevelKeys(doc, sourceName);
-    TransferFunction tf;
-    tf.mName = doc.contains("name") ? doc["name"].get<std::string>()
-                                    : std::filesystem::path(sourceName).stem().string();
+    std::string name = doc.contains("name") ? doc["name"].get<std::string>()
+                                            : std::filesystem::path(sourceName).stem().string();
+    std::optional<bool> shading;
+    if (doc.contains("shading")) shading = doc["shading"].get<bool>();
+    TransferFunction tf =
+        fromPoints(parsePoints(doc, sourceName), sourceName, stats, std::move(name), shading);
     if (doc.contains("description")) tf.mDescription = doc["description"].get<std::string>();
-    if (doc.contains("shading")) tf.mShading = doc["shading"].get<bool>();
-    tf.mPoints = parsePoints(doc, stats, sourceName);
-    tf.mDomainMin = stats.valueMin;
-    tf.mDomainMax = stats.valueMax > stats.valueMin ? stats.valueMax : stats.valueMin + 1.0;
     return tf;
 }
 
-TransferFunction TransferFunction::load(const std::string& fileOrPreset,
-                                        const VolumeValueStats& stats) {
-    const bool presetLike = looksLikePresetName(fileOrPreset);
-    if (presetLike) {
-        for (std::size_t i = 0; i < detail::kTfPresetCount; ++i)
-            if (fileOrPreset == detail::kTfPresets[i].name)
-                return parse(detail::kTfPresets[i].json, "<preset " + fileOrPreset + ">", stats);
+TransferFunction TransferFunction::fromPoints(const std::vector<PointSpec>& points,
+                                              const std::string& sourceName,
+                                              const VolumeValueStats& stats, std::string name,
+                                              std::optional<bool> shading) {
+    checkStats(stats);
+    if (points.empty()) fail(sourceName, "points", "empty: give at least one point");
+    if (points.size() > kMaxPoints)
+        fail(sourceName, "points",
+             std::to_string(points.size()) + " points, more than " + std::to_string(kMaxPoints));
+    std::vector<ControlPoint> placed;
+    placed.reserve(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i)
+        placed.push_back(place(points[i], stats, sourceName, "points[" + std::to_string(i) + "]"));
+    TransferFunction tf;
+    tf.mName = std::move(name);
+    tf.mShading = shading;
+    tf.setPoints(std::move(placed), stats);
+    return tf;
+}
+
+void TransferFunction::setPoints(std::vector<ControlPoint> points, const VolumeValueStats& stats) {
+    std::stable_sort(points.begin(), points.end(),
+                     [](const ControlPoint& a, const ControlPoint& b) { return a.value < b.value; });
+    mPoints = std::move(points);
+    mDomainMin = stats.valueMin;
+    mDomainMax = stats.valueMax > stats.valueMin ? stats.valueMax : stats.valueMin + 1.0;
+    std::uint64_t h = 0xcbf29ce484222325ull;
+    h = fnv1a(h, &mDomainMin, sizeof mDomainMin);
+    h = fnv1a(h, &mDomainMax, sizeof mDomainMax);
+    for (const ControlPoint& p : mPoints) {
+        h = fnv1a(h, &p.value, sizeof p.value);
+        h = fnv1a(h, p.rgba.data(), sizeof p.rgba);
     }
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(fileOrPreset, ec))
-        fail(fileOrPreset, "(file)",
-             std::string(presetLike ? "no such preset or file" : "no such file") +
-                 "; presets: " + presetList());
-    const auto bytes = std::filesystem::file_size(fileOrPreset, ec);
-    if (ec || bytes > kMaxFileBytes)
-        fail(fileOrPreset, "(file)",
-             ec ? ec.message() : "larger than " + std::to_string(kMaxFileBytes) + " bytes");
-    std::ifstream in(fileOrPreset, std::ios::binary);
-    std::ostringstream text;
-    text << in.rdbuf();
-    if (!in) fail(fileOrPreset, "(file)", "cannot read");
-    return parse(text.str(), fileOrPreset, stats);
+    mContentHash = h;
+}
+
+bool TransferFunction::sameFunction(const TransferFunction& other) const {
+    if (mContentHash != other.mContentHash || mDomainMin != other.mDomainMin ||
+        mDomainMax != other.mDomainMax || mPoints.size() != other.mPoints.size())
+        return false;
+    for (std::size_t i = 0; i < mPoints.size(); ++i)
+        if (mPoints[i].value != other.mPoints[i].value || mPoints[i].rgba != other.mPoints[i].rgba)
+            return false;
+    return true;
+}
+
+bool TransferFunction::isPreset(const std::string& name) {
+    for (std::size_t i = 0; i < detail::kTfPresetCount; ++i)
+        if (name == detail::kTfPresets[i].name) return true;
+    return false;
+}
+
+TransferFunction TransferFunction::preset(const std::string& name, const VolumeValueStats& stats) {
+    for (std::size_t i = 0; i < detail::kTfPresetCount; ++i)
+        if (name == detail::kTfPresets[i].name)
+            return parse(detail::kTfPresets[i].json, "<preset " + name + ">", stats);
+    fail("presets", "name", "no such preset; presets: " + presetList());
 }
 
 std::vector<std::string> TransferFunction::presetNames() {

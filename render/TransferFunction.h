@@ -44,6 +44,16 @@ struct VolumeValueStats {
     double percentile(double percent) const;
 };
 
+/// How a point's position is given (see the file format above).
+enum class Placement { Value, Fraction, Percentile };
+
+/// A point as a user gives it, before it is placed for a volume.
+struct PointSpec {
+    Placement placement = Placement::Value;
+    double position = 0.0;       ///< native units, fraction 0..1 or percentile 0..100
+    std::array<float, 4> rgba{}; ///< straight colour, opacity per unit step, each in [0, 1]
+};
+
 /// One placed point of a transfer function.
 struct ControlPoint {
     double value = 0.0;          ///< native stored units
@@ -82,15 +92,29 @@ class TransferFunction {
   public:
     static constexpr std::uint32_t kDefaultTableEntries = 4096;
     static constexpr std::uint32_t kMaxTableEntries = 1u << 20;
+    /// Most points a function may have (files and messages alike).
+    static constexpr std::size_t kMaxPoints = 4096;
 
     /// Parses a transfer-function document (format above) and places its points for a volume.
     /// `sourceName` names the input in errors ("tf.json", "<preset ct-bone>").
     /// @throw RenderInputError naming the source and the field at fault (e.g. points[3].rgba[1]).
     static TransferFunction parse(const std::string& jsonText, const std::string& sourceName,
                                   const VolumeValueStats& stats);
-    /// A preset name (no '/', no ".json") -> the embedded preset; anything else is a file.
-    /// @throw RenderInputError on an unreadable or bad file, or an unknown name (listing presets).
-    static TransferFunction load(const std::string& fileOrPreset, const VolumeValueStats& stats);
+    /// Builds from points without any text format: checks each point (a field such as
+    /// "points[2].rgba[1]" or "points[0].fraction" in errors), places it for the volume and
+    /// sorts by value (stable). `sourceName` names the input in errors.
+    /// @throw RenderInputError naming the source and the point at fault: no points, more than
+    /// kMaxPoints, a position or colour not finite or out of its range.
+    static TransferFunction fromPoints(const std::vector<PointSpec>& points,
+                                       const std::string& sourceName,
+                                       const VolumeValueStats& stats, std::string name = {},
+                                       std::optional<bool> shading = {});
+    /// The preset embedded from configs/tf at build time. Reads no file.
+    /// @throw RenderInputError (source "presets", field "name") when there is no such preset;
+    /// the message lists the presets and does not repeat the name asked for.
+    static TransferFunction preset(const std::string& name, const VolumeValueStats& stats);
+    /// Whether `name` is an embedded preset.
+    static bool isPreset(const std::string& name);
     /// Names of the presets embedded from configs/tf at build time, sorted.
     static std::vector<std::string> presetNames();
 
@@ -103,6 +127,12 @@ class TransferFunction {
     /// Table domain: the volume's [valueMin, valueMax], widened by 1 when they are equal.
     double domainMin() const { return mDomainMin; }
     double domainMax() const { return mDomainMax; }
+
+    /// Whether both map every value alike: the same placed points and the same domain (names,
+    /// descriptions and shading defaults do not matter).
+    bool sameFunction(const TransferFunction& other) const;
+    /// A hash of what sameFunction compares, computed once when the function is built.
+    std::uint64_t contentHash() const { return mContentHash; }
 
     /// The exact piecewise-linear function (straight RGBA, opacity per unit step).
     std::array<float, 4> evaluate(double value) const;
@@ -121,11 +151,13 @@ class TransferFunction {
   private:
     TransferFunction() = default;
     void snapPeaks(std::vector<float>& rgba, std::uint32_t entries) const;
+    void setPoints(std::vector<ControlPoint> points, const VolumeValueStats& stats);
 
     std::string mName, mDescription;
     std::optional<bool> mShading;
     std::vector<ControlPoint> mPoints;
     double mDomainMin = 0.0, mDomainMax = 1.0;
+    std::uint64_t mContentHash = 0;
 };
 
 } // namespace bc::render

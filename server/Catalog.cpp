@@ -85,6 +85,8 @@ void VolumeLease::release() {
 }
 
 Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config.hostBudgetBytes) {
+    for (const auto& preset : config.presets)
+        mPresets.emplace(preset.name, preset.json);
     for (const auto& entry : config.volumes) {
         try {
             auto volume = open(entry, config.storeDir);
@@ -134,6 +136,18 @@ void Catalog::changeSessions(Volume& volume, int delta) {
     mSessions += std::uint32_t(delta);
     for (const auto& v : mVolumes)
         v->cache->setBudgetBytes(v->sessions.load() ? shareOf(*v, mHostBudgetBytes) : 0);
+}
+
+bool Catalog::hasPreset(const std::string& name) const {
+    return mPresets.count(name) != 0 || render::TransferFunction::isPreset(name);
+}
+
+std::vector<std::string> Catalog::presetNames() const {
+    std::vector<std::string> names = render::TransferFunction::presetNames();
+    for (const auto& [name, json] : mPresets)
+        names.push_back(name);
+    std::sort(names.begin(), names.end());
+    return names;
 }
 
 void Catalog::collect(MetricSet& m) const {

@@ -66,6 +66,12 @@ class Catalog {
     std::uint32_t sessions() const { return mSessions.load(); }
     /// A volume's fair share of `totalBytes`: in proportion to its sessions (at least one).
     std::uint64_t shareOf(const Volume& volume, std::uint64_t totalBytes) const;
+    /// Presets the config added ([[preset]]): name -> JSON text, read at start-up.
+    const std::map<std::string, std::string>& configPresets() const { return mPresets; }
+    /// Whether a client may name `name` as a preset: a built-in one or the config's.
+    bool hasPreset(const std::string& name) const;
+    /// Every preset a client may name, sorted.
+    std::vector<std::string> presetNames() const;
     /// The disk -> host tier per volume (labelled volume="name"): hits, misses, evictions,
     /// bytes loaded and re-fetched after eviction, resident and budget bytes; sessions.
     void collect(MetricSet& metrics) const;
@@ -78,6 +84,7 @@ class Catalog {
     std::uint64_t mHostBudgetBytes;
     std::vector<std::shared_ptr<Volume>> mVolumes;
     std::map<std::string, std::shared_ptr<Volume>> mByName;
+    std::map<std::string, std::string> mPresets;
     std::atomic<std::uint32_t> mSessions{0};
     std::mutex mBudgetMutex;
 };

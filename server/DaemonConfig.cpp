@@ -2,6 +2,8 @@
 
 #include "brickstore/Readers.h"
 #include "protocol/Wire.h"
+#include "render/Error.h"
+#include "render/TransferFunction.h"
 #include "server/Error.h"
 
 #include <algorithm>
@@ -93,6 +95,13 @@ description = "synthetic branching vessel tree, 8-bit, 1-5% occupied"
 # name = "cthead"
 # store = "stores/cthead.bcs"
 # description = "Stanford CT head, 256x256x113"
+
+# Transfer-function presets clients may name in SetTransferFunction, beside the built-in ones
+# (ct-bone, ct-skin, mr, smoke, vessels). Each file is read once, at start-up; a client never
+# names a file, only a preset.
+# [[preset]]
+# name = "my-bone"                  # as a volume name; not a built-in preset's
+# file = "tf/my-bone.json"          # configs/tf/README.md has the format
 )toml";
 
 constexpr std::int64_t kMaxMs = 86'400'000; // a day
@@ -103,6 +112,9 @@ std::string nodeTypeName(toml::node_type t) {
     s << t;
     return s.str();
 }
+
+/// Most [[preset]] entries a config may add.
+constexpr std::size_t kMaxPresets = 256;
 
 /// Why `name` cannot be a catalog name (PROTOCOL.md "Limits"), or nothing.
 std::optional<std::string> volumeNameProblem(const std::string& name) {
@@ -195,6 +207,8 @@ class Reader {
     void readTimeouts(const toml::table& root, DaemonConfig& c) const;
     void readLimits(const toml::table& root, DaemonConfig& c) const;
     void readVolumes(const toml::table& root, DaemonConfig& c) const;
+    void readPresets(const toml::table& root, DaemonConfig& c) const;
+    PresetEntry readPreset(const toml::table& t, const std::string& prefix) const;
     CatalogEntry readVolume(const toml::table& t, const std::string& prefix) const;
     std::array<std::uint64_t, 3> readDims(const toml::table& t, const std::string& prefix) const;
 
@@ -410,8 +424,69 @@ void Reader::readVolumes(const toml::table& root, DaemonConfig& c) const {
     }
 }
 
+/// Preset files are a few kilobytes; the config refuses anything far larger.
+constexpr std::uintmax_t kMaxPresetFileBytes = 1u << 20;
+
+PresetEntry Reader::readPreset(const toml::table& t, const std::string& prefix) const {
+    checkKeys(t, prefix, {"name", "file"});
+    PresetEntry e;
+    auto name = string(t, prefix, "name");
+    if (!name) fail(t.source(), prefix + "name", "missing: every preset needs a name");
+    if (auto why = volumeNameProblem(*name)) fail(t.get("name")->source(), prefix + "name", *why);
+    if (render::TransferFunction::isPreset(*name))
+        fail(t.get("name")->source(), prefix + "name",
+             "'" + *name + "' is a built-in preset; give yours another name");
+    e.name = *name;
+    auto file = string(t, prefix, "file");
+    if (!file || file->empty())
+        fail(file ? t.get("file")->source() : t.source(), prefix + "file",
+             "missing: a transfer-function JSON file (configs/tf/README.md)");
+    e.file = resolve(*file);
+    const auto at = t.get("file")->source();
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(e.file, ec))
+        fail(at, prefix + "file", "'" + e.file + "' is not a readable file");
+    const auto bytes = std::filesystem::file_size(e.file, ec);
+    if (ec || bytes > kMaxPresetFileBytes)
+        fail(at, prefix + "file",
+             "'" + e.file + "' " +
+                 (ec ? ec.message() : "is over " + std::to_string(kMaxPresetFileBytes) + " bytes"));
+    std::ifstream in(e.file, std::ios::binary);
+    std::ostringstream text;
+    text << in.rdbuf();
+    if (!in) fail(at, prefix + "file", "'" + e.file + "' cannot be read");
+    e.json = text.str();
+    try { // placed for a stand-in volume: every placement works, so only the text can fail
+        render::TransferFunction::parse(e.json, e.file,
+                                        render::VolumeValueStats{0.0, 1.0, {1, 1}});
+    } catch (const render::RenderInputError& err) {
+        fail(at, prefix + "file", err.what());
+    }
+    return e;
+}
+
+void Reader::readPresets(const toml::table& root, DaemonConfig& c) const {
+    const toml::node* node = root.get("preset");
+    if (!node) return;
+    const toml::array* list = node->as_array();
+    if (!list || !list->is_array_of_tables())
+        fail(node->source(), "preset", "expected [[preset]] tables");
+    if (list->size() > kMaxPresets)
+        fail(node->source(), "[[preset]]", "more than " + std::to_string(kMaxPresets) + " presets");
+    std::map<std::string, std::size_t> seen;
+    for (std::size_t i = 0; i < list->size(); ++i) {
+        const toml::table& t = *(*list)[i].as_table();
+        const std::string prefix = "[[preset]] " + std::to_string(i + 1) + " .";
+        PresetEntry e = readPreset(t, prefix);
+        if (auto [it, fresh] = seen.emplace(e.name, i + 1); !fresh)
+            fail(t.get("name")->source(), prefix + "name",
+                 "'" + e.name + "' is already [[preset]] " + std::to_string(it->second));
+        c.presets.push_back(std::move(e));
+    }
+}
+
 DaemonConfig Reader::read(const toml::table& root) const {
-    checkKeys(root, "", {"server", "timeouts", "budgets", "frames", "volume"});
+    checkKeys(root, "", {"server", "timeouts", "budgets", "frames", "volume", "preset"});
     DaemonConfig c;
     c.source = mSource;
     c.storeDir = defaultStoreDir();
@@ -419,6 +494,7 @@ DaemonConfig Reader::read(const toml::table& root) const {
     readTimeouts(root, c);
     readLimits(root, c);
     readVolumes(root, c);
+    readPresets(root, c);
     if (c.token.empty() && !c.loopbackOnly()) {
         const toml::node* at = root.at_path("server.token").node();
         if (!at) at = root.at_path("server.listen").node();

@@ -21,6 +21,15 @@ struct CatalogEntry {
     bool operator==(const CatalogEntry&) const = default;
 };
 
+/// A transfer-function preset the config adds to the built-in ones: clients name it in
+/// SetTransferFunction; its file is read once, when the config is.
+struct PresetEntry {
+    std::string name; ///< as a volume name; not a built-in preset's
+    std::string file; ///< the JSON file it was read from (resolved), for messages
+    std::string json; ///< its text, checked to parse
+    bool operator==(const PresetEntry&) const = default;
+};
+
 struct DaemonConfig {
     std::string source = "<embedded default>"; ///< what it was read from
     std::string listenHost = "127.0.0.1";      ///< without brackets: "::1"
@@ -40,6 +49,7 @@ struct DaemonConfig {
     bool prefetch = true; ///< bricks of each GPU session's predicted next view, while idle
     std::string storeDir;               ///< where generated volumes are ingested
     std::vector<CatalogEntry> volumes;
+    std::vector<PresetEntry> presets; ///< [[preset]]: beside the built-in ones
 
     bool operator==(const DaemonConfig&) const = default;
 
@@ -59,7 +69,9 @@ struct DaemonConfig {
     /// Parses and validates a configuration; relative paths are taken against baseDir.
     /// @throw ConfigError naming sourceName, line:column and the key: syntax errors, unknown
     /// keys, wrong types, out-of-range values, bad listen syntax, duplicate volume names, an
-    /// entry with both or neither of store/generate, no token for a non-loopback listen.
+    /// entry with both or neither of store/generate, no token for a non-loopback listen, a
+    /// preset whose file is unreadable, over 1 MiB or not a transfer function, or whose name
+    /// is a built-in preset's or another preset's.
     static DaemonConfig parse(const std::string& tomlText, const std::string& sourceName,
                               const std::string& baseDir);
     /// Reads and parses a file; relative paths in it are taken against its folder.

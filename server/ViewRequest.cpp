@@ -1,6 +1,6 @@
 #include "server/ViewRequest.h"
 
-#include <nlohmann/json.hpp>
+#include "render/Error.h"
 
 #include <algorithm>
 #include <cmath>
@@ -40,32 +40,36 @@ render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, bool int
 
 namespace {
 
-const char* placementKey(protocol::Placement p) {
+render::Placement toPlacement(protocol::Placement p) {
     switch (p) {
-    case protocol::Placement::Value: return "value";
-    case protocol::Placement::Fraction: return "fraction";
-    case protocol::Placement::Percentile: return "percentile";
+    case protocol::Placement::Value: return render::Placement::Value;
+    case protocol::Placement::Fraction: return render::Placement::Fraction;
+    case protocol::Placement::Percentile: return render::Placement::Percentile;
     }
-    return "value";
+    return render::Placement::Value;
 }
 
 } // namespace
 
 std::shared_ptr<const render::TransferFunction>
-toTransferFunction(const protocol::SetTransferFunction& m, const render::VolumeValueStats& stats) {
-    if (m.kind == protocol::TfKind::Preset)
-        return std::make_shared<const render::TransferFunction>(
-            render::TransferFunction::load(m.preset, stats));
-    // Points go through the file parser: one set of rules and error names for both.
-    nlohmann::json doc;
-    doc["name"] = "SetTransferFunction";
-    doc["shading"] = m.shading;
-    doc["points"] = nlohmann::json::array();
+toTransferFunction(const protocol::SetTransferFunction& m, const render::VolumeValueStats& stats,
+                   const PresetTexts& configPresets) {
+    using render::TransferFunction;
+    if (m.kind == protocol::TfKind::Preset) {
+        if (const auto it = configPresets.find(m.preset); it != configPresets.end())
+            return std::make_shared<const TransferFunction>(
+                TransferFunction::parse(it->second, "<preset " + m.preset + ">", stats));
+        if (!TransferFunction::isPreset(m.preset))
+            throw render::RenderInputError("SetTransferFunction", "preset",
+                                           "not a preset of this server");
+        return std::make_shared<const TransferFunction>(TransferFunction::preset(m.preset, stats));
+    }
+    std::vector<render::PointSpec> points;
+    points.reserve(m.points.size());
     for (const auto& p : m.points)
-        doc["points"].push_back({{placementKey(p.placement), p.position},
-                                 {"rgba", {p.rgba[0], p.rgba[1], p.rgba[2], p.rgba[3]}}});
-    return std::make_shared<const render::TransferFunction>(
-        render::TransferFunction::parse(doc.dump(), "SetTransferFunction", stats));
+        points.push_back({toPlacement(p.placement), p.position, p.rgba});
+    return std::make_shared<const TransferFunction>(TransferFunction::fromPoints(
+        points, "SetTransferFunction", stats, "SetTransferFunction", m.shading));
 }
 
 bool shadingFor(const protocol::RenderOptions& options,

@@ -9,6 +9,7 @@
 #include "render/TransferFunction.h"
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 
@@ -21,12 +22,17 @@ render::Camera toCamera(const protocol::SetCamera& camera);
 /// are drawn at half the width and height, rounded up, and scaled back up by interactiveUpscale.
 render::RenderOptions toRenderOptions(const protocol::RenderOptions& options, bool interactive);
 
-/// A transfer function placed for a volume: a preset by name, or the message's points
-/// (through the same parser as the files, so errors name the field: "points[2].rgba[1]").
-/// @throw render::RenderInputError naming the preset or point at fault.
+/// Presets a config added: name -> JSON text (Catalog::configPresets).
+using PresetTexts = std::map<std::string, std::string>;
+
+/// A transfer function placed for a volume: a preset by name (the config's, then the built-in
+/// ones), or the message's points (TransferFunction::fromPoints, so errors name the field:
+/// "points[2].rgba[1]"). Never reads a file: no string from the wire reaches the filesystem.
+/// @throw render::RenderInputError naming the point at fault, or field "preset" (without
+/// repeating the name) when neither the config nor the built-in presets have it.
 std::shared_ptr<const render::TransferFunction>
 toTransferFunction(const protocol::SetTransferFunction& message,
-                   const render::VolumeValueStats& stats);
+                   const render::VolumeValueStats& stats, const PresetTexts& configPresets);
 
 /// Whether shading is on for this request: RenderOptions' shading bit, unless the transfer
 /// function message asked for its preset's default.

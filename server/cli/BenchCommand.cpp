@@ -20,6 +20,7 @@
 #include "server/cli/BenchDatasets.h"
 #include "server/cli/BenchReport.h"
 #include "server/cli/Commands.h"
+#include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>
 
@@ -226,8 +227,8 @@ void rebuild512(const std::string& tmp) {
     brickstore::ingest(*source, path, {});
     auto store = brickstore::BrickStore::open(path);
     const auto stats = render::VolumeValueStats::fromStore(store->info());
-    const auto a = render::TransferFunction::load("ct-skin", stats).table(1.0);
-    const auto b = render::TransferFunction::load("ct-bone", stats).table(1.0);
+    const auto a = tools::loadTransferFunction("ct-skin", stats).table(1.0);
+    const auto b = tools::loadTransferFunction("ct-bone", stats).table(1.0);
     render::OccupancyTrees trees(*store, 0);
     std::vector<double> full, incremental;
     std::uint64_t stored = 0, rebuilt = 0;
@@ -282,7 +283,7 @@ void runBench(const BenchOptions& o) {
         s.cache = std::make_unique<brickstore::BrickCache>(
             *s.store, brickstore::BrickCacheConfig{4ull << 30});
         if (!d.budgetMb) s.volume = std::make_unique<render::ReferenceVolume>(*s.store, 0);
-        s.tf = render::TransferFunction::load(d.preset,
+        s.tf = tools::loadTransferFunction(d.preset,
                                               render::VolumeValueStats::fromStore(s.store->info()));
         benchScene(s, d, o, report);
         stepSweep(s, d, o, report);

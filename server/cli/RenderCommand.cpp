@@ -12,6 +12,7 @@
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
 #include "server/cli/Commands.h"
+#include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -126,7 +127,7 @@ void runRender(const RenderCliOptions& o) {
     auto store = brickstore::BrickStore::open(o.store);
     const render::RenderOptions options = renderOptionsOf(o);
     const auto tf =
-        render::TransferFunction::load(o.tf, render::VolumeValueStats::fromStore(store->info()));
+        tools::loadTransferFunction(o.tf, render::VolumeValueStats::fromStore(store->info()));
     const render::Camera camera = cameraOf(o, render::LevelGeometry::of(*store, 0).box);
     render::FrameStats stats;
     render::Image image;

@@ -25,6 +25,7 @@
 #include "render/TransferFunction.h"
 #include "server/cli/BenchDatasets.h"
 #include "server/cli/Commands.h"
+#include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>
 
@@ -401,7 +402,7 @@ void runSplatBench(const SplatBenchOptions& o) {
             *s.store, brickstore::BrickCacheConfig{4ull << 30});
         s.volume = std::make_unique<render::ReferenceVolume>(*s.store, 0);
         const auto stats = render::VolumeValueStats::fromStore(s.store->info());
-        s.tf = d.tfJson.empty() ? render::TransferFunction::load(d.preset, stats)
+        s.tf = d.tfJson.empty() ? tools::loadTransferFunction(d.preset, stats)
                                 : render::TransferFunction::parse(d.tfJson, d.name, stats);
         visible.push_back(countVisible(*s.volume, s.tf->table(1.0)));
         sets.emplace_back(d, dims(render::LevelGeometry::of(*s.store, 0)));

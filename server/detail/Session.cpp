@@ -235,7 +235,7 @@ void Session::onOpenVolume(const protocol::OpenVolume& open, std::uint32_t reque
         mTfMessage.kind = protocol::TfKind::Preset;
         mTfMessage.preset = "ct-skin";
     }
-    auto tf = toTransferFunction(mTfMessage, volume->stats);
+    auto tf = toTransferFunction(mTfMessage, volume->stats, mContext.catalog.configPresets());
     mLease = std::move(lease);
     mSlot->setVolume(volume);
     mSlot->setTransferFunction(std::move(tf), mTfMessage);
@@ -250,8 +250,19 @@ void Session::onSetTransferFunction(const protocol::SetTransferFunction& m,
         sendError(ErrorCode::NoVolume, false, t, request, "open a volume first");
         return;
     }
+    if (m.kind == protocol::TfKind::Preset && !mContext.catalog.hasPreset(m.preset)) {
+        // The name is not repeated: what a client sends never comes back as if it were found.
+        std::string list;
+        for (const auto& name : mContext.catalog.presetNames())
+            list += (list.empty() ? "" : ", ") + name;
+        sendError(ErrorCode::NotFound, false, t, request,
+                  protocol::fitText("SetTransferFunction.preset: not a preset of this server; "
+                                    "presets: " + list,
+                                    protocol::kMaxErrorMessageBytes));
+        return;
+    }
     try {
-        auto tf = toTransferFunction(m, mLease.volume()->stats);
+        auto tf = toTransferFunction(m, mLease.volume()->stats, mContext.catalog.configPresets());
         mTfMessage = m;
         mHaveTf = true;
         mSlot->setTransferFunction(std::move(tf), m);

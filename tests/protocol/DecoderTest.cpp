@@ -505,7 +505,7 @@ TEST(DecoderRejects, OutOfRangeValueOfEveryEnumField) {
     expectRejected(patched<std::uint8_t>(sampleFrame(), 12, 4), ErrorCode::OutOfRange,
                    "Frame.codec");
     expectRejected(patched<std::uint16_t>(Error{}, 0, 0), ErrorCode::OutOfRange, "Error.code");
-    expectRejected(patched<std::uint16_t>(Error{}, 0, 17), ErrorCode::OutOfRange, "Error.code");
+    expectRejected(patched<std::uint16_t>(Error{}, 0, 18), ErrorCode::OutOfRange, "Error.code");
     expectRejected(patched<std::uint16_t>(Bye{}, 0, 3), ErrorCode::OutOfRange, "Bye.reason");
 }
 

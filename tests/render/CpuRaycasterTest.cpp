@@ -34,7 +34,7 @@ TEST_P(CpuVersusReference, MatchesTheDoublePrecisionReferenceAndTheGpuFrame) {
     auto spec = test::realScan(scan.name);
     if (!spec) GTEST_SKIP() << "missing scan " << scan.name;
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load(scan.preset, t->stats);
+    const auto tf = TransferFunction::preset(scan.preset, t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
     CpuRaycaster cpu;
     FrameStats s;
@@ -75,7 +75,7 @@ TEST(CpuRaycaster, SkippingIsExactAndEarlyTerminationKeepsItsBound) {
     auto spec = test::realScan("CT_AVM");
     if (!spec) GTEST_SKIP();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("vessels", t->stats);
+    const auto tf = TransferFunction::preset("vessels", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 120, 15);
     CpuRaycaster none, bricks, all;
     RenderOptions on = options(), ob = options(), oa = options();
@@ -104,7 +104,7 @@ TEST(CpuRaycaster, CameraInsideOrthographicAndFloatDataMatchTheReference) {
     auto hydrogen = test::realScan("hydrogen");
     if (!head || !hydrogen) GTEST_SKIP();
     auto t = test::ingestSpec(*head, {32, 2, 8});
-    const auto tf = TransferFunction::load("mr", t->stats);
+    const auto tf = TransferFunction::preset("mr", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     Camera inside;
     inside.eye = box.centre() + glm::dvec3(0.0, -0.2 * box.size().y, 0.0);
@@ -122,7 +122,7 @@ TEST(CpuRaycaster, CameraInsideOrthographicAndFloatDataMatchTheReference) {
         EXPECT_GE(cmp.psnrDb, 55.0);
     }
     auto h = test::ingestSpec(*hydrogen, {16, 2, 4});
-    const auto smoke = TransferFunction::load("smoke", h->stats);
+    const auto smoke = TransferFunction::preset("smoke", h->stats);
     const Camera c = Camera::orbit(LevelGeometry::of(*h->store, 0).box, 10, 50);
     const auto cmp = compareImages(cpuFrame(*h, cpu, smoke, c, options(96)),
                                    test::referenceFrame(*h, smoke, c, options(96)));

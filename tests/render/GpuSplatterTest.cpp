@@ -74,7 +74,7 @@ TEST_P(GpuSplatterVersusCpu, DrawsTheCpuSplattersImage) {
     if (!spec) GTEST_SKIP() << "missing scan " << scan.name;
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load(scan.preset, t->stats);
+    const auto tf = TransferFunction::preset(scan.preset, t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20, scan.distance);
     const std::string what =
         scan.name + " " + scan.preset + " x" + std::to_string(scan.distance).substr(0, 3) + " 64^2";

@@ -76,7 +76,7 @@ TEST_P(SplatVersusReference, IsWithinAStatedPsnrOfTheCpuReference) {
     auto spec = test::realScan(scan.name);
     if (!spec) GTEST_SKIP() << "missing scan " << scan.name;
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load(scan.preset, t->stats);
+    const auto tf = TransferFunction::preset(scan.preset, t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20, scan.distance);
     for (std::uint32_t edge : {64u, 128u}) {
         HybridSplatter splatter;
@@ -209,7 +209,7 @@ TEST(HybridSplatter, OcclusionCullingKeepsTheImageAndDrawsFewerVoxels) {
     auto spec = test::realScan("headsq");
     if (!spec) GTEST_SKIP();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("ct-skin", t->stats);
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 150, 10);
     HybridSplatterConfig off;
     off.occlusionCulling = false;
@@ -288,7 +288,7 @@ TEST(HybridSplatter, CameraInsideTheVolumeRendersFinite) {
     auto spec = test::realScan("headsq");
     if (!spec) GTEST_SKIP();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("mr", t->stats);
+    const auto tf = TransferFunction::preset("mr", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     Camera inside;
     inside.eye = box.centre() + glm::dvec3(0.0, -0.2 * box.size().y, 0.0);
@@ -369,7 +369,7 @@ void expectAcceleratedMatchesPlain(TestStore& t, const TransferFunction& tf, con
 TEST(HybridSplatter, AcceleratedDrawingKeepsThePlainImage) {
     if (auto spec = test::realScan("headsq")) {
         auto t = test::ingestSpec(*spec, {32, 2, 8});
-        const auto tf = TransferFunction::load("mr", t->stats);
+        const auto tf = TransferFunction::preset("mr", t->stats);
         const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20, 1.6);
         expectAcceleratedMatchesPlain(*t, tf, camera, 64, "headsq mr x1.6 64^2");
     }

@@ -44,7 +44,7 @@ brickstore::BrickKey levelBrickKey(std::uint64_t index, const LevelGeometry& g) 
 TEST(OccupancyTest, LeafIsLeptOnlyWhenTheTableIsTransparentOverEverythingItsSamplesRead) {
     auto t = angiography();
     if (!t) GTEST_SKIP() << "missing CT_AVM";
-    const auto tf = TransferFunction::load("vessels", t->stats);
+    const auto tf = TransferFunction::preset("vessels", t->stats);
     const auto table = tf.table(1.0, 4096);
     OccupancyTrees trees(*t->store, 0);
     const auto rebuild = trees.update(table, {});
@@ -103,7 +103,7 @@ TEST(OccupancyTest, PeakStrictlyBetweenALeafsVoxelValuesKeepsTheLeaf) {
 TEST(OccupancyTest, RatioThresholdAndLevelLimitDrawNodesWhole) {
     auto t = angiography();
     if (!t) GTEST_SKIP() << "missing CT_AVM";
-    const auto table = TransferFunction::load("vessels", t->stats).table(1.0, 4096);
+    const auto table = TransferFunction::preset("vessels", t->stats).table(1.0, 4096);
     OccupancyTrees exact(*t->store, 0), anyLeaf(*t->store, 0), limit0(*t->store, 0),
         limit1(*t->store, 0);
     exact.update(table, {});
@@ -136,7 +136,7 @@ TEST(OccupancyTest, IncrementalRebuildTouchesOnlyBricksMeetingTheChangeAndEquals
     auto t = angiography();
     if (!t) GTEST_SKIP() << "missing CT_AVM";
     const double top = t->store->info().valueMax;
-    const auto vessels = TransferFunction::load("vessels", t->stats);
+    const auto vessels = TransferFunction::preset("vessels", t->stats);
     const auto moved = peakTf(top - 3.0, 1.0, t->stats);
     OccupancyTrees incremental(*t->store, 0), fresh(*t->store, 0);
     incremental.update(vessels.table(1.0, 4096), {});

@@ -157,7 +157,7 @@ TEST(RayGuided, JumpToTheFarSideAsksForWhatTheLastFrameHid) {
 TEST(RayGuided, ANewTransferFunctionStartsWithoutDeferral) {
     auto t = phantomStore();
     const auto skin = opaqueSkin(t->stats);
-    const auto bone = TransferFunction::load("ct-bone", t->stats);
+    const auto bone = TransferFunction::preset("ct-bone", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     const PlanSize size = planSize(*t, skin, Camera::orbit(box, 0, 20));
     Raycaster guided(budgetOf(*t, (size.entered * 3 / 2 + size.sampled) / 2));

@@ -21,7 +21,7 @@ TEST_P(GpuVersusReference, MatchesTheDoublePrecisionReferenceAt256) {
     if (!spec) GTEST_SKIP() << "missing scan " << scan.name;
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load(scan.preset, t->stats);
+    const auto tf = TransferFunction::preset(scan.preset, t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20, 1.0);
     RenderOptions o;
     o.earlyTermination = false;
@@ -61,8 +61,8 @@ TEST(RaycasterSeams, BrickedEqualsSingleBrickOnCthead) {
     auto bricked = test::ingestSpec(*spec, {32, 2, 8});
     auto single = test::ingestSpec(*spec, {256, 2, 8});
     ASSERT_EQ(single->store->layout().levels()[0].brickCount(), 1u);
-    const auto tf = TransferFunction::load("ct-bone", bricked->stats);
-    const auto tf1 = TransferFunction::load("ct-bone", single->stats);
+    const auto tf = TransferFunction::preset("ct-bone", bricked->stats);
+    const auto tf1 = TransferFunction::preset("ct-bone", single->stats);
     Raycaster raycaster;
     for (double az : {0.0, 37.0, 90.0}) {
         const Camera camera =
@@ -83,7 +83,7 @@ TEST(RaycasterOutOfCore, BudgetSmallerThanTheWorkingSetGivesTheSameImage) {
     if (!spec) GTEST_SKIP();
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("ct-skin", t->stats);
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 60, 30);
     RenderOptions o;
     Raycaster unlimited({256ull << 20}), small({4ull << 20}); // 4 MiB: 44 slots of 36^3 u16
@@ -106,7 +106,7 @@ TEST(RaycasterEarlyTermination, ChangesNoPixelByMoreThanOneMinusThreshold) {
     if (!spec) GTEST_SKIP();
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("ct-skin", t->stats);
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 10, 10);
     Raycaster raycaster;
     RenderOptions off;
@@ -132,7 +132,7 @@ TEST(RaycasterBrickSkipping, ChangesNoPixelOnSparseAngiography) {
     if (!spec) GTEST_SKIP();
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("vessels", t->stats);
+    const auto tf = TransferFunction::preset("vessels", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 120, 15);
     Raycaster plain, skipping; // separate pools, so each frame uploads what it needs
     RenderOptions none, bricks;

@@ -62,7 +62,7 @@ TEST(RaycasterStress, CameraInsideTheVolumeStartsRaysAtTheEye) {
     if (!spec) GTEST_SKIP();
     test::glContext();
     auto t = test::ingestSpec(*spec, {16, 2, 8});
-    const auto tf = TransferFunction::load("ct-skin", t->stats);
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     Camera c;
     c.eye = box.centre();
@@ -79,7 +79,7 @@ TEST(RaycasterStress, RaysExactlyAlongBrickFacesAndAxesShowNoSeam) {
     auto bricked = test::ingestStore(*source, {32, 2, 8});
     auto source1 = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {128, 128, 96}, 7);
     auto single = test::ingestStore(*source1, {128, 2, 8});
-    const auto tf = TransferFunction::load("ct-bone", bricked->stats);
+    const auto tf = TransferFunction::preset("ct-bone", bricked->stats);
     Camera c;
     c.orthographic = true;
     c.eye = {63.5, 64, 500}; // pixel i's ray at x = i exactly (faces at 0, 32, 64, 96)
@@ -102,7 +102,7 @@ TEST(RaycasterStress, GrazingRaysAlongTheTopFaceStayFiniteAndSeamless) {
     auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {96, 96, 64}, 3);
     test::glContext();
     auto t = test::ingestStore(*source, {16, 2, 8});
-    const auto tf = TransferFunction::load("ct-skin", t->stats);
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
     Camera c;
     c.eye = {-200, 48, 64.0001}; // just above the top face, looking across it
     c.target = {48, 48, 63.9};
@@ -116,7 +116,7 @@ TEST(RaycasterStress, NonCubicSpacingOfCtheadMatchesReference) {
     if (!spec) GTEST_SKIP();
     test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
-    const auto tf = TransferFunction::load("ct-bone", t->stats);
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera c =
         Camera::orbit(LevelGeometry::of(*t->store, 0).box, 90, 0); // side view: z stretched
     expectCloseToReference(*t, tf, c, small(), "cthead 1x1x2 mm side view", 45.0);
@@ -128,7 +128,7 @@ TEST(RaycasterStress, SignedSixteenBitDicomMatchesReference) {
     test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
     ASSERT_EQ(t->store->info().volume.type, brickstore::VoxelType::I16);
-    const auto tf = TransferFunction::load("ct-bone", t->stats);
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 200, 30);
     expectCloseToReference(*t, tf, c, small(), "pancreas i16", 45.0);
 }
@@ -139,7 +139,7 @@ TEST(RaycasterStress, FloatDataMatchesReference) {
     test::glContext();
     auto t = test::ingestSpec(*spec, {16, 2, 8});
     ASSERT_EQ(t->store->info().volume.type, brickstore::VoxelType::F32);
-    const auto tf = TransferFunction::load("smoke", t->stats);
+    const auto tf = TransferFunction::preset("smoke", t->stats);
     const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 45, 35);
     expectCloseToReference(*t, tf, c, small(), "hydrogen f32", 45.0);
 }
@@ -198,7 +198,7 @@ TEST(RaycasterStress, StepsFromFiveHundredthsToFourVoxelsMatchReference) {
     if (!spec) GTEST_SKIP();
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
-    const auto tf = TransferFunction::load("ct-bone", t->stats);
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 150, 10);
     for (double step : {0.05, 0.5, 1.7, 4.0}) {
         RenderOptions o = small(64);

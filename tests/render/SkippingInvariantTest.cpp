@@ -106,7 +106,7 @@ TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOverA72FrameOrbit) {
     const Case c = GetParam();
     auto t = caseStore(c);
     if (!t) GTEST_SKIP() << "missing scan " << c.scan;
-    const auto tf = TransferFunction::load(c.preset, t->stats);
+    const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     std::vector<Camera> path;
     for (int f = 0; f < 72; ++f)
@@ -119,7 +119,7 @@ TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver50RandomJumps) {
     const Case c = GetParam();
     auto t = caseStore(c);
     if (!t) GTEST_SKIP() << "missing scan " << c.scan;
-    const auto tf = TransferFunction::load(c.preset, t->stats);
+    const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     std::mt19937 rng(20261201);
     std::uniform_real_distribution<double> az(0, 360), el(-80, 80), dist(0.35, 1.6);
@@ -146,7 +146,7 @@ TEST(OctreeSkipping, LeapsInsideBricksOfSparseAngiographyWithoutChangingAPixel) 
     if (!spec) GTEST_SKIP();
     test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
-    const auto tf = TransferFunction::load("vessels", t->stats);
+    const auto tf = TransferFunction::preset("vessels", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 120, 15);
     Raycaster bricksOnly, octree;
     RenderOptions b = options(SkipMode::Bricks), a = options(SkipMode::All);
@@ -185,7 +185,7 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
     const Case c = GetParam();
     auto t = caseStore(c);
     if (!t) GTEST_SKIP() << "missing scan " << c.scan;
-    const auto tf = TransferFunction::load(c.preset, t->stats);
+    const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     gEdge = 128;
     Raycaster plain, octree, frustums;
@@ -263,7 +263,7 @@ TEST(FrustumInvariant, ObjectEnteringFromOutsideThePreviousViewIsNeverLost) {
     spec.input = raw;
     test::glContext();
     auto t = test::ingestSpec(spec, {16, 2, 4});
-    const auto tf = TransferFunction::load("ct-bone", t->stats);
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
     Raycaster plain, frustums;
     RenderOptions a = options(SkipMode::None), b = options(SkipMode::All, true);
     a.width = a.height = b.width = b.height = 96;

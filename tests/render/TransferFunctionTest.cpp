@@ -100,33 +100,89 @@ TEST(TransferFunctionTest, RefusesJsonSyntaxErrorsAndNonFiniteNumbersWithThePars
                      "not a finite number");
 }
 
-TEST(TransferFunctionTest, LoadNamesTheFileOrListsThePresets) {
+TEST(TransferFunctionTest, PresetsAreLookedUpByNameOnlyAndUnknownNamesAreNotEchoed) {
     const auto stats = rangeStats(0, 255, {10, 5, 5, 5});
-    try {
-        TransferFunction::load("no-such-preset", stats);
-        ADD_FAILURE() << "accepted an unknown preset";
-    } catch (const RenderInputError& e) {
-        EXPECT_EQ(e.file(), "no-such-preset");
-        EXPECT_NE(std::string(e.what()).find("ct-bone, ct-skin, mr, smoke, vessels"),
-                  std::string::npos)
-            << e.what();
+    EXPECT_TRUE(TransferFunction::isPreset("ct-bone"));
+    const std::vector<std::string> hostile{
+        "no-such-preset",     "../../etc/passwd", "/etc/hostname", "x.json", "ct-bone/../x", "",
+        std::string(64, '/'), "ct-bone.json"};
+    for (const std::string& bad : hostile) {
+        EXPECT_FALSE(TransferFunction::isPreset(bad)) << bad;
+        try {
+            TransferFunction::preset(bad, stats);
+            ADD_FAILURE() << "accepted preset '" << bad << "'";
+        } catch (const RenderInputError& e) {
+            EXPECT_EQ(e.file(), "presets");
+            EXPECT_EQ(e.field(), "name");
+            const std::string what = e.what();
+            EXPECT_NE(what.find("ct-bone, ct-skin, mr, smoke, vessels"), std::string::npos) << what;
+            if (!bad.empty()) EXPECT_EQ(what.find(bad), std::string::npos) << what;
+        }
     }
-    EXPECT_THROW(TransferFunction::load("/no/such/dir/tf.json", stats), RenderInputError);
-    test::TempDir dir;
-    const std::string path = dir.file("broken.json");
-    test::writeFile(path, doc(R"({"value": 1, "rgba": [1, 1, 1, 2]})"));
-    try {
-        TransferFunction::load(path, stats);
-        ADD_FAILURE() << "accepted a bad file";
-    } catch (const RenderInputError& e) {
-        EXPECT_EQ(e.file(), path);
-        EXPECT_EQ(e.field(), "points[0].rgba[3]");
+}
+
+TEST(TransferFunctionTest, FromPointsChecksEachPointAndMatchesTheParser) {
+    const auto stats = rangeStats(0, 255, {10, 5, 5, 5});
+    const std::vector<PointSpec> points{{Placement::Fraction, 0.5, {1, 0, 0, 0.5f}},
+                                        {Placement::Value, 10, {0, 1, 0, 0.25f}},
+                                        {Placement::Percentile, 50, {0, 0, 1, 1}}};
+    const auto a = TransferFunction::fromPoints(points, "msg", stats, "m", true);
+    const auto b = TransferFunction::parse(doc(point("fraction", 0.5, {1, 0, 0, 0.5f}) + ", " +
+                                               point("value", 10, {0, 1, 0, 0.25f}) + ", " +
+                                               point("percentile", 50, {0, 0, 1, 1})),
+                                           "doc.json", stats);
+    EXPECT_TRUE(a.sameFunction(b));
+    EXPECT_EQ(a.contentHash(), b.contentHash());
+    ASSERT_EQ(a.points().size(), 3u);
+    EXPECT_EQ(a.points()[0].value, 10.0); // sorted by value
+    EXPECT_EQ(a.shading(), std::optional<bool>(true));
+
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double inf = std::numeric_limits<double>::infinity();
+    const float fnan = std::numeric_limits<float>::quiet_NaN();
+    const float finf = std::numeric_limits<float>::infinity();
+    struct Bad {
+        std::vector<PointSpec> points;
+        std::string field;
+    };
+    const std::vector<Bad> bad{
+        {{}, "points"},
+        {std::vector<PointSpec>(TransferFunction::kMaxPoints + 1, points[1]), "points"},
+        {{{Placement::Value, nan, {1, 1, 1, 1}}}, "points[0].value"},
+        {{points[1], {Placement::Value, inf, {1, 1, 1, 1}}}, "points[1].value"},
+        {{{Placement::Value, 1, {1, fnan, 1, 1}}}, "points[0].rgba[1]"},
+        {{{Placement::Value, 1, {1, 1, 1, finf}}}, "points[0].rgba[3]"},
+        {{{Placement::Value, 1, {1, 1, -0.5f, 1}}}, "points[0].rgba[2]"},
+        {{{Placement::Fraction, 1.5, {1, 1, 1, 1}}}, "points[0].fraction"},
+        {{points[0], {Placement::Percentile, -1, {1, 1, 1, 1}}}, "points[1].percentile"},
+    };
+    for (const auto& c : bad) {
+        try {
+            TransferFunction::fromPoints(c.points, "SetTransferFunction", stats);
+            ADD_FAILURE() << "accepted points; expected an error on " << c.field;
+        } catch (const RenderInputError& e) {
+            EXPECT_EQ(e.file(), "SetTransferFunction");
+            EXPECT_EQ(e.field(), c.field) << e.what();
+        }
     }
-    test::writeFile(path, doc(point("value", 7, {1, 0, 0, 0.5f})));
-    const auto tf = TransferFunction::load(path, stats);
-    EXPECT_EQ(tf.name(), "t");
-    ASSERT_EQ(tf.points().size(), 1u);
-    EXPECT_EQ(tf.points()[0].value, 7.0);
+}
+
+TEST(TransferFunctionTest, SameFunctionComparesPlacedPointsAndDomainNotNames) {
+    const auto stats = rangeStats(0, 255, {10, 5, 5, 5});
+    const auto a = TransferFunction::parse(doc(point("value", 7, {1, 0, 0, 0.5f})), "a", stats);
+    auto renamed = TransferFunction::fromPoints({{Placement::Value, 7, {1, 0, 0, 0.5f}}}, "b",
+                                                stats, "other name", false);
+    EXPECT_TRUE(a.sameFunction(renamed));
+    const auto moved =
+        TransferFunction::fromPoints({{Placement::Value, 8, {1, 0, 0, 0.5f}}}, "c", stats);
+    EXPECT_FALSE(a.sameFunction(moved));
+    EXPECT_NE(a.contentHash(), moved.contentHash());
+    const auto recoloured =
+        TransferFunction::fromPoints({{Placement::Value, 7, {1, 0, 0, 0.25f}}}, "d", stats);
+    EXPECT_FALSE(a.sameFunction(recoloured));
+    const auto otherVolume = TransferFunction::parse(doc(point("value", 7, {1, 0, 0, 0.5f})), "e",
+                                                     rangeStats(0, 4095, {10, 5, 5, 5}));
+    EXPECT_FALSE(a.sameFunction(otherVolume)); // another domain: another table
 }
 
 TEST(TransferFunctionTest, PercentilesCountOnlyTheVoxelsAboveTheMostPopulatedBin) {
@@ -158,7 +214,8 @@ TEST(TransferFunctionTest, PlacesByValueFractionAndPercentileThenSortsStably) {
                                                 point("value", -253, {0, 0, 0, 0.4f})),
                                             "mixed.json", stats);
     ASSERT_EQ(tf.points().size(), 4u);
-    EXPECT_DOUBLE_EQ(tf.points()[0].value, -253.0); // fraction 0.25: placed first in the file...
+    EXPECT_DOUBLE_EQ(tf.points()[0].value,
+                     -253.0); // fraction 0.25: placed first in the file...
     EXPECT_EQ(tf.points()[0].rgba[3], 0.2f);
     EXPECT_DOUBLE_EQ(tf.points()[1].value, -253.0); // ...so it stays before the equal value
     EXPECT_EQ(tf.points()[1].rgba[3], 0.4f);
@@ -376,7 +433,7 @@ TEST(TransferFunctionTest, PresetsAreEmbeddedFromConfigsTf) {
     EXPECT_EQ(TransferFunction::presetNames(), expected);
     const auto stats = rangeStats(0, 255, {100, 5, 5, 5, 5, 5, 5, 5});
     for (const auto& name : expected) {
-        const auto embedded = TransferFunction::load(name, stats);
+        const auto embedded = TransferFunction::preset(name, stats);
         const std::string path = std::string(BC_CONFIGS_DIR) + "/tf/" + name + ".json";
         const auto bytes = test::readFile(path);
         const auto file =
@@ -389,8 +446,6 @@ TEST(TransferFunctionTest, PresetsAreEmbeddedFromConfigsTf) {
             EXPECT_EQ(embedded.points()[i].value, file.points()[i].value);
             EXPECT_EQ(embedded.points()[i].rgba, file.points()[i].rgba);
         }
-        EXPECT_EQ(TransferFunction::load(path, stats).points().size(),
-                  file.points().size()); // as a file too
     }
 }
 
@@ -453,7 +508,7 @@ TEST_P(TransferFunctionPresetTest, EveryPresetLeavesTheBackgroundBinTransparentA
     const double binWidth = (stats.valueMax - stats.valueMin) / double(stats.histogram.size());
     const double modeLo = stats.valueMin + binWidth * double(mode), modeHi = modeLo + binWidth;
     for (const auto& name : TransferFunction::presetNames()) {
-        const auto tf = TransferFunction::load(name, stats);
+        const auto tf = TransferFunction::preset(name, stats);
         // Exact: the function is linear between points, so its ends and points suffice.
         auto maxAlpha = [&](double lo, double hi) {
             float a = std::max(tf.evaluate(lo)[3], tf.evaluate(hi)[3]);

@@ -66,7 +66,7 @@ std::vector<Received> fly(const TestDaemon& d, const ClientPlan& plan, int seed)
 std::vector<std::uint8_t> directRender(bc::test::TestStore& t, const Received& r,
                                        render::Raycaster& gpu, render::CpuRaycaster& cpu,
                                        render::HybridSplatter& splat, render::GpuSplatter& gpuSplat) {
-    const auto tf = toTransferFunction(r.tf, render::VolumeValueStats::fromStore(t.store->info()));
+    const auto tf = toTransferFunction(r.tf, render::VolumeValueStats::fromStore(t.store->info()), {});
     render::RenderOptions o = toRenderOptions(r.options, false);
     o.shading = shadingFor(r.options, r.tf, *tf);
     o.level = r.frame.header.level;
