@@ -72,8 +72,10 @@ void checkPayloadPlacement(const std::vector<BrickRecord>& records, const StoreL
 BrickStore::~BrickStore() = default;
 
 std::unique_ptr<BrickStore> BrickStore::open(const std::string& path) {
+    static std::atomic<std::uint64_t> nextInstance{1};
     std::unique_ptr<BrickStore> s(new BrickStore());
     s->mPath = path;
+    s->mInstance = nextInstance.fetch_add(1);
     s->mFile = std::make_unique<detail::MappedFile>(path);
     auto bytes = s->mFile->bytes();
     detail::StoreHeader h = detail::decodeHeader(bytes, path);

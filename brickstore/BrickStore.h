@@ -56,6 +56,9 @@ public:
     ~BrickStore();
 
     const std::string& path() const { return mPath; }
+    /// Unique among the stores this process opened, never reused: what derived state (octrees,
+    /// classifications) is keyed by, where an address or a path could name another store.
+    std::uint64_t instance() const { return mInstance; }
     const StoreInfo& info() const { return mInfo; }
     const StoreLayout& layout() const { return *mLayout; }
     const BrickRecord& record(const BrickKey& key) const;
@@ -77,6 +80,7 @@ public:
 private:
     BrickStore() = default;
     std::string mPath;
+    std::uint64_t mInstance = 0;
     StoreInfo mInfo;
     std::unique_ptr<StoreLayout> mLayout;
     std::vector<BrickRecord> mRecords;

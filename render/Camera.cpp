@@ -53,6 +53,10 @@ void Camera::validate() const {
 
 ViewBasis ViewBasis::from(const Camera& camera, std::uint32_t width, std::uint32_t height) {
     camera.validate();
+    return fromValid(camera, width, height);
+}
+
+ViewBasis ViewBasis::fromValid(const Camera& camera, std::uint32_t width, std::uint32_t height) {
     ViewBasis b;
     b.eye = camera.eye;
     b.orthographic = camera.orthographic;

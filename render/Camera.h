@@ -55,7 +55,10 @@ struct ViewBasis {
     glm::dvec3 upScaled{0.0}; ///< scaled likewise for the height
     bool orthographic = false;
 
+    /// @throw std::invalid_argument when the camera is not valid (Camera::validate).
     static ViewBasis from(const Camera& camera, std::uint32_t width, std::uint32_t height);
+    /// The same for a camera already validated (View::of, the protocol's decoder).
+    static ViewBasis fromValid(const Camera& camera, std::uint32_t width, std::uint32_t height);
     Ray ray(double pixelX, double pixelY, std::uint32_t width, std::uint32_t height) const;
 };
 

@@ -26,7 +26,6 @@ double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-constexpr std::uint32_t kTfEntries = 4096; // as the GPU raycaster's table
 
 enum class Slot : std::uint8_t { Absent, Sampled, Constant };
 
@@ -292,32 +291,23 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
 CpuRaycaster::CpuRaycaster() = default;
 CpuRaycaster::~CpuRaycaster() = default;
 
-Image CpuRaycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                           const TransferFunction& tf, const Camera& camera,
-                           const RenderOptions& options, FrameStats& stats) {
+Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
+                           FrameStats& stats) {
     const auto frameStart = Clock::now();
     options.validate();
-    camera.validate();
+    checkView(view, options);
     stats = FrameStats{};
+    const brickstore::BrickStore& store = scene.store;
+    brickstore::BrickCache& cache = scene.cache;
     const auto levels = std::uint32_t(store.layout().levels().size());
     const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     const LevelGeometry g = LevelGeometry::of(store, level);
-    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
-    const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
-    const bool octree = options.skip == SkipMode::All && g.apronVoxels > 0;
-    if (octree && (!mOccupancy || mStore != &store || mStorePath != store.path() ||
-                   mOccupancy->level() != level)) {
-        mOccupancy = std::make_unique<OccupancyTrees>(store, level);
-        mStore = &store;
-        mStorePath = store.path();
-    }
-    if (octree) {
-        const auto rebuild = mOccupancy->update(table, options.octree);
-        stats.octreeBricksRebuilt = rebuild.bricksRebuilt;
-        stats.octreeRebuildMs = rebuild.ms;
-    }
-    const BrickPlan plan =
-        planBricks(store, g, table, view, options.skip, octree ? mOccupancy.get() : nullptr);
+    const FrameClassification classified =
+        classifyFrame(scene, level, options, options.stepVoxels, stats);
+    const TransferFunctionTable& table = *classified.table;
+    const OccupancyTrees* occupancy = classified.occupancy;
+    const bool octree = occupancy != nullptr;
+    const BrickPlan plan = planBricks(store, g, table, view.basis, options.skip, occupancy);
     recordPlan(plan, level, stats);
     stats.batches = 1;
 
@@ -343,14 +333,14 @@ Image CpuRaycaster::render(const brickstore::BrickStore& store, brickstore::Bric
     stats.uploadMs = msSince(loadStart);
 
     const auto renderStart = Clock::now();
-    Frame f = frameOf(g, view, options, table);
+    Frame f = frameOf(g, view.basis, options, table);
     f.bricks = bricks.data();
-    if (octree && mOccupancy->depth() > 0) {
-        f.occ = mOccupancy->words().data();
-        f.octDepth = int(mOccupancy->depth());
-        f.occWords = int(mOccupancy->wordsPerBrick());
-        f.leafAxis = int(mOccupancy->leavesPerAxis());
-        f.leaf = float(mOccupancy->leafVoxels());
+    if (octree && occupancy->depth() > 0) {
+        f.occ = occupancy->words().data();
+        f.octDepth = int(occupancy->depth());
+        f.occWords = int(occupancy->wordsPerBrick());
+        f.leafAxis = int(occupancy->leavesPerAxis());
+        f.leaf = float(occupancy->leafVoxels());
     }
     Image image(options.width, options.height);
     RayCount count;

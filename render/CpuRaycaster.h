@@ -6,9 +6,7 @@
 // frame's visible non-empty bricks are pinned for the frame (the cache may exceed its budget
 // rather than fail a frame), so there are no batches and no GPU pool. Occlusion frustums are
 // a GPU technique and are not used here. Not thread-safe: one frame at a time per instance.
-#include "render/Camera.h"
-#include "render/Image.h"
-#include "render/RenderTypes.h"
+#include "render/Renderer.h"
 
 #include <memory>
 #include <string>
@@ -23,24 +21,20 @@ namespace bc::render {
 class TransferFunction;
 class OccupancyTrees;
 
-class CpuRaycaster {
+class CpuRaycaster final : public Renderer {
   public:
     CpuRaycaster();
-    ~CpuRaycaster();
+    ~CpuRaycaster() override;
     CpuRaycaster(const CpuRaycaster&) = delete;
     CpuRaycaster& operator=(const CpuRaycaster&) = delete;
 
-    /// Renders one frame of `store` at options.level (interactive is ignored: the host cache
-    /// holds what it must). Fills `stats` (no uploads, one batch).
-    /// @throw std::invalid_argument on bad options or camera; StoreCorrupt naming a brick.
-    Image render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                 const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
-                 FrameStats& stats);
-
-  private:
-    std::unique_ptr<OccupancyTrees> mOccupancy;
-    const brickstore::BrickStore* mStore = nullptr;
-    std::string mStorePath;
+    std::string_view name() const override { return "cpu"; }
+    /// Renders one frame at options.level (interactive is ignored: the host cache holds what it
+    /// must). Fills `stats` (no uploads, one batch).
+    /// @throw std::invalid_argument on bad options; StoreCorrupt naming a brick.
+    Image render(const Scene& scene, const View& view, const RenderOptions& options,
+                 FrameStats& stats) override;
+    using Renderer::render;
 };
 
 } // namespace bc::render

@@ -422,23 +422,21 @@ GpuSplatter::GpuSplatter(const HybridSplatterConfig& config)
 
 GpuSplatter::~GpuSplatter() = default;
 
-Image GpuSplatter::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                          const TransferFunction& tf, const Camera& camera,
-                          const RenderOptions& options, FrameStats& stats) {
+Image GpuSplatter::render(const Scene& scene, const View& view, const RenderOptions& options,
+                          FrameStats& stats) {
     const auto frameStart = Clock::now();
-    const detail::SplatScene scene = detail::sceneOf(store, tf, camera, options);
     stats = FrameStats{};
     mLast = HybridSplatStats{};
-    if (scene.octree)
-        detail::updateOccupancy(mOccupancy, mStore, mStorePath, store, scene.level, scene.table,
-                                options, stats);
-    const OccupancyTrees* occupancy = scene.octree ? mOccupancy.get() : nullptr;
+    const detail::SplatScene splat = detail::sceneOf(scene, view, options, stats);
+    const brickstore::BrickStore& store = scene.store;
+    brickstore::BrickCache& cache = scene.cache;
+    const OccupancyTrees* occupancy = splat.occupancy();
     const BrickPlan plan =
-        planBricks(store, scene.g, scene.table, scene.basis, options.skip, occupancy);
-    recordPlan(plan, scene.level, stats);
+        planBricks(store, splat.g, splat.table(), view.basis, options.skip, occupancy);
+    recordPlan(plan, splat.level, stats);
 
     const auto prepareStart = Clock::now();
-    const Frame f = detail::frameOf(mConfig, scene.g, scene.basis, options, scene.table);
+    const Frame f = detail::frameOf(mConfig, splat.g, view.basis, options, splat.table());
     PrimitiveList list(f, mFootprint, options.width, options.height, mLast);
     const auto type = store.info().volume.type;
     for (std::size_t first = 0; first < plan.drawn.size(); first += detail::kChunkBricks) {

@@ -52,7 +52,7 @@ namespace bc::render {
 class TransferFunction;
 class OccupancyTrees;
 
-class GpuSplatter {
+class GpuSplatter final : public Renderer {
   public:
     /// Texels of the footprint texture: lineIntegral at distance k / (kFootprintTexels - 1).
     static constexpr std::uint32_t kFootprintTexels = 4096;
@@ -60,18 +60,19 @@ class GpuSplatter {
     /// @throw std::invalid_argument on a bad config; RenderError naming a shader that does
     /// not build on this context.
     explicit GpuSplatter(const HybridSplatterConfig& config = {});
-    ~GpuSplatter();
+    ~GpuSplatter() override;
     GpuSplatter(const GpuSplatter&) = delete;
     GpuSplatter& operator=(const GpuSplatter&) = delete;
 
     /// Renders one frame of `store` at options.level, as HybridSplatter::render. Fills `stats`
     /// (samples = voxels drawn, octreeLeaps = empty leaves skipped, batches = draw batches,
     /// uploadMs = preparing bricks and uploading the primitives, renderMs = drawing).
-    /// @throw std::invalid_argument on bad options or camera; StoreCorrupt naming a brick;
+    /// @throw std::invalid_argument on bad options or view; StoreCorrupt naming a brick;
     /// RenderError on a GL failure.
-    Image render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                 const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
-                 FrameStats& stats);
+    Image render(const Scene& scene, const View& view, const RenderOptions& options,
+                 FrameStats& stats) override;
+    using Renderer::render;
+    std::string_view name() const override { return "splat-gpu"; }
 
     /// Counts of the last render() (points, splats, slabs, leaves skipped; nothing culled).
     const HybridSplatStats& lastFrame() const { return mLast; }
@@ -89,9 +90,6 @@ class GpuSplatter {
     SplatFootprint mFootprint; ///< of mConfig.sigmaOverRadius, built once
     HybridSplatStats mLast;
     std::unique_ptr<Gpu> mGpu;
-    std::unique_ptr<OccupancyTrees> mOccupancy;
-    const brickstore::BrickStore* mStore = nullptr;
-    std::string mStorePath;
 };
 
 } // namespace bc::render

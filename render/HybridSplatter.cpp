@@ -567,22 +567,21 @@ HybridSplatter::HybridSplatter(const HybridSplatterConfig& config)
       mFootprint(SplatFootprintConfig{config.sigmaOverRadius}) {}
 HybridSplatter::~HybridSplatter() = default;
 
-Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                             const TransferFunction& tf, const Camera& camera,
-                             const RenderOptions& options, FrameStats& stats) {
+Image HybridSplatter::render(const Scene& scene, const View& view, const RenderOptions& options,
+                             FrameStats& stats) {
     const auto frameStart = Clock::now();
-    // Opacity per unit step: the footprint supplies each voxel's own path length.
-    const SplatScene scene = detail::sceneOf(store, tf, camera, options);
     stats = FrameStats{};
     mLast = HybridSplatStats{};
-    const std::uint32_t level = scene.level;
-    const LevelGeometry& g = scene.g;
-    const ViewBasis& basis = scene.basis;
-    const TransferFunctionTable& table = scene.table;
-    const bool octree = scene.octree;
-    if (octree) updateOccupancy(store, level, table, options, stats);
-    const BrickPlan plan =
-        planBricks(store, g, table, basis, options.skip, octree ? mOccupancy.get() : nullptr);
+    // Opacity per unit step: the footprint supplies each voxel's own path length.
+    const SplatScene splat = detail::sceneOf(scene, view, options, stats);
+    const brickstore::BrickStore& store = scene.store;
+    brickstore::BrickCache& cache = scene.cache;
+    const std::uint32_t level = splat.level;
+    const LevelGeometry& g = splat.g;
+    const ViewBasis& basis = view.basis;
+    const TransferFunctionTable& table = splat.table();
+    const OccupancyTrees* occupancy = splat.occupancy();
+    const BrickPlan plan = planBricks(store, g, table, basis, options.skip, occupancy);
     recordPlan(plan, level, stats);
     stats.batches = 1;
 
@@ -595,8 +594,7 @@ Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::Br
         std::vector<PreparedBrick> chunk(std::min(kChunkBricks, plan.drawn.size() - first));
         drawer.cullBricks(plan.drawn.data() + first, chunk);
         const auto prepareStart = Clock::now();
-        detail::prepareChunk(f, plan, first, cache, type, octree ? mOccupancy.get() : nullptr,
-                             chunk);
+        detail::prepareChunk(f, plan, first, cache, type, occupancy, chunk);
         stats.uploadMs += msSince(prepareStart);
         drawer.draw(chunk);
     }
@@ -608,12 +606,6 @@ Image HybridSplatter::render(const brickstore::BrickStore& store, brickstore::Br
     stats.totalMs = msSince(frameStart);
     stats.renderMs = stats.totalMs - stats.uploadMs;
     return std::move(canvas.image);
-}
-
-void HybridSplatter::updateOccupancy(const brickstore::BrickStore& store, std::uint32_t level,
-                                     const TransferFunctionTable& table,
-                                     const RenderOptions& options, FrameStats& stats) {
-    detail::updateOccupancy(mOccupancy, mStore, mStorePath, store, level, table, options, stats);
 }
 
 } // namespace bc::render

@@ -30,9 +30,7 @@
 // worker per band (parallelDraw): slab cuts are decided once for all bands, culling per band,
 // so every pixel sees the serial operations and the image and counts are those of one band.
 // Not thread-safe: one frame at a time per instance.
-#include "render/Camera.h"
-#include "render/Image.h"
-#include "render/RenderTypes.h"
+#include "render/Renderer.h"
 #include "render/SplatFootprint.h"
 
 #include <cstdint>
@@ -77,36 +75,30 @@ struct HybridSplatStats {
     std::uint64_t slabs = 0;         ///< point slabs composited
 };
 
-class HybridSplatter {
+class HybridSplatter final : public Renderer {
   public:
     /// @throw std::invalid_argument on a bad config.
     explicit HybridSplatter(const HybridSplatterConfig& config = {});
-    ~HybridSplatter();
+    ~HybridSplatter() override;
     HybridSplatter(const HybridSplatter&) = delete;
     HybridSplatter& operator=(const HybridSplatter&) = delete;
 
     /// Renders one frame of `store` at options.level. Fills `stats` (samples = voxels drawn,
     /// octreeLeaps = empty leaves skipped, uploadMs = pinning, classifying and sorting bricks,
     /// one batch, no uploads).
-    /// @throw std::invalid_argument on bad options or camera; StoreCorrupt naming a brick.
-    Image render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                 const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
-                 FrameStats& stats);
+    /// @throw std::invalid_argument on bad options or view; StoreCorrupt naming a brick.
+    Image render(const Scene& scene, const View& view, const RenderOptions& options,
+                 FrameStats& stats) override;
+    using Renderer::render;
+    std::string_view name() const override { return "splat"; }
 
     /// Counts of the last render().
     const HybridSplatStats& lastFrame() const { return mLast; }
 
   private:
-    void updateOccupancy(const brickstore::BrickStore& store, std::uint32_t level,
-                         const TransferFunctionTable& table, const RenderOptions& options,
-                         FrameStats& stats);
-
     HybridSplatterConfig mConfig;
     SplatFootprint mFootprint; ///< of mConfig.sigmaOverRadius, built once
     HybridSplatStats mLast;
-    std::unique_ptr<OccupancyTrees> mOccupancy;
-    const brickstore::BrickStore* mStore = nullptr;
-    std::string mStorePath;
 };
 
 } // namespace bc::render

@@ -80,6 +80,16 @@ OccupancyTrees::OccupancyTrees(const brickstore::BrickStore& store, std::uint32_
     mWords.assign(mBricks * mWordsPerBrick, ~0u);
 }
 
+std::uint64_t OccupancyTrees::bytes() const {
+    auto of = [](const auto& v) { return std::uint64_t(v.capacity() * sizeof(v[0])); };
+    std::uint64_t n = of(mStored) + of(mBrickRange) + of(mLeafRange) + of(mLeafEntries) +
+                      of(mLeafFull) + of(mNonEmpty) + of(mRoot) + of(mWords) + of(mChanged) +
+                      of(mVisible);
+    for (const auto& f : mFaults)
+        n += f.capacity();
+    return n + sizeof(*this);
+}
+
 OccupancyRebuild OccupancyTrees::update(const TransferFunctionTable& table,
                                         const OccupancyConfig& config) {
     config.validate();

@@ -79,6 +79,8 @@ class OccupancyTrees {
     /// Whether the raycaster samples inside that node (its bit, or true for the root).
     bool occupied(std::uint64_t brick, std::uint32_t octLevel,
                   const std::array<std::uint32_t, 3>& node) const;
+    /// Host memory this object holds (its tables and bits).
+    std::uint64_t bytes() const;
     /// Leaf tables that failed their checksum, one line each naming the brick.
     const std::vector<std::string>& faults() const { return mFaults; }
 

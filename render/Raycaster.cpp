@@ -23,7 +23,6 @@ double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-constexpr std::uint32_t kTfEntries = 4096;
 /// Ray-guided frames: after this many passes that each loaded what rays asked for, every
 /// deferred brick left is loaded at once (so a frame takes at most this many + 2 passes).
 constexpr int kMaxRequestRounds = 6;
@@ -35,8 +34,8 @@ struct Raycaster::Gpu {
     gl::VertexArray vao;
     gl::Texture tf;
     gl::Buffer pages, counters;
-    gl::Buffer occupancy; ///< OccupancyTrees::words() of the level in mOccupancy
-    std::uint64_t occupancyWords = 0;
+    gl::Buffer occupancy; ///< OccupancyTrees::words() of classification occupancyId
+    std::uint64_t occupancyWords = 0, occupancyId = 0;
     std::unique_ptr<detail::OcclusionFrustums> occlusion; ///< created on first use
     gl::Buffer feedback; ///< per brick of the level: entered, then asked for (2 uints)
     std::uint64_t feedbackBricks = 0;
@@ -71,7 +70,7 @@ struct Raycaster::Gpu {
     void uploadTable(const TransferFunctionTable& table) {
         if (!tf) {
             tf = gl::createTexture(GL_TEXTURE_1D);
-            glTextureStorage1D(tf.get(), 1, GL_RGBA32F, GLsizei(kTfEntries));
+            glTextureStorage1D(tf.get(), 1, GL_RGBA32F, GLsizei(kClassificationTableEntries));
             glTextureParameteri(tf.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
             glTextureParameteri(tf.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
             glTextureParameteri(tf.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
@@ -133,13 +132,11 @@ void Raycaster::ensurePool(const brickstore::BrickStore& store) {
 }
 
 std::uint32_t Raycaster::chooseLevel(const brickstore::BrickStore& store,
-                                     const TransferFunction& tf, const Camera& camera,
+                                     const TransferFunctionTable& table, const ViewBasis& view,
                                      const RenderOptions& options) {
     const auto levels = std::uint32_t(store.layout().levels().size());
     std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     if (!options.interactive) return level;
-    const auto table = tf.table(options.stepVoxels, kTfEntries);
-    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
     for (; level + 1 < levels; ++level) {
         const BrickPlan plan =
             planBricks(store, LevelGeometry::of(store, level), table, view, options.skip);
@@ -317,6 +314,7 @@ void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount,
         mGpu->occupancy = gl::createBuffer();
         glNamedBufferStorage(mGpu->occupancy.get(), 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
         mGpu->occupancyWords = 0;
+        mGpu->occupancyId = 0;
     }
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, mGpu->occupancy.get());
     if (mGpu->occlusion) {
@@ -327,41 +325,28 @@ void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount,
     glViewport(0, 0, GLsizei(options.width), GLsizei(options.height));
 }
 
-const OccupancyTrees* Raycaster::prepareOccupancy(const brickstore::BrickStore& store,
-                                                   std::uint32_t level,
-                                                   const TransferFunctionTable& table,
-                                                   const RenderOptions& options,
-                                                   FrameStats& stats) {
-    // Leaf ranges reach the apron; without one they do not cover what border samples read.
-    if (options.skip != SkipMode::All || store.layout().geometry().apronVoxels == 0) return nullptr;
-    if (!mOccupancy || mOccupancyStore != &store || mOccupancyStorePath != store.path() ||
-        mOccupancy->level() != level) {
-        mOccupancy.reset();
-        mOccupancy = std::make_unique<OccupancyTrees>(store, level);
-        mOccupancyStore = &store;
-        mOccupancyStorePath = store.path();
-        mGpu->occupancyWords = 0; // the buffer holds another level's words
-    }
-    const OccupancyRebuild rebuild = mOccupancy->update(table, options.octree);
-    stats.octreeBricksRebuilt = rebuild.bricksRebuilt;
-    stats.octreeRebuildMs = rebuild.ms;
-    if (mOccupancy->depth() == 0) return mOccupancy.get(); // brick roots only, no bits
-    const auto& words = mOccupancy->words();
-    const std::uint32_t per = mOccupancy->wordsPerBrick();
+void Raycaster::uploadOccupancy(const FrameClassification& classified) {
+    const OccupancyTrees* occupancy = classified.occupancy;
+    if (!occupancy || occupancy->depth() == 0) return; // brick roots only, no bits
+    const Classification& c = *classified.classification;
+    if (mGpu->occupancyId == c.id()) return;
+    const auto& words = occupancy->words();
+    const std::uint32_t per = occupancy->wordsPerBrick();
+    const auto& changed = occupancy->changedBricks();
     if (mGpu->occupancyWords != words.size()) {
         mGpu->occupancy = gl::createBuffer();
         glNamedBufferStorage(mGpu->occupancy.get(), GLsizeiptr(words.size() * 4), words.data(),
                              GL_DYNAMIC_STORAGE_BIT);
         mGpu->occupancyWords = words.size();
-    } else if (rebuild.bricksRebuilt * 4 > words.size() / per) { // many changed: one upload
+    } else if (mGpu->occupancyId != c.basedOn() || changed.size() * 4 > words.size() / per) {
         glNamedBufferSubData(mGpu->occupancy.get(), 0, GLsizeiptr(words.size() * 4), words.data());
-    } else {
-        for (std::uint64_t b : mOccupancy->changedBricks())
+    } else { // the buffer holds the words these were updated from: only the changed bricks
+        for (std::uint64_t b : changed)
             glNamedBufferSubData(mGpu->occupancy.get(), GLintptr(b * per * 4), GLsizeiptr(per * 4),
                                  &words[b * per]);
     }
     gl::glCheck("uploading octree occupancy");
-    return mOccupancy.get();
+    mGpu->occupancyId = c.id();
 }
 
 std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint32_t level,
@@ -374,9 +359,8 @@ std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint
         for (std::size_t i = 0; i < bytes; ++i)
             h = (h ^ static_cast<const unsigned char*>(data)[i]) * 1099511628211ull;
     };
-    mix(store.path().data(), store.path().size());
-    const void* address = &store;
-    mix(&address, sizeof address);
+    const std::uint64_t instance = store.instance();
+    mix(&instance, sizeof instance);
     mix(&level, sizeof level);
     for (std::uint32_t i = 0; i < table.entries; ++i) {
         const bool visible = table.rgba[4 * std::size_t(i) + 3] > 0.0f;
@@ -391,7 +375,7 @@ std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint
 
 bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
                                  std::uint64_t scene, const RenderOptions& options,
-                                 bool octree, FrameStats& stats) {
+                                 const OccupancyTrees* octree, FrameStats& stats) {
     if (!options.occlusionFrustums) {
         if (mGpu->occlusion) mGpu->occlusion->invalidate();
         stats.occlusionReason = "off";
@@ -399,7 +383,7 @@ bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
     }
     if (!mGpu->occlusion) mGpu->occlusion = std::make_unique<detail::OcclusionFrustums>();
     const double voxels = options.skip == SkipMode::None ? 0.0
-                          : octree ? double(mOccupancy->leafVoxels())
+                          : octree ? double(octree->leafVoxels())
                                    : double(g.brickVoxels);
     const double cellMm = voxels * std::min({g.spacing.x, g.spacing.y, g.spacing.z});
     bool used = false;
@@ -414,29 +398,53 @@ bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
     return used;
 }
 
-std::uint32_t Raycaster::prefetch(const brickstore::BrickStore& store,
-                                  brickstore::BrickCache& cache, const TransferFunction& tf,
-                                  const Camera& camera, const RenderOptions& options,
-                                  std::uint32_t maxUploads) {
+/// The level a frame of `scene` draws at and what it classifies through (chooseLevel plans
+/// with the table of the asked level: tables do not depend on the level).
+struct Raycaster::Prepared {
+    std::uint32_t level = 0;
+    FrameClassification classified;
+};
+
+Raycaster::Prepared Raycaster::prepare(const Scene& scene, const View& view,
+                                       const RenderOptions& options, FrameStats& stats) {
     options.validate();
-    camera.validate();
-    ensurePool(store);
-    const std::uint32_t level = chooseLevel(store, tf, camera, options);
-    const LevelGeometry g = LevelGeometry::of(store, level);
-    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
-    const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
+    checkView(view, options);
+    ensurePool(scene.store);
+    Prepared p;
+    const auto levels = std::uint32_t(scene.store.layout().levels().size());
+    const auto asked = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
+    if (options.interactive) {
+        const auto tablesOnly = scene.classifications.get(scene.store, asked, scene.tf, nullptr)
+                                    ->table(options.stepVoxels);
+        p.level = chooseLevel(scene.store, *tablesOnly, view.basis, options);
+    } else {
+        p.level = asked;
+    }
+    p.classified = classifyFrame(scene, p.level, options, options.stepVoxels, stats);
+    uploadOccupancy(p.classified);
+    return p;
+}
+
+std::uint32_t Raycaster::prefetch(const Scene& scene, const View& view,
+                                  const RenderOptions& options, std::uint32_t maxUploads) {
     FrameStats ignored;
-    const OccupancyTrees* occupancy = prepareOccupancy(store, level, table, options, ignored);
-    const BrickPlan plan = planBricks(store, g, table, view, options.skip, occupancy);
+    const Prepared p = prepare(scene, view, options, ignored);
+    const brickstore::BrickStore& store = scene.store;
+    const std::uint32_t level = p.level;
+    const TransferFunctionTable& table = *p.classified.table;
+    const LevelGeometry g = LevelGeometry::of(store, level);
+    const BrickPlan plan =
+        planBricks(store, g, table, view.basis, options.skip, p.classified.occupancy);
     const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
-    const std::uint64_t scene = sceneKey(store, level, table, options);
+    const std::uint64_t sceneId = sceneKey(store, level, table, options);
+    brickstore::BrickCache& cache = scene.cache;
     BatchPins pins{*mPool};
     std::uint32_t uploaded = 0;
     for (const PlannedBrick& b : plan.drawn) {
         if (uploaded >= maxUploads) break;
         if (b.draw == BrickDraw::Constant || mPool->resident(levelFirst + b.index)) continue;
         // Behind the last frame's saturated rays: the frame asks for it if it is needed.
-        if (options.rayGuided && mGpu->guide.hidden(scene, b.index)) continue;
+        if (options.rayGuided && mGpu->guide.hidden(sceneId, b.index)) continue;
         brickstore::BrickPin pin;
         const auto slot = mPool->acquire(levelFirst + b.index, [&] {
             pin = cache.pin(b.key);
@@ -449,26 +457,25 @@ std::uint32_t Raycaster::prefetch(const brickstore::BrickStore& store,
     return uploaded;
 }
 
-Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                        const TransferFunction& tf, const Camera& camera,
-                        const RenderOptions& options, FrameStats& stats) {
+Image Raycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
+                        FrameStats& stats) {
     const auto frameStart = Clock::now();
-    options.validate();
     stats = FrameStats{};
-    ensurePool(store);
-    const std::uint32_t level = chooseLevel(store, tf, camera, options);
+    const Prepared p = prepare(scene, view, options, stats);
+    const brickstore::BrickStore& store = scene.store;
+    brickstore::BrickCache& cache = scene.cache;
+    const std::uint32_t level = p.level;
+    const TransferFunctionTable& table = *p.classified.table;
+    const OccupancyTrees* occupancy = p.classified.occupancy;
     const LevelGeometry g = LevelGeometry::of(store, level);
-    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
-    const TransferFunctionTable table = tf.table(options.stepVoxels, kTfEntries);
-    const OccupancyTrees* occupancy = prepareOccupancy(store, level, table, options, stats);
-    const BrickPlan plan = planBricks(store, g, table, view, options.skip, occupancy);
+    const BrickPlan plan = planBricks(store, g, table, view.basis, options.skip, occupancy);
     recordPlan(plan, level, stats);
 
     mGpu->ensureTargets(options.width, options.height);
     mGpu->uploadTable(table);
-    const std::uint64_t scene = sceneKey(store, level, table, options);
-    const bool useStarts = prepareOcclusion(g, view, scene, options, occupancy != nullptr, stats);
-    setFrameUniforms(mGpu->program.get(), g, view, options, table, *mPool);
+    const std::uint64_t sceneId = sceneKey(store, level, table, options);
+    const bool useStarts = prepareOcclusion(g, view.basis, sceneId, options, occupancy, stats);
+    setFrameUniforms(mGpu->program.get(), g, view.basis, options, table, *mPool);
     setOccupancyUniforms(mGpu->program.get(), occupancy);
     const GLuint program = mGpu->program.get();
     glProgramUniform1i(program, glGetUniformLocation(program, "uUseStart"), useStarts);
@@ -487,7 +494,7 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
         // when it does not, every hidden brick waits to be asked for (a resident one costs no
         // upload then), so that no slot is held by a brick no ray reaches.
         const bool fits = plan.sampled <= mPool->capacity();
-        deferred = mGpu->guide.deferrable(plan, scene, g.brickCount(), [&](std::uint64_t i) {
+        deferred = mGpu->guide.deferrable(plan, sceneId, g.brickCount(), [&](std::uint64_t i) {
             return fits && mPool->resident(levelFirst + i);
         });
     }
@@ -507,7 +514,7 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
     stats.readbackMs = msSince(readStart);
     if (options.occlusionFrustums) {
         const auto captureStart = Clock::now();
-        mGpu->occlusion->capture(view, scene, msSince(frameStart), useStarts, options.occlusion);
+        mGpu->occlusion->capture(view.basis, sceneId, msSince(frameStart), useStarts, options.occlusion);
         stats.occlusionBuildMs += msSince(captureStart);
     }
     if (options.rayGuided) {
@@ -517,7 +524,7 @@ Image Raycaster::render(const brickstore::BrickStore& store, brickstore::BrickCa
         gl::glCheck("reading ray feedback");
         for (const PlannedBrick& b : plan.drawn)
             stats.bricksEntered += b.draw == BrickDraw::Sampled && entered[b.index] != 0;
-        mGpu->guide.record(plan, scene, entered);
+        mGpu->guide.record(plan, sceneId, entered);
     }
     stats.bricksUploaded = mPool->stats().uploads - uploadsBefore;
     stats.bytesUploaded = mPool->stats().bytesUploaded - bytesBefore;

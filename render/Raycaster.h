@@ -4,11 +4,9 @@
 // brick grid (DDA), sampling only the batch's bricks and compositing onto the previous
 // pass's result. With a pool large enough for the view there is one pass. Needs a current
 // EglContext on the calling thread; render thread only.
-#include "render/BrickPool.h"
 #include "render/BrickPlan.h"
-#include "render/Camera.h"
-#include "render/Image.h"
-#include "render/RenderTypes.h"
+#include "render/BrickPool.h"
+#include "render/Renderer.h"
 
 #include <cstdint>
 #include <memory>
@@ -31,20 +29,21 @@ struct RaycasterConfig {
     std::uint64_t gpuBudgetBytes = 512ull << 20; ///< brick pool bytes (of a pool of its own)
 };
 
-class Raycaster {
+class Raycaster final : public Renderer, public GpuResidency {
   public:
     /// @throw RenderError if the shaders do not build on this context.
     explicit Raycaster(const RaycasterConfig& config = {});
-    ~Raycaster();
+    ~Raycaster() override;
     Raycaster(const Raycaster&) = delete;
     Raycaster& operator=(const Raycaster&) = delete;
 
-    /// Renders one frame of `store` (bricks come through `cache`). Fills `stats`.
-    /// @throw std::invalid_argument on bad options or camera; StoreCorrupt naming a brick
+    std::string_view name() const override { return "gpu"; }
+    /// Renders one frame of the scene (bricks come through its cache). Fills `stats`.
+    /// @throw std::invalid_argument on bad options or view; StoreCorrupt naming a brick
     /// that fails its checksum; RenderError on a GL failure.
-    Image render(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                 const TransferFunction& tf, const Camera& camera, const RenderOptions& options,
-                 FrameStats& stats);
+    Image render(const Scene& scene, const View& view, const RenderOptions& options,
+                 FrameStats& stats) override;
+    using Renderer::render;
 
     /// A new pool budget (a daemon's fair share changed): the next frame allocates a pool of
     /// that size, and what the old pool held is uploaded again as needed.
@@ -55,7 +54,7 @@ class Raycaster {
     /// occlusion frustums (a daemon's sessions). They must render on one thread, one frame at
     /// a time; the pool must hold this store's bricks only. @throw RenderError at the next
     /// frame when the pool's voxel type or slot edge does not fit the store.
-    void setSharedPool(std::shared_ptr<BrickPool> pool);
+    void setSharedPool(std::shared_ptr<BrickPool> pool) override;
 
     /// Uploads into the pool, nearest first, up to `maxUploads` bricks of the view `camera`
     /// would sample that the pool lacks (the level render() would choose; constant and
@@ -63,15 +62,19 @@ class Raycaster {
     /// slots, so a caller that passes at most capacity - (bricks of the last frame) keeps
     /// every brick of the last frame resident. Returns the bricks uploaded.
     /// @throw what render() throws for its inputs.
-    std::uint32_t prefetch(const brickstore::BrickStore& store, brickstore::BrickCache& cache,
-                           const TransferFunction& tf, const Camera& camera,
-                           const RenderOptions& options, std::uint32_t maxUploads);
+    std::uint32_t prefetch(const Scene& scene, const View& view, const RenderOptions& options,
+                           std::uint32_t maxUploads) override;
 
     /// The pool of the last frame (nullptr before the first); its counters span all frames.
-    const BrickPool* pool() const { return mPool.get(); }
+    const BrickPool* pool() const override { return mPool.get(); }
+    GpuResidency* gpuResidency() override { return this; }
 
   private:
     struct Gpu;
+    struct Prepared;
+    /// Validates, readies the pool, chooses the level and classifies (octrees uploaded).
+    Prepared prepare(const Scene& scene, const View& view, const RenderOptions& options,
+                     FrameStats& stats);
     void ensurePool(const brickstore::BrickStore& store);
     /// Pins the next bricks of `plan` into pool slots and marks them in `pages`; returns their
     /// indices.
@@ -89,21 +92,22 @@ class Raycaster {
     bool drawGuided(const BrickPlan& plan, const std::vector<std::size_t>& deferred,
                     std::uint64_t levelFirst, brickstore::BrickCache& cache,
                     std::vector<std::int32_t>& pages, int& pass, FrameStats& stats);
-    /// The octrees of `level` brought up to `table` and uploaded, or nullptr when the frame
-    /// does not use the second stage.
-    const OccupancyTrees* prepareOccupancy(const brickstore::BrickStore& store,
-                                           std::uint32_t level, const TransferFunctionTable& table,
-                                           const RenderOptions& options, FrameStats& stats);
+    /// The frame's octrees (if any) on the GPU: uploaded when they are another
+    /// classification's than the buffer holds (only the changed bricks' words when the buffer
+    /// holds the classification they were updated from).
+    void uploadOccupancy(const FrameClassification& classified);
     void drawPass(int pass);
     std::uint64_t sceneKey(const brickstore::BrickStore& store, std::uint32_t level,
                            const TransferFunctionTable& table, const RenderOptions& options) const;
     /// Builds this frame's ray starts from the last frame's occlusion frustums when allowed
     /// (returns whether the raycaster uses them) and readies the first-hit image.
     bool prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, std::uint64_t scene,
-                          const RenderOptions& options, bool octree, FrameStats& stats);
+                          const RenderOptions& options, const OccupancyTrees* octree,
+                          FrameStats& stats);
     Image readBack(int passes, std::uint32_t width, std::uint32_t height, FrameStats& stats);
-    std::uint32_t chooseLevel(const brickstore::BrickStore& store, const TransferFunction& tf,
-                              const Camera& camera, const RenderOptions& options);
+    std::uint32_t chooseLevel(const brickstore::BrickStore& store,
+                              const TransferFunctionTable& table, const ViewBasis& view,
+                              const RenderOptions& options);
 
     RaycasterConfig mConfig;
     std::unique_ptr<Gpu> mGpu;
@@ -111,9 +115,6 @@ class Raycaster {
     std::shared_ptr<BrickPool> mSharedPool;
     const brickstore::BrickStore* mPoolStore = nullptr;
     std::string mPoolStorePath;
-    std::unique_ptr<OccupancyTrees> mOccupancy;
-    const brickstore::BrickStore* mOccupancyStore = nullptr;
-    std::string mOccupancyStorePath;
 };
 
 } // namespace bc::render

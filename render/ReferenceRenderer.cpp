@@ -122,6 +122,16 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
                       const TransferFunction& tf, const Camera& camera,
                       const RenderOptions& options, FrameStats& stats,
                       const ReferenceConfig& config) {
+    options.validate();
+    return renderReference(store, volume, tf.table(options.stepVoxels),
+                           ViewBasis::from(camera, options.width, options.height), options, stats,
+                           config);
+}
+
+Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume& volume,
+                      const TransferFunctionTable& table, const ViewBasis& view,
+                      const RenderOptions& options, FrameStats& stats,
+                      const ReferenceConfig& config) {
     const auto start = std::chrono::steady_clock::now();
     options.validate();
     stats = FrameStats{};
@@ -130,8 +140,6 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
     const LevelGeometry geometry = LevelGeometry::of(store, level);
     if (geometry.dims != volume.dims())
         throw std::invalid_argument("reference volume is not the requested level");
-    const TransferFunctionTable table = tf.table(options.stepVoxels);
-    const ViewBasis view = ViewBasis::from(camera, options.width, options.height);
     const double span = table.domainMax - table.domainMin;
     const RayContext context{volume, table, geometry, options,
                              0.5 / span * geometry.minSpacing() / geometry.spacing};
@@ -167,6 +175,38 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
     stats.totalMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return image;
+}
+
+// ---- ReferenceRenderer ------------------------------------------------------------------
+
+ReferenceRenderer::ReferenceRenderer(const ReferenceRendererConfig& config) : mConfig(config) {}
+ReferenceRenderer::~ReferenceRenderer() = default;
+
+Image ReferenceRenderer::render(const Scene& scene, const View& view, const RenderOptions& options,
+                                FrameStats& stats) {
+    options.validate();
+    checkView(view, options);
+    const auto levels = std::uint32_t(scene.store.layout().levels().size());
+    const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
+    const auto& dims = scene.store.layout().levels()[level].dims;
+    if (dims[0] * dims[1] * dims[2] > mConfig.maxVoxels)
+        throw std::invalid_argument("the reference renderer is not offered for volumes over " +
+                                    std::to_string(mConfig.maxVoxels >> 20) + " Mi voxels");
+    if (!mVolume || mStoreInstance != scene.store.instance() || mLevel != level) {
+        mVolume.reset(); // the old level's voxels go before the new ones are read
+        mVolume = std::make_unique<ReferenceVolume>(scene.store, level);
+        mStoreInstance = scene.store.instance();
+        mLevel = level;
+    }
+    // Full precision: the table has the default entries (tables are equal for one step and
+    // entry count, so the shared classification's serves).
+    FrameStats ignored;
+    RenderOptions tablesOnly = options;
+    tablesOnly.skip = SkipMode::None;
+    const FrameClassification classified =
+        classifyFrame(scene, level, tablesOnly, options.stepVoxels, ignored);
+    return renderReference(scene.store, *mVolume, *classified.table, view.basis, options, stats,
+                           mConfig.threads);
 }
 
 } // namespace bc::render

@@ -5,8 +5,10 @@
 #include "render/Camera.h"
 #include "render/Image.h"
 #include "render/RenderTypes.h"
+#include "render/Renderer.h"
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace bc::brickstore {
@@ -43,5 +45,37 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
                       const TransferFunction& tf, const Camera& camera,
                       const RenderOptions& options, FrameStats& stats,
                       const ReferenceConfig& config = {});
+/// The same for a validated view and the table it classifies through (full precision: the
+/// table must hold the step's opacities).
+Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume& volume,
+                      const TransferFunctionTable& table, const ViewBasis& view,
+                      const RenderOptions& options, FrameStats& stats,
+                      const ReferenceConfig& config = {});
+
+struct ReferenceRendererConfig {
+    /// Largest level it draws: it holds every voxel of the level in host memory.
+    std::uint64_t maxVoxels = 64ull << 20;
+    ReferenceConfig threads;
+};
+
+/// The reference as a Renderer: the level's voxels are read once per store and level and
+/// kept while the same ones are drawn.
+class ReferenceRenderer final : public Renderer {
+  public:
+    explicit ReferenceRenderer(const ReferenceRendererConfig& config = {});
+    ~ReferenceRenderer() override;
+    std::string_view name() const override { return "reference"; }
+    /// @throw std::invalid_argument on bad options or view, or a level over maxVoxels;
+    /// StoreCorrupt.
+    Image render(const Scene& scene, const View& view, const RenderOptions& options,
+                 FrameStats& stats) override;
+    using Renderer::render;
+
+  private:
+    ReferenceRendererConfig mConfig;
+    std::unique_ptr<ReferenceVolume> mVolume;
+    std::uint64_t mStoreInstance = 0;
+    std::uint32_t mLevel = 0;
+};
 
 } // namespace bc::render

@@ -17,7 +17,9 @@ namespace bc::server {
 struct Daemon::Impl {
     Impl(DaemonConfig c, Log& l, bool handleSignals)
         : config(std::move(c)), log(l), catalog(config, log),
-          render(RenderServiceConfig{config.gpuBudgetBytes, config.restMs, config.prefetch}, catalog, log),
+          render(RenderServiceConfig{config.gpuBudgetBytes, config.restMs, config.prefetch,
+                                 config.hostBudgetBytes / 8},
+                 catalog, log),
           acceptor(io), signals(io), drainTimer(io),
           context{config, catalog, render, log, capabilities(), {}, {}, 0} {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };

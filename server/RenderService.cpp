@@ -1,12 +1,10 @@
 #include "server/RenderService.h"
 
-#include "render/CpuRaycaster.h"
 #include "render/BrickPool.h"
+#include "render/Classification.h"
 #include "render/EglContext.h"
-#include "render/GpuSplatter.h"
-#include "render/HybridSplatter.h"
-#include "render/Raycaster.h"
-#include "render/ReferenceRenderer.h"
+#include "render/RendererRegistry.h"
+#include "render/View.h"
 #include "server/Catalog.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
@@ -15,7 +13,6 @@
 #include <cmath>
 #include <map>
 
-#include <glm/geometric.hpp>
 
 namespace bc::server {
 
@@ -24,9 +21,6 @@ namespace {
 double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
-
-/// Largest volume the reference renderer is offered for (it holds every voxel as a double).
-constexpr std::uint64_t kMaxReferenceVoxels = 64ull << 20;
 
 } // namespace
 
@@ -151,24 +145,26 @@ RenderSlot::Job RenderSlot::take(Clock::time_point now, std::uint32_t restMs) {
 
 // ---- RenderService -------------------------------------------------------------------------
 
-/// What the sessions of one volume share on the GPU (render thread only).
+using RendererMap = std::map<std::string, std::unique_ptr<render::Renderer>, std::less<>>;
+
+/// What the sessions of one volume share (render thread only): the bricks resident on the GPU
+/// and the renderers that hold nothing of one viewer (RendererKind::sharedPerVolume).
 struct VolumeRenderers {
     std::shared_ptr<render::BrickPool> pool;
     std::uint64_t poolBudgetBytes = 0;
-    std::unique_ptr<render::ReferenceVolume> reference;
+    RendererMap shared;
 };
 
-/// A session's own renderers: its octrees (its transfer function) and its occlusion frustums
-/// (its previous frame) stay its own; bricks come from the volume's shared pool.
+/// A session's own renderers, by name: each keeps what is the session's (its previous frame's
+/// occlusion frustums and ray feedback); bricks come from the volume's shared pool and
+/// classifications from the service's cache.
 struct SessionRenderers {
     std::weak_ptr<RenderSlot> slot;
-    std::unique_ptr<render::Raycaster> gpu;
-    std::unique_ptr<render::CpuRaycaster> cpu;
-    std::unique_ptr<render::HybridSplatter> splat;
-    std::unique_ptr<render::GpuSplatter> gpuSplat;
-    /// The GPU raycaster's last two views and what to prefetch for the next (see runPrefetch).
+    RendererMap own;
+    /// The GPU renderer's last two views and what to prefetch for the next (see runPrefetch).
     std::optional<render::Camera> lastCamera, previousCamera;
     struct Prefetch {
+        render::Renderer* renderer = nullptr; ///< one of `own`, with gpuResidency()
         std::shared_ptr<Volume> volume;
         std::shared_ptr<const render::TransferFunction> tf;
         render::Camera camera;
@@ -196,7 +192,7 @@ struct RenderService::Renderers {
     }
     SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
         auto& s = sessions[slot.get()];
-        if (s.slot.lock() != slot) s = SessionRenderers{slot, nullptr, nullptr, nullptr, nullptr, {}, {}, {}}; // a reused address
+        if (s.slot.lock() != slot) s = SessionRenderers{slot, {}, {}, {}, {}}; // a reused address
         return s;
     }
 };
@@ -261,33 +257,7 @@ render::BrickPoolStats& operator+=(render::BrickPoolStats& a, const render::Bric
     return a;
 }
 
-/// `v` rotated by `angle` radians about unit `axis` (Rodrigues).
-glm::dvec3 rotated(const glm::dvec3& v, const glm::dvec3& axis, double angle) {
-    return v * std::cos(angle) + glm::cross(axis, v) * std::sin(angle) +
-           axis * glm::dot(axis, v) * (1.0 - std::cos(angle));
-}
-
-/// The view one frame on, if the camera keeps moving as it did from `a` to `b`: a turn about a
-/// fixed target (an orbit) continues as the same rotation and zoom; anything else moves eye
-/// and target on by the same step.
-render::Camera predictNext(const render::Camera& a, const render::Camera& b) {
-    render::Camera next = b;
-    const glm::dvec3 r0 = a.eye - a.target, r1 = b.eye - b.target;
-    const double l0 = glm::length(r0), l1 = glm::length(r1);
-    const glm::dvec3 axis = glm::cross(r0, r1);
-    const bool sameTarget = glm::length(b.target - a.target) <= 1e-9 * std::max(l1, 1.0);
-    if (sameTarget && l0 > 0 && l1 > 0 && glm::length(axis) > 1e-12 * l0 * l1) {
-        const double angle = std::atan2(glm::length(axis), glm::dot(r0, r1));
-        const glm::dvec3 u = glm::normalize(axis);
-        next.eye = b.target + rotated(r1, u, angle) * (l1 / l0);
-        next.up = rotated(b.up, u, angle);
-    } else {
-        next.eye = b.eye + (b.eye - a.eye);
-        next.target = b.target + (b.target - a.target);
-    }
-    return next;
-}
-
+/// The protocol's renderer numbers, by their names in the registry.
 const char* rendererName(protocol::Renderer r) {
     switch (r) {
     case protocol::Renderer::GpuRaycaster: return "gpu";
@@ -302,8 +272,10 @@ const char* rendererName(protocol::Renderer r) {
 } // namespace
 
 RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log)
-    : mConfig(config), mCatalog(catalog), mLog(log), mCounters(std::make_unique<Counters>()),
-      mThread([this] { run(); }) {}
+    : mConfig(config), mCatalog(catalog), mLog(log),
+      mClassifications(std::make_unique<render::ClassificationCache>(
+          render::ClassificationCacheConfig{config.classificationBudgetBytes})),
+      mCounters(std::make_unique<Counters>()), mThread([this] { run(); }) {}
 
 RenderService::~RenderService() {
     {
@@ -360,6 +332,22 @@ void RenderService::collect(MetricSet& m) {
                 c.workingSet);
     m.histogram("frame_encoded_bytes", "Encoded bytes of one frame message", c.frameBytes);
     m.counter("prefetch_ms_total", "Milliseconds the render thread spent prefetching", c.prefetchMs);
+    const render::ClassificationStats cs = mClassifications->stats();
+    m.counter("classification_builds_total",
+              "Transfer functions committed for a store and level: octrees built or brought up "
+              "to date, once per key however many sessions ask",
+              double(cs.builds));
+    m.counter("classification_hits_total", "Frames that found their classification built",
+              double(cs.hits));
+    m.counter("classification_evictions_total",
+              "Classifications dropped by the budget (LRU, none in use)", double(cs.evictions));
+    m.counter("classification_bricks_rebuilt_total", "Per-brick octrees rebuilt over all builds",
+              double(cs.bricksRebuilt));
+    m.counter("classification_build_ms_total", "Milliseconds spent building classifications",
+              cs.buildMs);
+    m.gauge("classification_bytes", "Host bytes of classifications held (octrees and tables)",
+            double(cs.residentBytes));
+    m.gauge("classifications", "Classifications held", double(cs.entries));
     m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn", double(waiting));
     std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
     for (const auto& [name, live] : c.poolLive) pools[name] += live;
@@ -408,8 +396,9 @@ void RenderService::runPrefetch() {
         if (!mine.prefetch) continue;
         auto job = std::move(*mine.prefetch);
         mine.prefetch.reset();
-        if (!mine.gpu || mine.slot.expired() || !mine.gpu->pool()) continue;
-        const render::BrickPool& pool = *mine.gpu->pool();
+        render::GpuResidency* gpu = job.renderer ? job.renderer->gpuResidency() : nullptr;
+        if (!gpu || mine.slot.expired() || !gpu->pool()) continue;
+        const render::BrickPool& pool = *gpu->pool();
         const std::uint64_t keep = std::min<std::uint64_t>(job.lastFrameBricks, pool.capacity());
         const auto room = std::uint32_t(pool.capacity() - keep);
         if (room == 0) continue;
@@ -418,8 +407,12 @@ void RenderService::runPrefetch() {
         const std::uint32_t step = std::min(room, kPrefetchStepBricks);
         try {
             const std::uint64_t bytesBefore = pool.stats().bytesUploaded;
-            const std::uint32_t n = mine.gpu->prefetch(*job.volume->store, *job.volume->cache,
-                                                       *job.tf, job.camera, job.options, step);
+            const render::Scene scene{*job.volume->store, *job.volume->cache, *job.tf,
+                                      *mClassifications};
+            const std::uint32_t n = gpu->prefetch(
+                scene,
+                render::View::ofDecoded(job.camera, job.options.width, job.options.height),
+                job.options, step);
             if (n == step && step < room) { // more may be missing: continue next turn
                 job.lastFrameBricks += n;       // what this step brought in stays too
                 mine.prefetch = job;
@@ -576,59 +569,39 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     const auto& o = s.options;
     render::RenderOptions options = toRenderOptions(o, !job.refined);
     options.shading = shadingFor(o, s.tfMessage, *s.tf);
-    const render::Camera camera = toCamera(*s.camera);
+    // The decoder validated the camera (the same rules as Camera::validate).
+    const render::View view = render::View::ofDecoded(toCamera(*s.camera), options.width,
+                                                      options.height);
+    const render::Scene scene{*s.volume->store, *s.volume->cache, *s.tf, *mClassifications};
+    const std::string_view name = rendererName(o.renderer);
+    const render::RendererKind* kind = render::RendererRegistry::builtin().find(name);
+    if (!kind) throw std::runtime_error("no renderer " + std::string(name));
+    if (kind->needsGl && !r.context)
+        throw std::runtime_error("this server has no OpenGL 4.5 context");
     auto& v = r.volumes[s.volume.get()];
-    render::FrameStats stats;
-    render::Image image;
-    switch (o.renderer) {
-    case protocol::Renderer::GpuRaycaster: {
-        if (!r.context) throw std::runtime_error("this server has no OpenGL 4.5 context");
-        auto& mine = r.of(slotPtr);
-        if (!mine.gpu) mine.gpu = std::make_unique<render::Raycaster>();
+    auto& mine = r.of(slotPtr);
+    RendererMap& owner = kind->sharedPerVolume ? v.shared : mine.own;
+    auto it = owner.find(name);
+    if (it == owner.end()) it = owner.emplace(std::string(name), kind->create()).first;
+    render::Renderer& renderer = *it->second;
+    render::GpuResidency* gpu = renderer.gpuResidency();
+    if (gpu) { // the volume's bricks on the GPU are shared by its sessions
         const render::BrickPool* before = v.pool.get();
         auto& shared = sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes));
         if (before && shared.get() != before) retirePool(s.volume->name);
-        mine.gpu->setSharedPool(shared);
+        gpu->setSharedPool(shared);
         pool = shared.get();
-        image = mine.gpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
+    }
+    render::FrameStats stats;
+    render::Image image = renderer.render(scene, view, options, stats);
+    if (gpu) {
         mine.previousCamera = mine.lastCamera;
-        mine.lastCamera = camera;
+        mine.lastCamera = view.camera;
         mine.prefetch.reset();
         if (mConfig.prefetch && mine.previousCamera)
             mine.prefetch = SessionRenderers::Prefetch{
-                s.volume, s.tf, predictNext(*mine.previousCamera, camera), options,
-                residentBricks(stats)};
-        break;
-    }
-    case protocol::Renderer::CpuRaycaster: {
-        auto& mine = r.of(slotPtr);
-        if (!mine.cpu) mine.cpu = std::make_unique<render::CpuRaycaster>();
-        image = mine.cpu->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
-        break;
-    }
-    case protocol::Renderer::Splatter: {
-        auto& mine = r.of(slotPtr);
-        if (!mine.splat) mine.splat = std::make_unique<render::HybridSplatter>();
-        image = mine.splat->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
-        break;
-    }
-    case protocol::Renderer::GpuSplatter: {
-        if (!r.context) throw std::runtime_error("this server has no OpenGL 4.5 context");
-        auto& mine = r.of(slotPtr);
-        if (!mine.gpuSplat) mine.gpuSplat = std::make_unique<render::GpuSplatter>();
-        image = mine.gpuSplat->render(*s.volume->store, *s.volume->cache, *s.tf, camera, options, stats);
-        break;
-    }
-    case protocol::Renderer::Reference: {
-        const auto& dims = s.volume->store->info().volume.dims;
-        if (dims[0] * dims[1] * dims[2] > kMaxReferenceVoxels)
-            throw std::runtime_error("the reference renderer is not offered for volumes over " +
-                                     std::to_string(kMaxReferenceVoxels >> 20) + " Mi voxels");
-        if (!v.reference)
-            v.reference = std::make_unique<render::ReferenceVolume>(*s.volume->store, 0);
-        image = render::renderReference(*s.volume->store, *v.reference, *s.tf, camera, options, stats);
-        break;
-    }
+                &renderer, s.volume, s.tf, render::predictNext(*mine.previousCamera, view.camera),
+                options, residentBricks(stats)};
     }
     if (!job.refined) image = interactiveUpscale(image, o.width, o.height);
     const auto rgba8 = render::toRgba8(image);

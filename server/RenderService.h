@@ -21,7 +21,8 @@
 
 namespace bc::render {
 class BrickPool;
-}
+class ClassificationCache;
+} // namespace bc::render
 
 namespace bc::server {
 
@@ -94,6 +95,9 @@ struct RenderServiceConfig {
     std::uint64_t gpuBudgetBytes = 512ull << 20;
     std::uint32_t restMs = 150;
     bool prefetch = true; ///< DaemonConfig::prefetch
+    /// Classifications (TF tables and octrees) kept once no session uses them: an eighth of
+    /// the host budget by default (Daemon).
+    std::uint64_t classificationBudgetBytes = 128ull << 20;
 };
 
 class RenderService {
@@ -150,6 +154,8 @@ class RenderService {
     bool mStop = false, mStarted = false, mGpu = false;
     std::condition_variable mStartedCv;
     std::unique_ptr<Renderers> mRenderers; // render thread only
+    /// Shared by every session and renderer (thread-safe).
+    std::unique_ptr<render::ClassificationCache> mClassifications;
 
     struct Counters; // under mMutex
     std::unique_ptr<Counters> mCounters;

@@ -163,29 +163,15 @@ Frame frameOf(const HybridSplatterConfig& config, const LevelGeometry& g, const 
     return f;
 }
 
-SplatScene sceneOf(const brickstore::BrickStore& store, const TransferFunction& tf,
-                   const Camera& camera, const RenderOptions& options) {
+SplatScene sceneOf(const Scene& scene, const View& view, const RenderOptions& options,
+                   FrameStats& stats) {
     options.validate();
-    camera.validate();
-    const auto levels = std::uint32_t(store.layout().levels().size());
+    if (view.width != options.width || view.height != options.height)
+        throw std::invalid_argument("the view's size is not the options' size");
+    const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
-    const LevelGeometry g = LevelGeometry::of(store, level);
-    return {level, g, ViewBasis::from(camera, options.width, options.height),
-            tf.table(1.0, kSplatTfEntries), options.skip == SkipMode::All && g.apronVoxels > 0};
-}
-
-void updateOccupancy(std::unique_ptr<OccupancyTrees>& trees, const brickstore::BrickStore*& owner,
-                     std::string& ownerPath, const brickstore::BrickStore& store,
-                     std::uint32_t level, const TransferFunctionTable& table,
-                     const RenderOptions& options, FrameStats& stats) {
-    if (!trees || owner != &store || ownerPath != store.path() || trees->level() != level) {
-        trees = std::make_unique<OccupancyTrees>(store, level);
-        owner = &store;
-        ownerPath = store.path();
-    }
-    const auto rebuild = trees->update(table, options.octree);
-    stats.octreeBricksRebuilt = rebuild.bricksRebuilt;
-    stats.octreeRebuildMs = rebuild.ms;
+    return {level, LevelGeometry::of(scene.store, level),
+            classifyFrame(scene, level, options, 1.0, stats)};
 }
 
 bool pixelRect(const glm::dvec2& lo, const glm::dvec2& hi, std::uint32_t w, std::uint32_t h,

@@ -10,6 +10,7 @@
 #include "render/Camera.h"
 #include "render/HybridSplatter.h"
 #include "render/RenderTypes.h"
+#include "render/Renderer.h"
 #include "render/SplatGeometry.h"
 #include "render/TransferFunction.h"
 
@@ -34,7 +35,6 @@ class SplatFootprint;
 
 namespace bc::render::detail {
 
-constexpr std::uint32_t kSplatTfEntries = 4096; // as the raycasters' table
 constexpr double kMaxOpacity = 1.0 - 1e-6;      // keeps -log(1 - a) finite
 
 /// Everything a voxel needs to be drawn.
@@ -56,24 +56,19 @@ struct Frame {
 Frame frameOf(const HybridSplatterConfig& config, const LevelGeometry& g, const ViewBasis& basis,
               const RenderOptions& o, const TransferFunctionTable& table);
 
-/// What a splatter settles before drawing. @throw std::invalid_argument on bad options or
-/// camera (validated here).
+/// What a splatter settles before drawing: the level, and the classification (its table at
+/// step 1, opacity per unit step, since the footprint gives the path; octrees under
+/// SkipMode::All with an apron). Records an octree build in `stats`.
+/// @throw std::invalid_argument on bad options or a view of another size.
 struct SplatScene {
     std::uint32_t level;
     LevelGeometry g;
-    ViewBasis basis;
-    TransferFunctionTable table; ///< opacity per unit step: the footprint gives the path
-    bool octree;                 ///< second-stage skipping (SkipMode::All with an apron)
+    FrameClassification classified;
+    const TransferFunctionTable& table() const { return *classified.table; }
+    const OccupancyTrees* occupancy() const { return classified.occupancy; }
 };
-SplatScene sceneOf(const brickstore::BrickStore& store, const TransferFunction& tf,
-                   const Camera& camera, const RenderOptions& options);
-
-/// Brings `trees` up to `table` for `level` of `store` (rebuilt when the store or level
-/// changed; `owner` and `ownerPath` remember which) and records the rebuild in `stats`.
-void updateOccupancy(std::unique_ptr<OccupancyTrees>& trees, const brickstore::BrickStore*& owner,
-                     std::string& ownerPath, const brickstore::BrickStore& store,
-                     std::uint32_t level, const TransferFunctionTable& table,
-                     const RenderOptions& options, FrameStats& stats);
+SplatScene sceneOf(const Scene& scene, const View& view, const RenderOptions& options,
+                   FrameStats& stats);
 
 /// Pixel rectangle of image-plane box [lo, hi], clipped; false when empty.
 bool pixelRect(const glm::dvec2& lo, const glm::dvec2& hi, std::uint32_t w, std::uint32_t h,

@@ -158,8 +158,7 @@ void Session::handle(protocol::Message& message, std::uint32_t request) {
                 } else if constexpr (std::is_same_v<M, protocol::OpenVolume>) {
                     onOpenVolume(m, request);
                 } else if constexpr (std::is_same_v<M, protocol::SetCamera>) {
-                    toCamera(m).validate();
-                    mSlot->setCamera(m);
+                    mSlot->setCamera(m); // the decoder validated it (Camera::validate's rules)
                 } else if constexpr (std::is_same_v<M, protocol::SetTransferFunction>) {
                     onSetTransferFunction(m, request);
                 } else if constexpr (std::is_same_v<M, protocol::SetRenderOptions>) {

@@ -206,9 +206,13 @@ TEST(RayGuided, PrefetchSkipsBricksBehindSaturatedRays) {
     }
     const auto room = std::uint32_t(skips.pool()->capacity() - lastFrame);
     const Camera next = Camera::orbit(box, 8.0, 20);
-    const std::uint32_t a = skips.prefetch(*t->store, *t->cache, tf, next, frameOptions(true), room);
+    ClassificationCache classifications;
+    const Scene scene{*t->store, *t->cache, tf, classifications};
+    const auto viewOf = [&](const RenderOptions& o) { return View::of(next, o.width, o.height); };
+    const std::uint32_t a =
+        skips.prefetch(scene, viewOf(frameOptions(true)), frameOptions(true), room);
     const std::uint32_t b =
-        loadsAll.prefetch(*t->store, *t->cache, tf, next, frameOptions(false), room);
+        loadsAll.prefetch(scene, viewOf(frameOptions(false)), frameOptions(false), room);
     FrameStats sa, sb;
     const Image ia = test::gpuFrame(*t, skips, tf, next, frameOptions(true), &sa);
     const Image ib = test::gpuFrame(*t, loadsAll, tf, next, frameOptions(true), &sb);

@@ -70,43 +70,6 @@ TEST(Metrics, TextExpositionHasHelpTypeEscapedLabelsAndCumulativeBuckets) {
 }
 
 /// The whole reply to `request` sent on a fresh connection to 127.0.0.1:port.
-std::string scrape(std::uint16_t port, const std::string& request) {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = htons(port);
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-        ::close(fd);
-        return "connect failed";
-    }
-    std::size_t sent = 0;
-    while (sent < request.size()) {
-        const auto n = ::send(fd, request.data() + sent, request.size() - sent, MSG_NOSIGNAL);
-        if (n <= 0) break;
-        sent += std::size_t(n);
-    }
-    std::string reply;
-    char buf[4096];
-    for (;;) {
-        pollfd p{fd, POLLIN, 0};
-        if (::poll(&p, 1, 10000) <= 0) break;
-        const auto n = ::recv(fd, buf, sizeof buf, 0);
-        if (n <= 0) break;
-        reply.append(buf, std::size_t(n));
-    }
-    ::close(fd);
-    return reply;
-}
-
-/// The value of the sample line `name` (labels included) in a text exposition; -1 if absent.
-double sampleOf(const std::string& text, const std::string& name) {
-    std::istringstream in(text);
-    for (std::string line; std::getline(in, line);)
-        if (line.starts_with(name + " ")) return std::stod(line.substr(name.size() + 1));
-    return -1;
-}
-
 /// A stored brick of the generated u16 phantom: 64^3 voxels and a 2-voxel apron.
 constexpr std::uint64_t kBrickBytes = 68ull * 68 * 68 * 2;
 

@@ -1,0 +1,142 @@
+#include "render/Classification.h"
+
+#include "brickstore/BrickStore.h"
+
+#include <atomic>
+#include <chrono>
+
+namespace bc::render {
+
+namespace {
+
+/// Tables kept per classification: a session's steps (interactive and refined) and a few more.
+constexpr std::size_t kTablesKept = 4;
+
+std::uint64_t nextClassificationId() {
+    static std::atomic<std::uint64_t> next{1};
+    return next.fetch_add(1);
+}
+
+/// Bytes of one table: its RGBA and the range-maximum levels built over it.
+std::uint64_t tableBytes(const TransferFunctionTable& t) {
+    const auto levels = std::uint64_t(std::bit_width(t.entries));
+    return t.rgba.capacity() * sizeof(float) + levels * t.entries * sizeof(float);
+}
+
+} // namespace
+
+// ---- Classification ---------------------------------------------------------------------
+
+Classification::Classification(const brickstore::BrickStore& store, std::uint32_t level,
+                               const TransferFunction& tf, const OccupancyConfig* octree,
+                               const Classification* donor)
+    : mKey{store.instance(), level, tf.contentHash(), octree != nullptr,
+           octree ? *octree : OccupancyConfig{}},
+      mTf(tf), mId(nextClassificationId()) {
+    if (!octree) return;
+    octree->validate();
+    if (store.layout().geometry().apronVoxels == 0) return;
+    // Which entries are visible does not depend on the step (a' > 0 exactly when a > 0), so
+    // the octrees are built from the table at step 1 and serve every step.
+    const TransferFunctionTable table = tf.table(1.0, kClassificationTableEntries);
+    if (donor && donor->mOccupancy) {
+        mOccupancy = std::make_unique<OccupancyTrees>(*donor->mOccupancy);
+        mBasedOn = donor->mId;
+    } else {
+        mOccupancy = std::make_unique<OccupancyTrees>(store, level);
+    }
+    mBuild = mOccupancy->update(table, *octree);
+}
+
+std::shared_ptr<const TransferFunctionTable> Classification::table(double stepVoxels) const {
+    std::lock_guard lock(mTablesMutex);
+    for (auto it = mTables.begin(); it != mTables.end(); ++it)
+        if (it->first == stepVoxels) {
+            mTables.splice(mTables.begin(), mTables, it);
+            return it->second;
+        }
+    auto made = std::make_shared<const TransferFunctionTable>(
+        mTf.table(stepVoxels, kClassificationTableEntries));
+    mTables.emplace_front(stepVoxels, made);
+    if (mTables.size() > kTablesKept) mTables.pop_back();
+    return made;
+}
+
+std::uint64_t Classification::bytes() const {
+    std::uint64_t n = sizeof(*this) + (mOccupancy ? mOccupancy->bytes() : 0);
+    std::lock_guard lock(mTablesMutex);
+    for (const auto& [step, table] : mTables)
+        n += tableBytes(*table);
+    return n;
+}
+
+// ---- ClassificationCache ----------------------------------------------------------------
+
+ClassificationCache::ClassificationCache(const ClassificationCacheConfig& config)
+    : mConfig(config) {}
+
+std::shared_ptr<const Classification>
+ClassificationCache::get(const brickstore::BrickStore& store, std::uint32_t level,
+                         const TransferFunction& tf, const OccupancyConfig* octree, bool* built) {
+    const ClassificationKey key{store.instance(), level, tf.contentHash(), octree != nullptr,
+                                octree ? *octree : OccupancyConfig{}};
+    std::lock_guard lock(mMutex);
+    const Classification* donor = nullptr;
+    for (auto it = mEntries.begin(); it != mEntries.end(); ++it) {
+        const Classification& c = **it;
+        const ClassificationKey& k = c.key();
+        const bool serves = octree ? k == key
+                                   : k.storeInstance == key.storeInstance && k.level == level &&
+                                         k.tfHash == key.tfHash;
+        if (serves && c.transferFunction().sameFunction(tf)) {
+            mEntries.splice(mEntries.begin(), mEntries, it);
+            ++mStats.hits;
+            if (built) *built = false;
+            return mEntries.front();
+        }
+        if (!donor && c.occupancy() && k.storeInstance == key.storeInstance && k.level == level)
+            donor = &c; // the most recent octrees of this store and level
+    }
+    // Built under the lock: a second request for this key waits and then finds it.
+    const auto start = std::chrono::steady_clock::now();
+    auto made = std::make_shared<const Classification>(store, level, tf, octree, donor);
+    mStats.builds += 1;
+    mStats.bricksRebuilt += made->build().bricksRebuilt;
+    mStats.buildMs +=
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    mEntries.push_front(made);
+    evict();
+    if (built) *built = true;
+    return made;
+}
+
+void ClassificationCache::evict() {
+    std::uint64_t total = 0;
+    for (const auto& c : mEntries)
+        total += c->bytes();
+    // Least recently used first; one a renderer still holds stays (freeing it saves nothing).
+    for (auto it = mEntries.end(); total > mConfig.budgetBytes && it != mEntries.begin();) {
+        --it;
+        if (it->use_count() > 1) continue;
+        total -= (*it)->bytes();
+        it = mEntries.erase(it);
+        ++mStats.evictions;
+    }
+}
+
+ClassificationStats ClassificationCache::stats() const {
+    std::lock_guard lock(mMutex);
+    ClassificationStats s = mStats;
+    s.entries = mEntries.size();
+    for (const auto& c : mEntries)
+        s.residentBytes += c->bytes();
+    return s;
+}
+
+void ClassificationCache::setBudgetBytes(std::uint64_t budgetBytes) {
+    std::lock_guard lock(mMutex);
+    mConfig.budgetBytes = budgetBytes;
+    evict();
+}
+
+} // namespace bc::render

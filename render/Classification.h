@@ -1,0 +1,124 @@
+#pragma once
+// A transfer function committed for one pyramid level of one store: its tables (one per step
+// size, opacity-corrected) and the per-brick occupancy octrees of the second skipping stage.
+// Derived state is built once, when it is first asked for after the transfer function is set,
+// and shared by every session and renderer asking for the same key (DESIGN.md "Derived state
+// is committed once"); the ClassificationCache holds them under a byte budget (LRU).
+//
+// A new transfer function starts from the octrees of the most recent classification of the
+// same store and level (copied, then brought up to the new function), so only bricks whose
+// value range meets the table entries whose emptiness changed are rebuilt, and leaf tables
+// are read from the store once.
+#include "render/Occupancy.h"
+#include "render/TransferFunction.h"
+
+#include <cstdint>
+#include <list>
+#include <map>
+#include <memory>
+#include <mutex>
+
+namespace bc::brickstore {
+class BrickStore;
+}
+
+namespace bc::render {
+
+/// Entries of every table a classification makes (the raycasters', the splatters' and the
+/// reference's).
+inline constexpr std::uint32_t kClassificationTableEntries = TransferFunction::kDefaultTableEntries;
+
+/// What a classification is made for.
+struct ClassificationKey {
+    std::uint64_t storeInstance = 0; ///< BrickStore::instance()
+    std::uint32_t level = 0;
+    std::uint64_t tfHash = 0; ///< TransferFunction::contentHash(); sameFunction() decides
+    bool octrees = true;      ///< false: tables only (a frame that does not leap inside bricks)
+    OccupancyConfig octree;   ///< when octrees
+    bool operator==(const ClassificationKey&) const = default;
+};
+
+/// Immutable once built; every member function is thread-safe.
+class Classification {
+  public:
+    /// Builds the octrees of `level` for `tf` under `octree` (none when `octree` is null or
+    /// the store has no apron: without one, leaf ranges do not cover what border samples
+    /// read), starting from `donor`'s when given (same store and level).
+    /// @throw std::invalid_argument on a bad config; what OccupancyTrees throws.
+    Classification(const brickstore::BrickStore& store, std::uint32_t level,
+                   const TransferFunction& tf, const OccupancyConfig* octree,
+                   const Classification* donor);
+
+    const ClassificationKey& key() const { return mKey; }
+    const TransferFunction& transferFunction() const { return mTf; }
+    std::uint32_t level() const { return mKey.level; }
+    /// Unique per classification built in this process: GPU copies of its octrees key on it.
+    std::uint64_t id() const { return mId; }
+    /// id() of the classification whose octrees these were updated from (0: built from the
+    /// store): OccupancyTrees::changedBricks() lists the bricks whose words differ from it.
+    std::uint64_t basedOn() const { return mBasedOn; }
+    /// The octrees, or nullptr when the store has no apron.
+    const OccupancyTrees* occupancy() const { return mOccupancy.get(); }
+    /// What building the octrees took (zero when there are none).
+    const OccupancyRebuild& build() const { return mBuild; }
+    /// The table at `stepVoxels` (kClassificationTableEntries entries), made on first use and
+    /// kept for the most recent steps. @throw std::invalid_argument on a bad step.
+    std::shared_ptr<const TransferFunctionTable> table(double stepVoxels) const;
+    /// Host memory held: octrees and tables.
+    std::uint64_t bytes() const;
+
+  private:
+    ClassificationKey mKey;
+    TransferFunction mTf;
+    std::uint64_t mId = 0, mBasedOn = 0;
+    std::unique_ptr<OccupancyTrees> mOccupancy;
+    OccupancyRebuild mBuild;
+    mutable std::mutex mTablesMutex;
+    mutable std::list<std::pair<double, std::shared_ptr<const TransferFunctionTable>>> mTables;
+};
+
+struct ClassificationCacheConfig {
+    /// Host bytes of classifications kept after their last user lets go (LRU beyond it). One
+    /// in use is never freed, so the cache may exceed this while sessions hold more.
+    std::uint64_t budgetBytes = 256ull << 20;
+};
+
+/// Counters since the cache was made.
+struct ClassificationStats {
+    std::uint64_t builds = 0;        ///< classifications built (octrees made or updated)
+    std::uint64_t hits = 0;          ///< requests answered with one already built
+    std::uint64_t evictions = 0;     ///< dropped by the budget
+    std::uint64_t bricksRebuilt = 0; ///< octrees rebuilt over all builds
+    std::uint64_t residentBytes = 0; ///< held now
+    std::uint64_t entries = 0;       ///< held now
+    double buildMs = 0;              ///< spent building
+};
+
+/// The classifications of every store a process renders, by key. Thread-safe: a request for a
+/// key being built waits for that build rather than starting a second one.
+class ClassificationCache {
+  public:
+    explicit ClassificationCache(const ClassificationCacheConfig& config = {});
+
+    /// The classification of `tf` for `level` of `store` with octrees under `octree` (null:
+    /// tables only, and any held classification of that function serves): the one held for an
+    /// equal key and function, else one built now (from the latest of that store and level).
+    /// `built` (optional) is set to whether this call built it.
+    /// @throw std::invalid_argument on a bad octree config; StoreCorrupt from the store.
+    std::shared_ptr<const Classification> get(const brickstore::BrickStore& store,
+                                              std::uint32_t level, const TransferFunction& tf,
+                                              const OccupancyConfig* octree, bool* built = nullptr);
+    ClassificationStats stats() const;
+    void setBudgetBytes(std::uint64_t budgetBytes);
+
+  private:
+    void evict(); ///< with mMutex held
+
+    ClassificationCacheConfig mConfig;
+    mutable std::mutex mMutex;
+    /// Most recently used first.
+    std::list<std::shared_ptr<const Classification>> mEntries;
+    ClassificationStats mStats;
+};
+
+} // namespace bc::render

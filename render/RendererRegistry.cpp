@@ -1,0 +1,61 @@
+#include "render/RendererRegistry.h"
+
+#include "render/CpuRaycaster.h"
+#include "render/GpuSplatter.h"
+#include "render/HybridSplatter.h"
+#include "render/Raycaster.h"
+#include "render/ReferenceRenderer.h"
+
+#include <stdexcept>
+
+namespace bc::render {
+
+const RendererRegistry& RendererRegistry::builtin() {
+    static const RendererRegistry registry = [] {
+        RendererRegistry r;
+        r.add({"gpu", "GPU raycaster (OpenGL 4.5)", true, false,
+               [] { return std::make_unique<Raycaster>(); }});
+        r.add({"cpu", "CPU raycaster", false, false,
+               [] { return std::make_unique<CpuRaycaster>(); }});
+        r.add({"reference", "CPU reference raycaster (double precision, no skipping)", false, true,
+               [] { return std::make_unique<ReferenceRenderer>(); }});
+        r.add({"splat", "hybrid forward splatter (CPU)", false, false,
+               [] { return std::make_unique<HybridSplatter>(); }});
+        r.add({"splat-gpu", "hybrid forward splatter (OpenGL 4.5)", true, false,
+               [] { return std::make_unique<GpuSplatter>(); }});
+        return r;
+    }();
+    return registry;
+}
+
+void RendererRegistry::add(RendererKind kind) {
+    if (find(kind.name)) throw std::invalid_argument("renderer '" + kind.name + "' is registered");
+    mKinds.push_back(std::move(kind));
+}
+
+const RendererKind* RendererRegistry::find(std::string_view name) const {
+    for (const auto& k : mKinds)
+        if (k.name == name) return &k;
+    return nullptr;
+}
+
+std::unique_ptr<Renderer> RendererRegistry::create(std::string_view name) const {
+    const RendererKind* kind = find(name);
+    if (!kind) {
+        std::string list;
+        for (const auto& k : mKinds)
+            list += (list.empty() ? "" : ", ") + k.name;
+        throw std::invalid_argument("no renderer named '" + std::string(name) +
+                                    "' (renderers: " + list + ")");
+    }
+    return kind->create();
+}
+
+std::vector<std::string> RendererRegistry::names() const {
+    std::vector<std::string> out;
+    for (const auto& k : mKinds)
+        out.push_back(k.name);
+    return out;
+}
+
+} // namespace bc::render

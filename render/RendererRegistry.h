@@ -1,0 +1,42 @@
+#pragma once
+// Renderers by name: the daemon, the command-line tools and the benchmarks create them here
+// instead of switching over the kinds they know (OSPRay's renderer factory).
+#include "render/Renderer.h"
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace bc::render {
+
+/// One kind of renderer.
+struct RendererKind {
+    std::string name;
+    std::string description;
+    bool needsGl = false; ///< needs a current EglContext to be created and to draw
+    /// Holds nothing of one viewer (no previous frame, no camera path): one instance may serve
+    /// every viewer of a volume (the reference, which holds the volume's voxels).
+    bool sharedPerVolume = false;
+    std::function<std::unique_ptr<Renderer>()> create;
+};
+
+class RendererRegistry {
+  public:
+    /// The built-in renderers: gpu, cpu, reference, splat, splat-gpu.
+    static const RendererRegistry& builtin();
+
+    void add(RendererKind kind);
+    /// The kind named `name`, or nullptr.
+    const RendererKind* find(std::string_view name) const;
+    /// A new renderer of kind `name`. @throw std::invalid_argument naming the kinds when there
+    /// is none; what its constructor throws (RenderError without a GL context).
+    std::unique_ptr<Renderer> create(std::string_view name) const;
+    std::vector<std::string> names() const;
+
+  private:
+    std::vector<RendererKind> mKinds;
+};
+
+} // namespace bc::render
