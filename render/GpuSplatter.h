@@ -32,9 +32,10 @@
 //    from the exact ray distance instead of the CPU's (index, half angle) table.
 // Needs a current EglContext on the calling thread; render thread only, one frame at a time.
 #include "render/Camera.h"
-#include "render/HybridSplatter.h"
 #include "render/Image.h"
 #include "render/RenderTypes.h"
+#include "render/Renderer.h"
+#include "render/SplatConfig.h"
 #include "render/SplatFootprint.h"
 
 #include <cstdint>

@@ -13,7 +13,6 @@
 #include <cmath>
 #include <map>
 
-
 namespace bc::server {
 
 namespace {
@@ -108,7 +107,9 @@ void RenderSlot::close() {
     changed();
 }
 
-void RenderSlot::changed() { mService.notify(); }
+void RenderSlot::changed() {
+    mService.notify();
+}
 
 void RenderSlot::markChanged() {
     if (!mDirty && !mOnce) mChangedAt = Clock::now(); // the oldest undrawn change
@@ -212,7 +213,7 @@ std::uint64_t slotBytesOf(const brickstore::BrickStore& store) {
 /// The volume's pool at its fair share of the budget; a new pool only when the share moved by
 /// more than an eighth, so sessions coming and going do not make every brick upload again.
 std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume& volume,
-                                              std::uint64_t shareBytes) {
+                                               std::uint64_t shareBytes) {
     const bool far = shareBytes < v.poolBudgetBytes - v.poolBudgetBytes / 8 ||
                      shareBytes > v.poolBudgetBytes + v.poolBudgetBytes / 8;
     if (!v.pool || far) {
@@ -260,11 +261,16 @@ render::BrickPoolStats& operator+=(render::BrickPoolStats& a, const render::Bric
 /// The protocol's renderer numbers, by their names in the registry.
 const char* rendererName(protocol::Renderer r) {
     switch (r) {
-    case protocol::Renderer::GpuRaycaster: return "gpu";
-    case protocol::Renderer::CpuRaycaster: return "cpu";
-    case protocol::Renderer::Reference: return "reference";
-    case protocol::Renderer::Splatter: return "splat";
-    case protocol::Renderer::GpuSplatter: return "splat-gpu";
+    case protocol::Renderer::GpuRaycaster:
+        return "gpu";
+    case protocol::Renderer::CpuRaycaster:
+        return "cpu";
+    case protocol::Renderer::Reference:
+        return "reference";
+    case protocol::Renderer::Splatter:
+        return "splat";
+    case protocol::Renderer::GpuSplatter:
+        return "splat-gpu";
     }
     return "unknown";
 }
@@ -315,23 +321,29 @@ void RenderService::collect(MetricSet& m) {
         m.counter("frames_total", "Frames drawn and encoded, by renderer",
                   it == c.frames.end() ? 0.0 : it->second, {{"renderer", r}});
     }
-    m.counter("frames_refined_total", "Full-quality frames after the camera came to rest", c.refined);
+    m.counter("frames_refined_total", "Full-quality frames after the camera came to rest",
+              c.refined);
     m.counter("render_errors_total", "Frames that failed (sent as RenderFailed)", c.errors);
     m.counter("render_ms_total", "Milliseconds spent drawing frames", c.renderMs);
     m.counter("encode_ms_total", "Milliseconds spent encoding frames", c.encodeMs);
     m.counter("frame_bytes_total", "Encoded frame message bytes", c.bytes);
     m.counter("samples_total", "Volume samples (voxels for the splatter) taken", c.samples);
-    m.histogram("frame_latency_ms",
-                "From the oldest change a frame answers to the frame encoded (queue + render + encode)",
-                c.latencyMs);
-    m.histogram("frame_render_ms", "Drawing one frame (bricks, octrees, rays or splats)", c.renderMsHist);
-    m.histogram("frame_upload_ms", "Host -> GPU uploads (CPU renderers: brick preparation) of one frame",
-                c.uploadMs);
+    m.histogram(
+        "frame_latency_ms",
+        "From the oldest change a frame answers to the frame encoded (queue + render + encode)",
+        c.latencyMs);
+    m.histogram("frame_render_ms", "Drawing one frame (bricks, octrees, rays or splats)",
+                c.renderMsHist);
+    m.histogram("frame_upload_ms",
+                "Host -> GPU uploads (CPU renderers: brick preparation) of one frame", c.uploadMs);
     m.histogram("frame_encode_ms", "Encoding one frame", c.encodeMsHist);
-    m.histogram("frame_working_set_bytes", "Bytes of the bricks one frame held on the GPU (drawn, less constant and deferred ones)",
-                c.workingSet);
+    m.histogram(
+        "frame_working_set_bytes",
+        "Bytes of the bricks one frame held on the GPU (drawn, less constant and deferred ones)",
+        c.workingSet);
     m.histogram("frame_encoded_bytes", "Encoded bytes of one frame message", c.frameBytes);
-    m.counter("prefetch_ms_total", "Milliseconds the render thread spent prefetching", c.prefetchMs);
+    m.counter("prefetch_ms_total", "Milliseconds the render thread spent prefetching",
+              c.prefetchMs);
     const render::ClassificationStats cs = mClassifications->stats();
     m.counter("classification_builds_total",
               "Transfer functions committed for a store and level: octrees built or brought up "
@@ -350,17 +362,19 @@ void RenderService::collect(MetricSet& m) {
     m.gauge("classifications", "Classifications held", double(cs.entries));
     m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn", double(waiting));
     std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
-    for (const auto& [name, live] : c.poolLive) pools[name] += live;
+    for (const auto& [name, live] : c.poolLive)
+        pools[name] += live;
     for (const auto& [name, p] : pools) {
         const std::vector<std::pair<std::string, std::string>> l{{"volume", name}};
-        m.counter("gpu_pool_hits_total", "Bricks a frame found resident on the GPU", double(p.hits), l);
+        m.counter("gpu_pool_hits_total", "Bricks a frame found resident on the GPU", double(p.hits),
+                  l);
         m.counter("gpu_pool_uploads_total", "Bricks uploaded host -> GPU", double(p.uploads), l);
         m.counter("gpu_pool_bytes_uploaded_total", "Bytes uploaded host -> GPU",
                   double(p.bytesUploaded), l);
         m.counter("gpu_pool_evictions_total", "Bricks evicted from the GPU pool (LRU)",
                   double(p.evictions), l);
-        m.counter("gpu_pool_refetches_total",
-                  "Uploads of bricks the pool held before and evicted", double(p.refetches), l);
+        m.counter("gpu_pool_refetches_total", "Uploads of bricks the pool held before and evicted",
+                  double(p.refetches), l);
         m.counter("gpu_pool_bytes_refetched_total", "Bytes uploaded again after their eviction",
                   double(p.bytesRefetched), l);
         m.counter("gpu_pool_upload_ms_total", "Milliseconds spent uploading bricks", p.uploadMs, l);
@@ -373,14 +387,15 @@ void RenderService::collect(MetricSet& m) {
         m.counter("gpu_prefetch_uploads_total",
                   "Bricks uploaded ahead of need, for a predicted next view, while idle",
                   of(c.prefetchUploads, name), l);
-        m.counter("gpu_prefetch_bytes_total", "Bytes uploaded by prefetch", of(c.prefetchBytes, name), l);
+        m.counter("gpu_prefetch_bytes_total", "Bytes uploaded by prefetch",
+                  of(c.prefetchBytes, name), l);
         m.counter("gpu_deferred_bricks_total",
                   "Planned bricks a frame left unloaded: its last frame found them behind "
                   "saturated rays (ray-guided residency)",
                   of(c.deferred, name), l);
         m.counter("gpu_requested_bricks_total",
-                  "Deferred bricks loaded after all, when rays reached them",
-                  of(c.requested, name), l);
+                  "Deferred bricks loaded after all, when rays reached them", of(c.requested, name),
+                  l);
         const auto b = c.poolBudget.find(name);
         m.gauge("gpu_pool_budget_bytes", "The volume's share of the GPU budget",
                 b == c.poolBudget.end() ? 0.0 : b->second, l);
@@ -409,12 +424,12 @@ void RenderService::runPrefetch() {
             const std::uint64_t bytesBefore = pool.stats().bytesUploaded;
             const render::Scene scene{*job.volume->store, *job.volume->cache, *job.tf,
                                       *mClassifications};
+            // A predicted camera came from no decoder: validated here (a bad guess throws).
             const std::uint32_t n = gpu->prefetch(
-                scene,
-                render::View::ofDecoded(job.camera, job.options.width, job.options.height),
+                scene, render::View::of(job.camera, job.options.width, job.options.height),
                 job.options, step);
             if (n == step && step < room) { // more may be missing: continue next turn
-                job.lastFrameBricks += n;       // what this step brought in stays too
+                job.lastFrameBricks += n;   // what this step brought in stays too
                 mine.prefetch = job;
             }
             std::lock_guard lock(mMutex);
@@ -485,7 +500,8 @@ void RenderService::run() {
     std::unique_lock lock(mMutex);
     while (!mStop) {
         bool prefetchDue = false;
-        for (const auto& [key, s] : mRenderers->sessions) prefetchDue |= s.prefetch.has_value();
+        for (const auto& [key, s] : mRenderers->sessions)
+            prefetchDue |= s.prefetch.has_value();
         auto slot = nextReady(lock, !prefetchDue);
         if (!slot) {
             if (prefetchDue) {
@@ -570,8 +586,8 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     render::RenderOptions options = toRenderOptions(o, !job.refined);
     options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
-    const render::View view = render::View::ofDecoded(toCamera(*s.camera), options.width,
-                                                      options.height);
+    const render::View view =
+        render::View::ofDecoded(toCamera(*s.camera), options.width, options.height);
     const render::Scene scene{*s.volume->store, *s.volume->cache, *s.tf, *mClassifications};
     const std::string_view name = rendererName(o.renderer);
     const render::RendererKind* kind = render::RendererRegistry::builtin().find(name);
@@ -587,7 +603,8 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     render::GpuResidency* gpu = renderer.gpuResidency();
     if (gpu) { // the volume's bricks on the GPU are shared by its sessions
         const render::BrickPool* before = v.pool.get();
-        auto& shared = sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes));
+        auto& shared =
+            sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes));
         if (before && shared.get() != before) retirePool(s.volume->name);
         gpu->setSharedPool(shared);
         pool = shared.get();
@@ -600,8 +617,9 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
         mine.prefetch.reset();
         if (mConfig.prefetch && mine.previousCamera)
             mine.prefetch = SessionRenderers::Prefetch{
-                &renderer, s.volume, s.tf, render::predictNext(*mine.previousCamera, view.camera),
-                options, residentBricks(stats)};
+                &renderer, s.volume,
+                s.tf,      render::predictNext(*mine.previousCamera, view.camera),
+                options,   residentBricks(stats)};
     }
     if (!job.refined) image = interactiveUpscale(image, o.width, o.height);
     const auto rgba8 = render::toRgba8(image);

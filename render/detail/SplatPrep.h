@@ -8,9 +8,9 @@
 #include "brickstore/VoxelType.h"
 #include "render/BrickPlan.h"
 #include "render/Camera.h"
-#include "render/HybridSplatter.h"
 #include "render/RenderTypes.h"
 #include "render/Renderer.h"
+#include "render/SplatConfig.h"
 #include "render/SplatGeometry.h"
 #include "render/TransferFunction.h"
 
@@ -35,7 +35,7 @@ class SplatFootprint;
 
 namespace bc::render::detail {
 
-constexpr double kMaxOpacity = 1.0 - 1e-6;      // keeps -log(1 - a) finite
+constexpr double kMaxOpacity = 1.0 - 1e-6; // keeps -log(1 - a) finite
 
 /// Everything a voxel needs to be drawn.
 struct Frame {

@@ -288,3 +288,20 @@ TEST(DaemonConfigPresets, BadPresetEntriesNameTheKey) {
 
 } // namespace
 } // namespace bc::server::test
+
+namespace bc::server::test {
+namespace {
+
+// A client's Error message reaches the log: it cannot start a line of its own there.
+TEST(LogLines, ControlCharactersAreEscapedSoALineIsOneLine) {
+    Log log(false);
+    ::testing::internal::CaptureStderr();
+    log.info("client error Internal: x\n2026-12-02T00:00:00.000Z error forged\r\x01");
+    const std::string out = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+    EXPECT_NE(out.find("x\\n2026-12-02T00:00:00.000Z error forged\\x0d\\x01"), std::string::npos)
+        << out;
+}
+
+} // namespace
+} // namespace bc::server::test
