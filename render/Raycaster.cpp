@@ -10,6 +10,7 @@
 #include "render/detail/OcclusionFrustums.h"
 #include "render/detail/RayGuide.h"
 #include "render/detail/RaycastShader.h"
+#include "render/detail/ShaderPrograms.h"
 
 #include <algorithm>
 #include <chrono>
@@ -84,8 +85,7 @@ struct Raycaster::Gpu {
 
 Raycaster::Raycaster(const RaycasterConfig& config)
     : mConfig(config), mGpu(std::make_unique<Gpu>()) {
-    mGpu->program =
-        gl::buildProgram("raycast", detail::raycastVertexShader(), detail::raycastFragmentShader());
+    mGpu->program = detail::buildShaderProgram(detail::ShaderProgram::Raycast);
     GLuint vao = 0;
     glCreateVertexArrays(1, &vao);
     mGpu->vao = gl::VertexArray(vao);
@@ -328,10 +328,9 @@ void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount,
 }
 
 const OccupancyTrees* Raycaster::prepareOccupancy(const brickstore::BrickStore& store,
-                                                   std::uint32_t level,
-                                                   const TransferFunctionTable& table,
-                                                   const RenderOptions& options,
-                                                   FrameStats& stats) {
+                                                  std::uint32_t level,
+                                                  const TransferFunctionTable& table,
+                                                  const RenderOptions& options, FrameStats& stats) {
     // Leaf ranges reach the apron; without one they do not cover what border samples read.
     if (options.skip != SkipMode::All || store.layout().geometry().apronVoxels == 0) return nullptr;
     if (!mOccupancy || mOccupancyStore != &store || mOccupancyStorePath != store.path() ||
@@ -389,9 +388,8 @@ std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint
     return h;
 }
 
-bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
-                                 std::uint64_t scene, const RenderOptions& options,
-                                 bool octree, FrameStats& stats) {
+bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, std::uint64_t scene,
+                                 const RenderOptions& options, bool octree, FrameStats& stats) {
     if (!options.occlusionFrustums) {
         if (mGpu->occlusion) mGpu->occlusion->invalidate();
         stats.occlusionReason = "off";
@@ -399,16 +397,16 @@ bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
     }
     if (!mGpu->occlusion) mGpu->occlusion = std::make_unique<detail::OcclusionFrustums>();
     const double voxels = options.skip == SkipMode::None ? 0.0
-                          : octree ? double(mOccupancy->leafVoxels())
-                                   : double(g.brickVoxels);
+                          : octree                       ? double(mOccupancy->leafVoxels())
+                                                         : double(g.brickVoxels);
     const double cellMm = voxels * std::min({g.spacing.x, g.spacing.y, g.spacing.z});
     bool used = false;
     if (options.skip == SkipMode::None) {
         stats.occlusionReason = "no occupancy to find first hits with (skip none)";
     } else {
-        used = mGpu->occlusion->prepare(view, options.width, options.height, g.box, scene, cellMm,
-                                        options.stepVoxels * g.minSpacing(), options.occlusion,
-                                        stats);
+        used =
+            mGpu->occlusion->prepare(view, options.width, options.height, g.box, scene, cellMm,
+                                     options.stepVoxels * g.minSpacing(), options.occlusion, stats);
     }
     mGpu->occlusion->beginFrame(options.width, options.height);
     return used;
