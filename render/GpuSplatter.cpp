@@ -8,6 +8,7 @@
 #include "render/SplatGeometry.h"
 #include "render/TransferFunction.h"
 #include "render/detail/Gl.h"
+#include "render/detail/ShaderPrograms.h"
 #include "render/detail/SplatPrep.h"
 
 #include <algorithm>
@@ -138,105 +139,6 @@ class PrimitiveList {
     bool mSlabOpen = false, mBatchClosed = true;
     double mSlabEnd = 0.0;
 };
-
-// Quads over pixel rectangles; GL window row = image row (row 0 at the top of the image is
-// row 0 of the target), so the read-back needs no flip.
-const std::string kQuadVertex = R"(#version 450 core
-layout(location = 0) in vec4 aRect;
-layout(location = 1) in vec4 aColour;
-layout(location = 2) in vec4 aShape;
-uniform vec2 uViewport;
-flat out vec4 vColour;
-flat out vec4 vShape;
-void main() {
-    vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
-    vec2 pixel = mix(aRect.xy, aRect.zw + 1.0, corner);
-    gl_Position = vec4(pixel / uViewport * 2.0 - 1.0, 0.0, 1.0);
-    vColour = aColour;
-    vShape = aShape;
-}
-)";
-
-// Linear between neighbouring texels with full-precision weights: filtering hardware may
-// quantise them (8 bits on many GPUs). GpuSplatter::sampleFootprint is the CPU twin.
-std::string footprintGlsl() {
-    return "const int kTexels = " + std::to_string(GpuSplatter::kFootprintTexels) + ";\n" +
-           R"(layout(binding = 0) uniform sampler1D uFootprint;
-float footprint(float d) {
-    float u = clamp(d, 0.0, 1.0) * float(kTexels - 1);
-    int i = min(int(u), kTexels - 2);
-    return mix(texelFetch(uFootprint, i, 0).r, texelFetch(uFootprint, i + 1, 0).r, u - float(i));
-}
-)";
-}
-
-// The pixel's eye ray against the sphere centre: distance in radii is the footprint index
-// after correctedDistance (render/SplatGeometry.h), exact in perspective and orthographic.
-std::string splatFragment() {
-    return "#version 450 core\n" + footprintGlsl() + R"(
-uniform vec2 uViewport;
-uniform vec3 uForward, uRight, uUp;
-uniform float uFocal, uOrthoScale, uInvRadius;
-uniform bool uOrtho;
-flat in vec4 vColour;
-flat in vec4 vShape;
-out vec4 outColor;
-void main() {
-    vec2 p = vec2(gl_FragCoord.x - 0.5 * uViewport.x, 0.5 * uViewport.y - gl_FragCoord.y);
-    vec3 rel = vShape.xyz;
-    float d;
-    if (uOrtho) {
-        vec2 q = p / uOrthoScale;
-        d = length(cross(rel - q.x * uRight - q.y * uUp, uForward));
-    } else {
-        vec3 w = normalize(uForward + (p.x / uFocal) * uRight + (p.y / uFocal) * uUp);
-        if (!(dot(w, rel) > 0.0)) discard;
-        d = length(cross(rel, w));
-    }
-    d *= uInvRadius;
-    if (!(d < 1.0)) discard;
-    float a = 1.0 - exp(-vColour.w * footprint(d));
-    outColor = vec4(a * vColour.rgb, a);
-}
-)";
-}
-
-std::string pointFragment() {
-    return "#version 450 core\n" + footprintGlsl() + R"(
-flat in vec4 vColour;
-flat in vec4 vShape;
-out vec4 outColor;
-void main() {
-    float w = 1.0;
-    if (vShape.w == 0.0) {
-        float d = length(gl_FragCoord.xy - 0.5 - vShape.xy) * vShape.z;
-        if (!(d < 1.0)) discard;
-        w = footprint(d);
-    }
-    float cover = vColour.w * w;
-    outColor = vec4(cover * vColour.rgb, cover);
-}
-)";
-}
-
-const std::string kFullScreenVertex = R"(#version 450 core
-void main() {
-    vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-)";
-
-// The slab as one layer: summed coverage clamped to 1, coverage-weighted colour.
-const std::string kCompositeFragment = R"(#version 450 core
-layout(binding = 1) uniform sampler2D uSlab;
-out vec4 outColor;
-void main() {
-    vec4 s = texelFetch(uSlab, ivec2(gl_FragCoord.xy), 0);
-    if (!(s.a > 0.0)) discard;
-    float a = min(s.a, 1.0);
-    outColor = vec4(s.rgb * (a / s.a), a);
-}
-)";
 
 gl::Texture floatTarget(std::uint32_t w, std::uint32_t h, gl::Framebuffer& fbo) {
     gl::Texture t = gl::createTexture(GL_TEXTURE_2D);
@@ -401,10 +303,9 @@ double GpuSplatter::sampleFootprint(const std::vector<float>& texels, double dis
 GpuSplatter::GpuSplatter(const HybridSplatterConfig& config)
     : mConfig((config.validate(), config)),
       mFootprint(SplatFootprintConfig{config.sigmaOverRadius}), mGpu(std::make_unique<Gpu>()) {
-    mGpu->splat = gl::buildProgram("splat", kQuadVertex, splatFragment());
-    mGpu->point = gl::buildProgram("splat point", kQuadVertex, pointFragment());
-    mGpu->composite =
-        gl::buildProgram("splat slab composite", kFullScreenVertex, kCompositeFragment);
+    mGpu->splat = detail::buildShaderProgram(detail::ShaderProgram::Splat);
+    mGpu->point = detail::buildShaderProgram(detail::ShaderProgram::SplatPoint);
+    mGpu->composite = detail::buildShaderProgram(detail::ShaderProgram::SplatComposite);
     GLuint vao[2] = {0, 0};
     glCreateVertexArrays(2, vao);
     mGpu->quads = gl::VertexArray(vao[0]);

@@ -10,6 +10,7 @@
 #include "render/detail/OcclusionFrustums.h"
 #include "render/detail/RayGuide.h"
 #include "render/detail/RaycastShader.h"
+#include "render/detail/ShaderPrograms.h"
 
 #include <algorithm>
 #include <chrono>
@@ -83,8 +84,7 @@ struct Raycaster::Gpu {
 
 Raycaster::Raycaster(const RaycasterConfig& config)
     : mConfig(config), mGpu(std::make_unique<Gpu>()) {
-    mGpu->program =
-        gl::buildProgram("raycast", detail::raycastVertexShader(), detail::raycastFragmentShader());
+    mGpu->program = detail::buildShaderProgram(detail::ShaderProgram::Raycast);
     GLuint vao = 0;
     glCreateVertexArrays(1, &vao);
     mGpu->vao = gl::VertexArray(vao);
@@ -390,9 +390,9 @@ bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
     if (options.skip == SkipMode::None) {
         stats.occlusionReason = "no occupancy to find first hits with (skip none)";
     } else {
-        used = mGpu->occlusion->prepare(view, options.width, options.height, g.box, scene, cellMm,
-                                        options.stepVoxels * g.minSpacing(), options.occlusion,
-                                        stats);
+        used =
+            mGpu->occlusion->prepare(view, options.width, options.height, g.box, scene, cellMm,
+                                     options.stepVoxels * g.minSpacing(), options.occlusion, stats);
     }
     mGpu->occlusion->beginFrame(options.width, options.height);
     return used;

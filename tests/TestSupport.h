@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -13,16 +14,37 @@
 
 namespace bc::test {
 
-/// Path of a file in ../shared/data (read, never copied). Skips the test if the folder is absent.
+/// Path of a file in ../shared/data (read, never copied).
 inline std::string dataPath(const std::string& name) {
     std::filesystem::path p = std::filesystem::path(BC_SHARED_DATA_DIR) / name;
     return p.string();
 }
-inline bool haveData(const std::string& name) { return std::filesystem::exists(dataPath(name)); }
+inline bool haveData(const std::string& name) {
+    return std::filesystem::exists(dataPath(name));
+}
+
+/// Whether the real scans must be there: CI=true (or 1) in the environment. CI provides
+/// ../shared/data, so a scan missing there is a broken set-up, not a reason to skip.
+inline bool dataRequired() {
+    const char* ci = std::getenv("CI");
+    const std::string v = ci ? ci : "";
+    return v == "true" || v == "TRUE" || v == "True" || v == "1";
+}
+
+/// Reports `what` (a scan or file of ../shared/data) missing: a failure when dataRequired(), a
+/// skip otherwise. The test stops here: `if (!spec) return test::missingData("scan cthead");`.
+inline void missingData(const std::string& what) {
+    if (dataRequired()) {
+        ADD_FAILURE() << "missing " << what << " in " << BC_SHARED_DATA_DIR
+                      << " (CI=true: the real scans are required)";
+        return;
+    }
+    GTEST_SKIP() << "missing " << what << " in " << BC_SHARED_DATA_DIR;
+}
 
 /// A fresh scratch folder removed with everything in it when the object goes.
 class TempDir {
-public:
+  public:
     TempDir() {
         std::random_device rd;
         mPath = std::filesystem::temp_directory_path() /
@@ -38,7 +60,7 @@ public:
     std::string file(const std::string& name) const { return (mPath / name).string(); }
     const std::filesystem::path& path() const { return mPath; }
 
-private:
+  private:
     std::filesystem::path mPath;
 };
 

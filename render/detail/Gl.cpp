@@ -54,9 +54,17 @@ Buffer createBuffer() {
 
 namespace {
 
-GLuint compile(const std::string& name, GLenum stage, const std::string& source) {
-    GLuint shader = glCreateShader(stage);
-    const char* text = source.c_str();
+const char* stageName(GLenum type) {
+    return type == GL_VERTEX_SHADER     ? "vertex"
+           : type == GL_GEOMETRY_SHADER ? "geometry"
+           : type == GL_FRAGMENT_SHADER ? "fragment"
+           : type == GL_COMPUTE_SHADER  ? "compute"
+                                        : "unknown stage";
+}
+
+GLuint compile(const std::string& name, const ShaderStage& stage) {
+    GLuint shader = glCreateShader(stage.type);
+    const char* text = stage.source.c_str();
     glShaderSource(shader, 1, &text, nullptr);
     glCompileShader(shader);
     GLint ok = 0;
@@ -67,8 +75,9 @@ GLuint compile(const std::string& name, GLenum stage, const std::string& source)
     std::vector<char> log(std::size_t(length) + 1, '\0');
     glGetShaderInfoLog(shader, length, nullptr, log.data());
     glDeleteShader(shader);
-    throw RenderError("shader " + name + (stage == GL_VERTEX_SHADER ? " (vertex)" : " (fragment)") +
-                      " does not compile: " + log.data());
+    const std::string where = stage.file.empty() ? "" : stage.file + ", ";
+    throw RenderError("shader " + name + " (" + where + stageName(stage.type) +
+                      ") does not compile: " + log.data());
 }
 
 } // namespace
@@ -78,7 +87,7 @@ Program buildProgram(const std::string& name, const std::vector<ShaderStage>& st
     std::vector<GLuint> shaders;
     try {
         for (const ShaderStage& stage : stages)
-            shaders.push_back(compile(name, stage.type, stage.source));
+            shaders.push_back(compile(name, stage));
     } catch (...) {
         for (GLuint sh : shaders)
             glDeleteShader(sh);
@@ -100,11 +109,6 @@ Program buildProgram(const std::string& name, const std::vector<ShaderStage>& st
     }
     glCheck(("building shader " + name).c_str());
     return program;
-}
-
-Program buildProgram(const std::string& name, const std::string& vertexSource,
-                     const std::string& fragmentSource) {
-    return buildProgram(name, {{GL_VERTEX_SHADER, vertexSource}, {GL_FRAGMENT_SHADER, fragmentSource}});
 }
 
 } // namespace bc::render::gl

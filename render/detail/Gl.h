@@ -59,12 +59,12 @@ Buffer createBuffer();
 struct ShaderStage {
     GLenum type; ///< GL_VERTEX_SHADER, GL_GEOMETRY_SHADER, GL_FRAGMENT_SHADER, GL_COMPUTE_SHADER
     std::string source;
+    std::string file; ///< the render/shaders file it comes from, for error messages
 };
 
 /// Compiles and links a program from its stages (vertex + fragment, + geometry, or compute).
-/// @throw RenderError with the driver's log, naming `name`.
+/// @throw RenderError with the driver's log (which gives the line), naming `name` and the
+/// failing stage's file.
 Program buildProgram(const std::string& name, const std::vector<ShaderStage>& stages);
-Program buildProgram(const std::string& name, const std::string& vertexSource,
-                     const std::string& fragmentSource);
 
 } // namespace bc::render::gl

@@ -1,6 +1,7 @@
 #include "render/detail/OcclusionFrustums.h"
 
 #include "render/Error.h"
+#include "render/detail/ShaderPrograms.h"
 
 #include <algorithm>
 #include <chrono>
@@ -13,102 +14,6 @@ namespace bc::render::detail {
 namespace {
 
 constexpr float kMiss = 3.0e38f; // no first hit / no proxy: beyond any ray
-
-const char* kReduceShader = R"(#version 450 core
-// One invocation per k x k block: the nearest eye-space depth of the block's first hits and
-// those of the one-pixel ring around it (so an occluder between two blocks' rays counts).
-layout(local_size_x = 8, local_size_y = 8) in;
-layout(binding = 0) uniform sampler2D uFirstHit;   // ray parameter (mm); >= 1e37: no hit
-layout(std430, binding = 3) writeonly buffer Blocks { float blockDepth[]; };
-uniform ivec2 uSize, uBlocks;
-uniform int uK;
-uniform vec3 uForward, uRight, uUp;
-uniform bool uOrtho;
-void main() {
-    ivec2 b = ivec2(gl_GlobalInvocationID.xy);
-    if (b.x >= uBlocks.x || b.y >= uBlocks.y) return;
-    ivec2 lo = max(b * uK - 1, ivec2(0)), hi = min((b + 1) * uK + 1, uSize);
-    float z = 3.0e38;
-    for (int y = lo.y; y < hi.y; ++y)
-        for (int x = lo.x; x < hi.x; ++x) {
-            float t = texelFetch(uFirstHit, ivec2(x, y), 0).r;
-            if (t >= 1.0e37) continue;
-            vec2 s = 2.0 * (vec2(x, y) + 0.5) / vec2(uSize) - 1.0;
-            float c = uOrtho ? 1.0 : dot(normalize(uForward + s.x * uRight + s.y * uUp), uForward);
-            z = min(z, t * c);
-        }
-    blockDepth[b.y * uBlocks.x + b.x] = z;
-}
-)";
-
-const char* kFrustumVertexShader = R"(#version 450 core
-flat out int vIndex;
-void main() { vIndex = gl_VertexID; gl_Position = vec4(0.0); }
-)";
-
-// One point per block in, the block's frustum out: the block's pixel rectangle (enlarged by
-// half a pixel, so neighbours overlap and no ray slips between them) extruded from the
-// captured frame's eye, from the block's nearest first hit less a margin to beyond the box.
-const char* kFrustumGeometryShader = R"(#version 450 core
-layout(points) in;
-layout(triangle_strip, max_vertices = 24) out;
-flat in int vIndex[];
-layout(std430, binding = 3) readonly buffer Blocks { float blockDepth[]; };
-uniform ivec2 uBlocks;
-uniform int uK;
-uniform vec2 uOldSize;
-uniform vec3 uOldEye, uOldForward, uOldRight, uOldUp;
-uniform bool uOldOrtho;
-uniform float uMargin, uNearMin, uFar;
-uniform mat4 uViewProj;
-out vec3 vWorld;
-vec3 corner(vec2 s, float z) {
-    return uOldOrtho ? uOldEye + s.x * uOldRight + s.y * uOldUp + z * uOldForward
-                     : uOldEye + z * (uOldForward + s.x * uOldRight + s.y * uOldUp);
-}
-void emitQuad(vec3 a, vec3 b, vec3 c, vec3 d) {
-    vWorld = a; gl_Position = uViewProj * vec4(a, 1.0); EmitVertex();
-    vWorld = b; gl_Position = uViewProj * vec4(b, 1.0); EmitVertex();
-    vWorld = c; gl_Position = uViewProj * vec4(c, 1.0); EmitVertex();
-    vWorld = d; gl_Position = uViewProj * vec4(d, 1.0); EmitVertex();
-    EndPrimitive();
-}
-void main() {
-    int i = vIndex[0];
-    float zb = blockDepth[i];
-    if (zb >= 1.0e37) return;
-    ivec2 b = ivec2(i % uBlocks.x, i / uBlocks.x);
-    vec2 s0 = 2.0 * (vec2(b * uK) - 0.5) / uOldSize - 1.0;
-    vec2 s1 = 2.0 * (vec2((b + 1) * uK) + 0.5) / uOldSize - 1.0;
-    float zn = max(zb - uMargin, uNearMin);
-    vec3 c[8];
-    for (int k = 0; k < 8; ++k)
-        c[k] = corner(vec2((k & 1) != 0 ? s1.x : s0.x, (k & 2) != 0 ? s1.y : s0.y),
-                      (k & 4) != 0 ? uFar : zn);
-    emitQuad(c[0], c[1], c[2], c[3]);
-    emitQuad(c[4], c[5], c[6], c[7]);
-    emitQuad(c[0], c[2], c[4], c[6]);
-    emitQuad(c[1], c[3], c[5], c[7]);
-    emitQuad(c[0], c[1], c[4], c[5]);
-    emitQuad(c[2], c[3], c[6], c[7]);
-}
-)";
-
-const char* kPiecesVertexShader = R"(#version 450 core
-layout(location = 0) in vec3 aPosition;
-uniform mat4 uViewProj;
-out vec3 vWorld;
-void main() { vWorld = aPosition; gl_Position = uViewProj * vec4(aPosition, 1.0); }
-)";
-
-// The ray parameter of the surface point, for the frame being drawn; blended with MIN.
-const char* kStartFragmentShader = R"(#version 450 core
-in vec3 vWorld;
-uniform vec3 uEye, uForward;
-uniform bool uOrtho;
-layout(location = 0) out float outT;
-void main() { outT = uOrtho ? dot(vWorld - uEye, uForward) : length(vWorld - uEye); }
-)";
 
 /// World -> clip for `v` (the raycaster's ray rule), clipping at `nearMm` and `farMm`.
 glm::mat4 viewProjection(const ViewBasis& v, double nearMm, double farMm) {
@@ -169,9 +74,9 @@ void clipBox(const Box& box, const HalfSpace& h, std::vector<float>& triangles) 
     glm::dvec3 centre(0.0);
     for (const auto& p : cap)
         centre += p / double(cap.size());
-    const glm::dvec3 e1 = glm::normalize(glm::abs(h.normal.x) < 0.9
-                                             ? glm::cross(h.normal, glm::dvec3(1, 0, 0))
-                                             : glm::cross(h.normal, glm::dvec3(0, 1, 0)));
+    const glm::dvec3 e1 =
+        glm::normalize(glm::abs(h.normal.x) < 0.9 ? glm::cross(h.normal, glm::dvec3(1, 0, 0))
+                                                  : glm::cross(h.normal, glm::dvec3(0, 1, 0)));
     const glm::dvec3 e2 = glm::cross(h.normal, e1);
     std::sort(cap.begin(), cap.end(), [&](const glm::dvec3& a, const glm::dvec3& b) {
         return std::atan2(glm::dot(a - centre, e2), glm::dot(a - centre, e1)) <
@@ -205,8 +110,8 @@ std::vector<HalfSpace> outsideOfView(const ViewBasis& v, double nearMm, double s
 }
 
 bool insideBox(const glm::dvec3& p, const Box& b) {
-    return p.x >= b.min.x && p.y >= b.min.y && p.z >= b.min.z && p.x <= b.max.x &&
-           p.y <= b.max.y && p.z <= b.max.z;
+    return p.x >= b.min.x && p.y >= b.min.y && p.z >= b.min.z && p.x <= b.max.x && p.y <= b.max.y &&
+           p.z <= b.max.z;
 }
 
 void uniform3(GLuint p, const char* name, const glm::dvec3& v) {
@@ -216,11 +121,9 @@ void uniform3(GLuint p, const char* name, const glm::dvec3& v) {
 } // namespace
 
 OcclusionFrustums::OcclusionFrustums() {
-    mReduce = gl::buildProgram("occlusion blocks", {{GL_COMPUTE_SHADER, kReduceShader}});
-    mFrustum = gl::buildProgram("occlusion frustums", {{GL_VERTEX_SHADER, kFrustumVertexShader},
-                                                       {GL_GEOMETRY_SHADER, kFrustumGeometryShader},
-                                                       {GL_FRAGMENT_SHADER, kStartFragmentShader}});
-    mPieces = gl::buildProgram("occlusion outside pieces", kPiecesVertexShader, kStartFragmentShader);
+    mReduce = buildShaderProgram(ShaderProgram::OcclusionReduce);
+    mFrustum = buildShaderProgram(ShaderProgram::OcclusionFrustums);
+    mPieces = buildShaderProgram(ShaderProgram::OcclusionPieces);
     GLuint vao = 0;
     glCreateVertexArrays(1, &vao);
     mVao = gl::VertexArray(vao);
@@ -280,10 +183,9 @@ bool OcclusionFrustums::prepare(const ViewBasis& view, std::uint32_t width, std:
     double deepest = 0.0;
     for (float z : mBlockDepth)
         if (z < kMiss) deepest = std::max(deepest, double(z));
-    const double footprint =
-        mView.orthographic
-            ? 2.0 * glm::length(mView.upScaled) / double(height)
-            : 2.0 * (deepest + cellMm * std::sqrt(3.0)) * glm::length(mView.upScaled) / double(height);
+    const double footprint = mView.orthographic ? 2.0 * glm::length(mView.upScaled) / double(height)
+                                                : 2.0 * (deepest + cellMm * std::sqrt(3.0)) *
+                                                      glm::length(mView.upScaled) / double(height);
     if (footprint > 0.5 * cellMm || stepMm > 0.5 * cellMm)
         return refuse("rays sparser than the occupancy cells");
     const double margin = cellMm * std::sqrt(3.0) + 2.0 * stepMm;
@@ -303,7 +205,8 @@ bool OcclusionFrustums::prepare(const ViewBasis& view, std::uint32_t width, std:
             const auto by = std::int64_t(std::floor(py / mBlockPixels));
             for (std::int64_t y = by - 1; y <= by + 1; ++y)
                 for (std::int64_t x = bx - 1; x <= bx + 1; ++x) {
-                    if (x < 0 || y < 0 || x >= std::int64_t(mBlocksX) || y >= std::int64_t(mBlocksY))
+                    if (x < 0 || y < 0 || x >= std::int64_t(mBlocksX) ||
+                        y >= std::int64_t(mBlocksY))
                         continue;
                     const float zb = mBlockDepth[std::size_t(y) * mBlocksX + std::size_t(x)];
                     if (zb < kMiss && z >= std::max(double(zb) - margin, nearMin))
@@ -323,7 +226,8 @@ bool OcclusionFrustums::prepare(const ViewBasis& view, std::uint32_t width, std:
     glBlendEquation(GL_MIN);
     glBlendFunc(GL_ONE, GL_ONE);
     for (GLuint p : {mFrustum.get(), mPieces.get()}) {
-        glProgramUniformMatrix4fv(p, glGetUniformLocation(p, "uViewProj"), 1, GL_FALSE, &viewProj[0][0]);
+        glProgramUniformMatrix4fv(p, glGetUniformLocation(p, "uViewProj"), 1, GL_FALSE,
+                                  &viewProj[0][0]);
         uniform3(p, "uEye", view.eye);
         uniform3(p, "uForward", view.forward);
         glProgramUniform1i(p, glGetUniformLocation(p, "uOrtho"), view.orthographic);
@@ -370,7 +274,8 @@ std::uint32_t OcclusionFrustums::drawOutsidePieces(const ViewBasis& view, const 
         clipBox(box, h, triangles);
     if (triangles.empty()) return 0;
     mPieceVertices = gl::createBuffer();
-    glNamedBufferStorage(mPieceVertices.get(), GLsizeiptr(triangles.size() * 4), triangles.data(), 0);
+    glNamedBufferStorage(mPieceVertices.get(), GLsizeiptr(triangles.size() * 4), triangles.data(),
+                         0);
     GLuint vao = 0;
     glCreateVertexArrays(1, &vao);
     gl::VertexArray pieceVao(vao);

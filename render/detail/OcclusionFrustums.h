@@ -5,8 +5,8 @@
 // non-empty block becomes a frustum extruded away from that frame's eye; the volume box
 // minus that frame's view frustum is added. Rendering the union's nearest faces from the
 // next frame's camera gives each of its rays a start. Built on the GPU (a compute shader
-// reduces the blocks, a geometry shader extrudes them). Render thread only; needs a current
-// EglContext. Design and policy: render/OCCLUSION.md.
+// reduces the blocks, a geometry shader extrudes them: render/shaders/occlusion_*.glsl). Render
+// thread only; needs a current EglContext. Design and policy: render/OCCLUSION.md.
 #include "render/Camera.h"
 #include "render/RenderTypes.h"
 #include "render/detail/Gl.h"
@@ -25,8 +25,8 @@ class OcclusionFrustums {
     /// occupancy cell edge (leaf or brick) and `stepMm` the sample distance: both bound what
     /// can hide between the last frame's rays.
     /// Fills stats.occlusion*; returns true when the ray-start texture is to be used.
-    bool prepare(const ViewBasis& view, std::uint32_t width, std::uint32_t height,
-                         const Box& box, std::uint64_t sceneKey, double cellMm, double stepMm,
+    bool prepare(const ViewBasis& view, std::uint32_t width, std::uint32_t height, const Box& box,
+                 std::uint64_t sceneKey, double cellMm, double stepMm,
                  const OcclusionConfig& config, FrameStats& stats);
     /// The ray-start texture (ray parameter in mm, +huge where no proxy), valid after a
     /// prepare() that returned true.
@@ -37,8 +37,8 @@ class OcclusionFrustums {
     void beginFrame(std::uint32_t width, std::uint32_t height);
     /// After a frame: keeps its first-hit image, reduced to blocks, for the next frame, and
     /// what the frame cost with or without proxies (for the policy).
-    void capture(const ViewBasis& view, std::uint64_t sceneKey, double frameMs,
-                 bool proxiesUsed, const OcclusionConfig& config);
+    void capture(const ViewBasis& view, std::uint64_t sceneKey, double frameMs, bool proxiesUsed,
+                 const OcclusionConfig& config);
     /// Forgets the last frame (the next frame uses the plain box).
     void invalidate() { mValid = false; }
 
@@ -56,10 +56,10 @@ class OcclusionFrustums {
     ViewBasis mView;                ///< the last captured frame's camera
     std::uint64_t mSceneKey = 0;
     bool mValid = false;
-    std::uint32_t mOffFor = 0;      ///< policy: frames left without proxies
-    std::uint32_t mUsedRun = 0;     ///< frames with proxies since the last plain one
-    double mPlainMs = -1.0;         ///< the last comparable frame without proxies
-    bool mComparable = false;       ///< this frame's refusal leaves it comparable
+    std::uint32_t mOffFor = 0;  ///< policy: frames left without proxies
+    std::uint32_t mUsedRun = 0; ///< frames with proxies since the last plain one
+    double mPlainMs = -1.0;     ///< the last comparable frame without proxies
+    bool mComparable = false;   ///< this frame's refusal leaves it comparable
 };
 
 } // namespace bc::render::detail

@@ -104,7 +104,7 @@ std::vector<std::int16_t> gdcmSliceInHu(int number) {
 }
 
 TEST(DicomReaderTest, PancreasSeriesHasItsGeometryAndHuRange) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     auto source = openDicomSeries(bc::test::dataPath(kSeries)); // LICENSE and Citations are skipped
     const VolumeInfo& info = source->info();
     EXPECT_EQ(info.dims, (std::array<std::uint64_t, 3>{512, 512, kSlices}));
@@ -135,7 +135,7 @@ TEST(DicomReaderTest, PancreasSeriesHasItsGeometryAndHuRange) {
 }
 
 TEST(DicomReaderTest, PancreasSlicesMatchGdcmDecodingInPositionOrder) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     std::vector<std::pair<double, int>> order; // (position along the normal, file number)
     for (int i = 1; i <= int(kSlices); ++i) {
         gdcm::Reader reader;
@@ -163,7 +163,7 @@ TEST(DicomReaderTest, PancreasSlicesMatchGdcmDecodingInPositionOrder) {
 }
 
 TEST(DicomReaderTest, MixedSeriesIsRejected) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;
     linkSlices(dir, 10, 14);
     writeModifiedSlice(15, dir.file("1-015.dcm"), [](gdcm::DataSet& ds) {
@@ -177,14 +177,14 @@ TEST(DicomReaderTest, MixedSeriesIsRejected) {
 }
 
 TEST(DicomReaderTest, MissingSliceIsRejected) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;
     linkSlices(dir, 1, int(kSlices), 67);
     expectFolderError(dir.path().string(), "ImagePositionPatient", "missing slice");
 }
 
 TEST(DicomReaderTest, DuplicateSliceIsRejected) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;
     linkSlices(dir, 20, 25);
     fs::create_symlink(sliceFile(22), dir.path() / "copy-of-22.dcm");
@@ -192,7 +192,7 @@ TEST(DicomReaderTest, DuplicateSliceIsRejected) {
 }
 
 TEST(DicomReaderTest, DifferentRowsAreRejected) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;
     linkSlices(dir, 30, 33);
     writeModifiedSlice(34, dir.file("1-034.dcm"), [](gdcm::DataSet& ds) {
@@ -204,7 +204,7 @@ TEST(DicomReaderTest, DifferentRowsAreRejected) {
 }
 
 TEST(DicomReaderTest, DifferentOrientationIsRejected) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;
     linkSlices(dir, 40, 43);
     writeModifiedSlice(44, dir.file("1-044.dcm"), [](gdcm::DataSet& ds) {
@@ -215,7 +215,7 @@ TEST(DicomReaderTest, DifferentOrientationIsRejected) {
 }
 
 TEST(DicomReaderTest, NonIntegerRescaleGivesF32) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;
     linkSlices(dir, 70, 72);
     writeModifiedSlice(73, dir.file("1-073.dcm"), [](gdcm::DataSet& ds) {
@@ -252,7 +252,7 @@ TEST(DicomReaderTest, FolderWithoutDicomFilesIsRejected) {
 }
 
 TEST(DicomReaderTest, NonDicomFilesBesideTheSlicesAreSkipped) {
-    if (!bc::test::haveData(kSeries)) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;
     linkSlices(dir, 60, 64);
     bc::test::writeFile(dir.file("README"), "five slices\n");

@@ -52,7 +52,7 @@ TEST(MosaicVolumeTest, TilesAGeneratedVolumeAndOpensOneSourcePerZRepetition) {
 
 TEST(MosaicVolumeTest, TilesARealScanServedFromMemory) {
     const std::string name = "vtk_headsq_quarter_64x64x93_uint16.raw";
-    if (!test::haveData(name)) GTEST_SKIP() << "no " << name;
+    if (!test::haveData(name)) return test::missingData(name);
     const auto raw = test::readFile(test::dataPath(name));
     std::vector<std::byte> bytes(raw.size());
     std::memcpy(bytes.data(), raw.data(), raw.size());

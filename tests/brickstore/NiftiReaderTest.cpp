@@ -109,7 +109,7 @@ float headerFloat(const std::vector<std::uint8_t>& file, std::size_t offset) {
 // keeps the u8 voxels as they are and records the slope (physical = stored x slope + inter)
 // instead of growing the volume into f32; checked against every raw byte and the header.
 TEST(NiftiReaderTest, CtAvmKeepsItsRawBytesAndRecordsSclSlope) {
-    if (!bc::test::haveData("CT_AVM.nii.gz")) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData("CT_AVM.nii.gz")) return bc::test::missingData("CT_AVM.nii.gz");
     const std::string path = bc::test::dataPath("CT_AVM.nii.gz");
     auto source = openNifti(path);
     const VolumeInfo& info = source->info();
@@ -136,7 +136,7 @@ TEST(NiftiReaderTest, CtAvmKeepsItsRawBytesAndRecordsSclSlope) {
 }
 
 TEST(NiftiReaderTest, IguanaMatchesAnIndependentGzipDecode) {
-    if (!bc::test::haveData("Iguana.nii.gz")) GTEST_SKIP() << "shared data absent";
+    if (!bc::test::haveData("Iguana.nii.gz")) return bc::test::missingData("Iguana.nii.gz");
     const std::string path = bc::test::dataPath("Iguana.nii.gz");
     auto source = openNifti(path);
     const VolumeInfo& info = source->info();

@@ -146,7 +146,7 @@ TEST(RawReaderTest, ReadsZstdFileOfSeveralFrames) {
 
 TEST(RawReaderTest, ReadsRealScanVoxelsAsStoredInTheFile) {
     const std::string name = "vtk_headsq_quarter_64x64x93_uint16.raw";
-    if (!test::haveData(name)) GTEST_SKIP() << "no " << test::dataPath(name);
+    if (!test::haveData(name)) return test::missingData(name);
     Bytes file = test::readFile(test::dataPath(name));
     ASSERT_EQ(file.size(), 64u * 64 * 93 * 2);
     RawLayout layout;

@@ -4,7 +4,6 @@
 #include "tests/TestSupport.h"
 #include "tests/brickstore/VolumeTestSupport.h"
 
-#include <chrono>
 #include <cstring>
 #include <numeric>
 
@@ -167,35 +166,6 @@ TEST(SyntheticVolumeTest, PhantomHasAirAtCornersSkullAndSoftTissue) {
     const std::uint16_t centre = u16At(bytes, dims, dims[0] / 2, dims[1] / 2, dims[2] / 2);
     EXPECT_GE(centre, 990);
     EXPECT_LE(centre, 1110);
-}
-
-TEST(SyntheticVolumeTest, GeneratorThroughput) {
-    // Not a timing assertion: prints what a 512^3 phantom (256 MiB) costs, slab by slab.
-    const Dims dims{512, 512, 512};
-    auto source = makeSynthetic(SynthKind::Phantom, dims, 1);
-    std::vector<std::byte> slab(16 * source->info().sliceBytes());
-    std::uint64_t checksum = 0;
-    const auto start = std::chrono::steady_clock::now();
-    for (std::uint64_t z = 0; z < dims[2]; z += 16) {
-        source->readSlices(16, slab);
-        for (std::size_t i = 0; i < slab.size(); i += 4099)
-            checksum += std::to_integer<std::uint64_t>(slab[i]);
-    }
-    const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const double mb = double(source->info().voxelCount() * 2) / 1e6;
-    std::printf("phantom 512^3 u16: %.0f MB in %.2f s = %.0f MB/s (checksum %llu)\n", mb, seconds,
-                mb / seconds, (unsigned long long)checksum);
-
-    auto vessels = makeSynthetic(SynthKind::Vessels, dims, 1);
-    std::vector<std::byte> vslab(16 * vessels->info().sliceBytes());
-    const auto vstart = std::chrono::steady_clock::now();
-    for (std::uint64_t z = 0; z < dims[2]; z += 16)
-        vessels->readSlices(16, vslab);
-    const double vseconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - vstart).count();
-    std::printf("vessels 512^3 u8: %.0f MB in %.2f s = %.0f MB/s\n", mb / 2, vseconds,
-                mb / 2 / vseconds);
 }
 
 } // namespace

@@ -21,7 +21,7 @@ using test::readAllSlices;
 const char* const kSmoke = "gaffer_smoke.vdb";
 
 class VdbReaderTest : public ::testing::Test {
-protected:
+  protected:
     static void SetUpTestSuite() { openvdb::initialize(); }
 
     /// Writes `grids` to a .vdb in the scratch folder and returns its path.
@@ -52,7 +52,7 @@ template <typename Fn> FormatError formatErrorOf(Fn&& open) {
 }
 
 TEST_F(VdbReaderTest, SmokeDensityStreamsEveryVoxelAsOpenVdbSeesIt) {
-    if (!test::haveData(kSmoke)) GTEST_SKIP() << "no " << kSmoke;
+    if (!test::haveData(kSmoke)) return test::missingData(kSmoke);
     const std::string path = test::dataPath(kSmoke);
     auto source = openVdb(path, "density");
     const VolumeInfo& info = source->info();
@@ -162,7 +162,7 @@ TEST_F(VdbReaderTest, FileWithoutScalarGridNamesTheGridsItHolds) {
 }
 
 TEST_F(VdbReaderTest, MissingGridNameListsTheGrids) {
-    if (!test::haveData(kSmoke)) GTEST_SKIP() << "no " << kSmoke;
+    if (!test::haveData(kSmoke)) return test::missingData(kSmoke);
     const FormatError e = formatErrorOf([&] { openVdb(test::dataPath(kSmoke), "temperature"); });
     EXPECT_EQ(e.field(), "grid");
     EXPECT_NE(std::string(e.what()).find("temperature"), std::string::npos) << e.what();

@@ -1,7 +1,7 @@
 // The CPU raycaster: the GPU raycaster's optical model in float on the CPU. It must match the
 // double-precision reference, agree with the GPU frame, and keep the skipping invariants.
-#include "RenderTestSupport.h"
 #include "render/CpuRaycaster.h"
+#include "RenderTestSupport.h"
 
 namespace bc::render {
 namespace {
@@ -32,7 +32,7 @@ class CpuVersusReference : public ::testing::TestWithParam<Scan> {};
 TEST_P(CpuVersusReference, MatchesTheDoublePrecisionReferenceAndTheGpuFrame) {
     const Scan scan = GetParam();
     auto spec = test::realScan(scan.name);
-    if (!spec) GTEST_SKIP() << "missing scan " << scan.name;
+    if (!spec) return test::missingData("scan " + scan.name);
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset(scan.preset, t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
@@ -62,7 +62,8 @@ TEST_P(CpuVersusReference, MatchesTheDoublePrecisionReferenceAndTheGpuFrame) {
 INSTANTIATE_TEST_SUITE_P(RealScans, CpuVersusReference,
                          ::testing::Values(Scan{"cthead", "ct-skin"}, Scan{"CT_AVM", "vessels"},
                                            Scan{"frog", "mr"}, Scan{"pancreas", "ct-bone"},
-                                           Scan{"hydrogen", "smoke"}, Scan{"gaffer_smoke", "smoke"}),
+                                           Scan{"hydrogen", "smoke"},
+                                           Scan{"gaffer_smoke", "smoke"}),
                          [](const auto& info) {
                              std::string s = info.param.name + "_" + info.param.preset;
                              for (char& ch : s)
@@ -73,7 +74,7 @@ INSTANTIATE_TEST_SUITE_P(RealScans, CpuVersusReference,
 // Bricks and octrees change no pixel; early termination keeps its bound.
 TEST(CpuRaycaster, SkippingIsExactAndEarlyTerminationKeepsItsBound) {
     auto spec = test::realScan("CT_AVM");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan CT_AVM");
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("vessels", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 120, 15);
@@ -102,7 +103,7 @@ TEST(CpuRaycaster, SkippingIsExactAndEarlyTerminationKeepsItsBound) {
 TEST(CpuRaycaster, CameraInsideOrthographicAndFloatDataMatchTheReference) {
     auto head = test::realScan("headsq");
     auto hydrogen = test::realScan("hydrogen");
-    if (!head || !hydrogen) GTEST_SKIP();
+    if (!head || !hydrogen) return test::missingData("scan headsq or hydrogen");
     auto t = test::ingestSpec(*head, {32, 2, 8});
     const auto tf = TransferFunction::preset("mr", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;

@@ -1,8 +1,8 @@
 // Per-brick octrees (issue 4), without a GPU: emptiness decided from the stored leaf ranges
 // alone and never missing a visible value, the ratio threshold and level limit of the
 // traversal, incremental rebuilds equal to full ones, and a corrupt leaf table named.
-#include "RenderTestSupport.h"
 #include "render/Occupancy.h"
+#include "RenderTestSupport.h"
 
 #include <fstream>
 
@@ -14,8 +14,8 @@ using test::TestStore;
 TransferFunction peakTf(double centre, double halfWidth, const VolumeValueStats& stats,
                         const char* rgb = "1,0.8,0.6") {
     auto point = [&](double v, double a) {
-        return R"({"value":)" + std::to_string(v) + R"(,"rgba":[)" + rgb + "," +
-               std::to_string(a) + "]}";
+        return R"({"value":)" + std::to_string(v) + R"(,"rgba":[)" + rgb + "," + std::to_string(a) +
+               "]}";
     };
     const std::string json = R"({"name":"peak","points":[)" + point(centre - halfWidth, 0) + "," +
                              point(centre, 0.9) + "," + point(centre + halfWidth, 0) + "]}";
@@ -43,7 +43,7 @@ brickstore::BrickKey levelBrickKey(std::uint64_t index, const LevelGeometry& g) 
 
 TEST(OccupancyTest, LeafIsLeptOnlyWhenTheTableIsTransparentOverEverythingItsSamplesRead) {
     auto t = angiography();
-    if (!t) GTEST_SKIP() << "missing CT_AVM";
+    if (!t) return test::missingData("scan CT_AVM");
     const auto tf = TransferFunction::preset("vessels", t->stats);
     const auto table = tf.table(1.0, 4096);
     OccupancyTrees trees(*t->store, 0);
@@ -102,7 +102,7 @@ TEST(OccupancyTest, PeakStrictlyBetweenALeafsVoxelValuesKeepsTheLeaf) {
 
 TEST(OccupancyTest, RatioThresholdAndLevelLimitDrawNodesWhole) {
     auto t = angiography();
-    if (!t) GTEST_SKIP() << "missing CT_AVM";
+    if (!t) return test::missingData("scan CT_AVM");
     const auto table = TransferFunction::preset("vessels", t->stats).table(1.0, 4096);
     OccupancyTrees exact(*t->store, 0), anyLeaf(*t->store, 0), limit0(*t->store, 0),
         limit1(*t->store, 0);
@@ -134,7 +134,7 @@ TEST(OccupancyTest, RatioThresholdAndLevelLimitDrawNodesWhole) {
 
 TEST(OccupancyTest, IncrementalRebuildTouchesOnlyBricksMeetingTheChangeAndEqualsAFullOne) {
     auto t = angiography();
-    if (!t) GTEST_SKIP() << "missing CT_AVM";
+    if (!t) return test::missingData("scan CT_AVM");
     const double top = t->store->info().valueMax;
     const auto vessels = TransferFunction::preset("vessels", t->stats);
     const auto moved = peakTf(top - 3.0, 1.0, t->stats);
@@ -164,7 +164,7 @@ TEST(OccupancyTest, IncrementalRebuildTouchesOnlyBricksMeetingTheChangeAndEquals
 
 TEST(OccupancyTest, CorruptLeafTableIsNamedAndItsBrickIsNeverLeapt) {
     auto t = angiography();
-    if (!t) GTEST_SKIP() << "missing CT_AVM";
+    if (!t) return test::missingData("scan CT_AVM");
     const LevelGeometry g = LevelGeometry::of(*t->store, 0);
     // The first stored brick: flip a byte of its leaf table on disk.
     std::uint64_t victim = 0;

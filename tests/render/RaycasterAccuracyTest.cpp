@@ -18,7 +18,7 @@ class GpuVersusReference : public ::testing::TestWithParam<Scan> {};
 TEST_P(GpuVersusReference, MatchesTheDoublePrecisionReferenceAt256) {
     const Scan scan = GetParam();
     auto spec = test::realScan(scan.name);
-    if (!spec) GTEST_SKIP() << "missing scan " << scan.name;
+    if (!spec) return test::missingData("scan " + scan.name);
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset(scan.preset, t->stats);
@@ -56,7 +56,7 @@ INSTANTIATE_TEST_SUITE_P(RealScans, GpuVersusReference,
 // No seams: a store of 32^3 bricks renders like a store holding the volume in one brick.
 TEST(RaycasterSeams, BrickedEqualsSingleBrickOnCthead) {
     auto spec = test::realScan("cthead");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan cthead");
     test::glContext();
     auto bricked = test::ingestSpec(*spec, {32, 2, 8});
     auto single = test::ingestSpec(*spec, {256, 2, 8});
@@ -80,7 +80,7 @@ TEST(RaycasterSeams, BrickedEqualsSingleBrickOnCthead) {
 // A GPU budget smaller than the visible working set: several front-to-back batches, same image.
 TEST(RaycasterOutOfCore, BudgetSmallerThanTheWorkingSetGivesTheSameImage) {
     auto spec = test::realScan("cthead");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan cthead");
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("ct-skin", t->stats);
@@ -103,7 +103,7 @@ TEST(RaycasterOutOfCore, BudgetSmallerThanTheWorkingSetGivesTheSameImage) {
 // Early termination at t changes no pixel by more than (1 - t) + 1/255.
 TEST(RaycasterEarlyTermination, ChangesNoPixelByMoreThanOneMinusThreshold) {
     auto spec = test::realScan("cthead");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan cthead");
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("ct-skin", t->stats);
@@ -129,7 +129,7 @@ TEST(RaycasterEarlyTermination, ChangesNoPixelByMoreThanOneMinusThreshold) {
 // Brick skipping changes no pixel beyond 1/255, and skips something on sparse data.
 TEST(RaycasterBrickSkipping, ChangesNoPixelOnSparseAngiography) {
     auto spec = test::realScan("CT_AVM");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan CT_AVM");
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("vessels", t->stats);

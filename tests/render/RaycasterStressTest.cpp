@@ -59,7 +59,7 @@ RenderOptions small(std::uint32_t edge = 128) {
 
 TEST(RaycasterStress, CameraInsideTheVolumeStartsRaysAtTheEye) {
     auto spec = test::realScan("headsq");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan headsq");
     test::glContext();
     auto t = test::ingestSpec(*spec, {16, 2, 8});
     const auto tf = TransferFunction::preset("ct-skin", t->stats);
@@ -113,7 +113,7 @@ TEST(RaycasterStress, GrazingRaysAlongTheTopFaceStayFiniteAndSeamless) {
 
 TEST(RaycasterStress, NonCubicSpacingOfCtheadMatchesReference) {
     auto spec = test::realScan("cthead"); // 1 x 1 x 2 mm
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan cthead");
     test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
@@ -124,7 +124,7 @@ TEST(RaycasterStress, NonCubicSpacingOfCtheadMatchesReference) {
 
 TEST(RaycasterStress, SignedSixteenBitDicomMatchesReference) {
     auto spec = test::realScan("pancreas"); // i16, HU -1000..1988
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan pancreas");
     test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
     ASSERT_EQ(t->store->info().volume.type, brickstore::VoxelType::I16);
@@ -135,7 +135,7 @@ TEST(RaycasterStress, SignedSixteenBitDicomMatchesReference) {
 
 TEST(RaycasterStress, FloatDataMatchesReference) {
     auto spec = test::realScan("hydrogen"); // f32 0..1
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan hydrogen");
     test::glContext();
     auto t = test::ingestSpec(*spec, {16, 2, 8});
     ASSERT_EQ(t->store->info().volume.type, brickstore::VoxelType::F32);
@@ -147,7 +147,7 @@ TEST(RaycasterStress, FloatDataMatchesReference) {
 // A TF opaque only at one value between two integers: samples between voxels reach it.
 TEST(RaycasterStress, OneValueWidePeakIsRenderedAndNeverSkipped) {
     auto spec = test::realScan("CT_AVM");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan CT_AVM");
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = peakTf(100.5, 0.5, t->stats);
@@ -195,7 +195,7 @@ TEST(RaycasterStress, PeakStrictlyBetweenVoxelValuesKeepsItsBrick) {
 
 TEST(RaycasterStress, StepsFromFiveHundredthsToFourVoxelsMatchReference) {
     auto spec = test::realScan("headsq");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan headsq");
     test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("ct-bone", t->stats);

@@ -15,7 +15,7 @@ namespace {
 
 struct Output {
     int exitCode = -1;
-    std::string text;  ///< stdout and stderr together
+    std::string text; ///< stdout and stderr together
 };
 
 Output brickcast(const std::string& args, const std::string& env = "") {
@@ -24,16 +24,19 @@ Output brickcast(const std::string& args, const std::string& env = "") {
     FILE* p = ::popen(cmd.c_str(), "r");
     if (!p) return out;
     std::array<char, 4096> buf{};
-    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.text.append(buf.data(), n);
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;)
+        out.text.append(buf.data(), n);
     const int status = ::pclose(p);
     out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return out;
 }
 
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+bool contains(const std::string& text, const std::string& part) {
+    return text.find(part) != std::string::npos;
+}
 
 class RenderCli : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override {
         store = dir.file("phantom.bcs");
         auto r = brickcast("ingest synth:phantom --dims 64,64,48 --brick 16 -o " + store);
@@ -44,10 +47,13 @@ protected:
 };
 
 TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
-    const std::string gpu = dir.file("gpu.png"), ref = dir.file("ref.png"), stats = dir.file("s.json");
-    auto a = brickcast("render " + store + " -o " + gpu + " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --stats " + stats);
+    const std::string gpu = dir.file("gpu.png"), ref = dir.file("ref.png"),
+                      stats = dir.file("s.json");
+    auto a = brickcast("render " + store + " -o " + gpu +
+                       " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --stats " + stats);
     ASSERT_EQ(a.exitCode, 0) << a.text;
-    auto b = brickcast("render " + store + " -o " + ref + " --size 96,64 --tf ct-bone --orbit 40,25 --reference");
+    auto b = brickcast("render " + store + " -o " + ref +
+                       " --size 96,64 --tf ct-bone --orbit 40,25 --reference");
     ASSERT_EQ(b.exitCode, 0) << b.text;
     const Image ga = readPng(gpu), rb = readPng(ref);
     EXPECT_EQ(ga.width, 96u);
@@ -70,7 +76,8 @@ TEST_F(RenderCli, RepeatDrawsWarmFramesOfTheSameImage) {
         const std::string args = " --size 64,48 --tf ct-bone --orbit 40,25 --renderer " + renderer;
         auto a = brickcast("render " + store + " -o " + one + args);
         ASSERT_EQ(a.exitCode, 0) << a.text;
-        auto b = brickcast("render " + store + " -o " + three + args + " --repeat 3 --stats " + stats);
+        auto b =
+            brickcast("render " + store + " -o " + three + args + " --repeat 3 --stats " + stats);
         ASSERT_EQ(b.exitCode, 0) << b.text;
         EXPECT_TRUE(contains(b.text, "3 frames: first")) << b.text;
         EXPECT_LE(compareImages(readPng(one), readPng(three)).maxAbs, 1.0 / 255.0) << renderer;
@@ -87,12 +94,13 @@ TEST_F(RenderCli, RepeatDrawsWarmFramesOfTheSameImage) {
 // `brickcast bench` on the smallest real scan: every technique set of every path, speed-ups
 // over plain taken in the run, errors against the reference, a step sweep; bad lists named.
 TEST(BenchCli, PrintsEveryTechniqueSetWithErrorsAndASweepAndNamesBadInput) {
-    if (!test::realScan("hydrogen")) GTEST_SKIP() << "missing hydrogen";
+    if (!test::realScan("hydrogen")) return test::missingData("scan hydrogen");
     test::TempDir dir;
     const std::string csv = dir.file("bench.csv");
     auto r = brickcast("bench --data " + std::string(BC_SHARED_DATA_DIR) +
                        " --datasets hydrogen --sizes 32 --frames 2 --steps 1,2 --no-rebuild-512"
-                       " --no-generated --csv " + csv);
+                       " --no-generated --csv " +
+                       csv);
     ASSERT_EQ(r.exitCode, 0) << r.text;
     std::ifstream f(csv);
     std::string line;
@@ -111,7 +119,8 @@ TEST(BenchCli, PrintsEveryTechniqueSetWithErrorsAndASweepAndNamesBadInput) {
     EXPECT_EQ(paths, 14) << "7 technique sets x 2 paths";
     EXPECT_EQ(sweeps, 2);
     EXPECT_EQ(plain, 2);
-    auto bad = brickcast("bench --datasets hydrogen --paths spiral --no-rebuild-512 --no-generated");
+    auto bad =
+        brickcast("bench --datasets hydrogen --paths spiral --no-rebuild-512 --no-generated");
     EXPECT_NE(bad.exitCode, 0);
     EXPECT_TRUE(contains(bad.text, "spiral")) << bad.text;
     auto none = brickcast("bench --datasets nosuchscan --no-generated");
@@ -123,15 +132,17 @@ TEST(BenchCli, PrintsEveryTechniqueSetWithErrorsAndASweepAndNamesBadInput) {
 // points, as the splatter's own counts say), the raycaster sweep beside it, errors against
 // the reference; bad sweeps named.
 TEST(SplatBenchCli, PrintsTheFigure9ViewsBesideTheRaycasterSweepAndNamesBadInput) {
-    if (!test::realScan("hydrogen")) GTEST_SKIP() << "missing hydrogen";
+    if (!test::realScan("hydrogen")) return test::missingData("scan hydrogen");
     test::TempDir dir;
     const std::string csv = dir.file("splat.csv");
     auto r = brickcast("bench-splat --data " + std::string(BC_SHARED_DATA_DIR) +
                        " --datasets hydrogen,checker --size 48 --frames 1 --steps 1,2"
-                       " --supersampling 1 --csv " + csv);
+                       " --supersampling 1 --csv " +
+                       csv);
     ASSERT_EQ(r.exitCode, 0) << r.text;
     EXPECT_TRUE(contains(r.text, "| All splats | Mixed | All points |")) << r.text;
-    EXPECT_TRUE(contains(r.text, "| checker box 100^3 | checker | 100x100x100 | 1000000 |")) << r.text;
+    EXPECT_TRUE(contains(r.text, "| checker box 100^3 | checker | 100x100x100 | 1000000 |"))
+        << r.text;
     std::ifstream f(csv);
     std::string line;
     std::getline(f, line);
@@ -142,7 +153,8 @@ TEST(SplatBenchCli, PrintsTheFigure9ViewsBesideTheRaycasterSweepAndNamesBadInput
         EXPECT_FALSE(contains(line, "nan")) << line;
         std::vector<std::string> cell;
         std::stringstream in(line);
-        for (std::string c; std::getline(in, c, ',');) cell.push_back(c);
+        for (std::string c; std::getline(in, c, ',');)
+            cell.push_back(c);
         cell.resize(13);
         if (cell[4] == "cpu raycaster") {
             ++raycastRows;
@@ -183,7 +195,8 @@ TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
     test::writeFile(tf, std::string(R"({"points":[{"value":1,"rgba":[1,1,1,2]}]})"));
     auto bad = brickcast("render " + store + " -o " + out + " --tf " + tf);
     EXPECT_NE(bad.exitCode, 0);
-    EXPECT_TRUE(contains(bad.text, "bad.json") && contains(bad.text, "points[0].rgba[3]")) << bad.text;
+    EXPECT_TRUE(contains(bad.text, "bad.json") && contains(bad.text, "points[0].rgba[3]"))
+        << bad.text;
     auto preset = brickcast("render " + store + " -o " + out + " --tf no-such-preset");
     EXPECT_NE(preset.exitCode, 0);
     EXPECT_TRUE(contains(preset.text, "ct-bone")) << "lists the presets: " << preset.text;
@@ -208,7 +221,7 @@ TEST(RaycasterInteractive, DrawsACoarserLevelWhenTheViewExceedsTheBudgetAndRepor
     auto t = test::ingestStore(*source, {16, 2, 8});
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
-    Raycaster raycaster({1ull << 20});  // 1 MiB: 64 slots of 20^3 u8... fewer than level 0 needs
+    Raycaster raycaster({1ull << 20}); // 1 MiB: 64 slots of 20^3 u8... fewer than level 0 needs
     RenderOptions o;
     o.width = o.height = 96;
     FrameStats full, fast;

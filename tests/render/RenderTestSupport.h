@@ -15,13 +15,18 @@
 #include "render/TransferFunction.h"
 
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <optional>
 
 namespace bc::test {
 
-/// The process's EGL context, created on first use.
+/// The process's EGL context, created on first use. Fails the test when ctest runs it without
+/// the label "gl" (BC_TEST_NO_GL=1, tests/CMakeLists.txt): it belongs in the gl filter there.
 inline render::EglContext& glContext() {
+    if (const char* noGl = std::getenv("BC_TEST_NO_GL"); noGl && std::string(noGl) == "1")
+        ADD_FAILURE() << "this test needs an EGL context but has no ctest label \"gl\": add it "
+                         "to the gl filter of its executable in tests/CMakeLists.txt";
     static render::EglContext context;
     static bool printed = (std::printf("[gl] %s, %s via %s\n", context.renderer().c_str(),
                                        context.version().c_str(), context.platform().c_str()),

@@ -23,7 +23,9 @@ struct Case {
 };
 
 // Test names and failure messages show the case, not its bytes.
-void PrintTo(const Case& c, std::ostream* os) { *os << c.scan << " " << c.preset; }
+void PrintTo(const Case& c, std::ostream* os) {
+    *os << c.scan << " " << c.preset;
+}
 
 /// Every technique set of the benchmark except early termination, against plain.
 struct Technique {
@@ -64,11 +66,13 @@ std::vector<std::uint64_t> checkPath(TestStore& t, const TransferFunction& tf,
     std::vector<int> frustumFrames(std::size(kTechniques), 0);
     for (std::size_t f = 0; f < cameras.size(); ++f) {
         FrameStats s;
-        const Image reference = test::gpuFrame(t, plain, tf, cameras[f], options(SkipMode::None), &s);
+        const Image reference =
+            test::gpuFrame(t, plain, tf, cameras[f], options(SkipMode::None), &s);
         samples[0] += s.samples;
         for (std::size_t i = 0; i < std::size(kTechniques); ++i) {
-            const Image image = test::gpuFrame(t, *accelerated[i], tf, cameras[f],
-                                               options(kTechniques[i].skip, kTechniques[i].frustums), &s);
+            const Image image =
+                test::gpuFrame(t, *accelerated[i], tf, cameras[f],
+                               options(kTechniques[i].skip, kTechniques[i].frustums), &s);
             samples[i + 1] += s.samples;
             frustumFrames[i] += s.occlusionUsed;
             const double maxAbs = compareImages(image, reference).maxAbs;
@@ -105,7 +109,7 @@ class SkippingInvariant : public ::testing::TestWithParam<Case> {};
 TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOverA72FrameOrbit) {
     const Case c = GetParam();
     auto t = caseStore(c);
-    if (!t) GTEST_SKIP() << "missing scan " << c.scan;
+    if (!t) return test::missingData("scan " + c.scan);
     const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     std::vector<Camera> path;
@@ -118,7 +122,7 @@ TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOverA72FrameOrbit) {
 TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver50RandomJumps) {
     const Case c = GetParam();
     auto t = caseStore(c);
-    if (!t) GTEST_SKIP() << "missing scan " << c.scan;
+    if (!t) return test::missingData("scan " + c.scan);
     const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     std::mt19937 rng(20261201);
@@ -134,16 +138,15 @@ INSTANTIATE_TEST_SUITE_P(RealScans, SkippingInvariant,
                                            Case{"CT_AVM", "vessels"}, Case{"frog", "mr"},
                                            Case{"pancreas", "ct-bone"}, Case{"pancreas", "ct-skin"},
                                            Case{"Iguana", "ct-bone"}, Case{"Iguana", "ct-skin"},
-                                           Case{"gaffer_smoke", "smoke"},
-                                           Case{"hydrogen", "smoke"}, Case{"headsq", "mr"},
-                                           Case{"headsq", "ct-bone"}),
+                                           Case{"gaffer_smoke", "smoke"}, Case{"hydrogen", "smoke"},
+                                           Case{"headsq", "mr"}, Case{"headsq", "ct-bone"}),
                          caseName);
 
 // Octrees leap over the empty space inside non-empty bricks of sparse angiography: fewer
 // samples than brick skipping alone, the same image.
 TEST(OctreeSkipping, LeapsInsideBricksOfSparseAngiographyWithoutChangingAPixel) {
     auto spec = test::realScan("CT_AVM");
-    if (!spec) GTEST_SKIP();
+    if (!spec) return test::missingData("scan CT_AVM");
     test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
     const auto tf = TransferFunction::preset("vessels", t->stats);
@@ -184,7 +187,7 @@ class FrustumInvariant : public ::testing::TestWithParam<Case> {};
 TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt128) {
     const Case c = GetParam();
     auto t = caseStore(c);
-    if (!t) GTEST_SKIP() << "missing scan " << c.scan;
+    if (!t) return test::missingData("scan " + c.scan);
     const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     gEdge = 128;
@@ -197,9 +200,9 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
     const int frames = c.orbitFrames + 20;
     for (int f = 0; f < frames; ++f) {
         // the orbit, then 20 random jumps
-        const Camera camera = f < c.orbitFrames
-                                  ? Camera::orbit(box, 360.0 * f / c.orbitFrames, 20.0, c.orbitDistance)
-                                     : Camera::orbit(box, az(rng), el(rng), dist(rng));
+        const Camera camera =
+            f < c.orbitFrames ? Camera::orbit(box, 360.0 * f / c.orbitFrames, 20.0, c.orbitDistance)
+                              : Camera::orbit(box, az(rng), el(rng), dist(rng));
         FrameStats sp, so, sf;
         RenderOptions po = options(SkipMode::None), oo = options(SkipMode::All),
                       fo = options(SkipMode::All, true);
@@ -231,8 +234,7 @@ INSTANTIATE_TEST_SUITE_P(RealScans, FrustumInvariant,
                          ::testing::Values(Case{"cthead", "ct-skin"}, Case{"CT_AVM", "vessels"},
                                            Case{"frog", "mr", 0.42, true, 36},
                                            Case{"pancreas", "ct-bone", 0.28, true, 36},
-                                           Case{"Iguana", "ct-bone"},
-                                           Case{"gaffer_smoke", "smoke"},
+                                           Case{"Iguana", "ct-bone"}, Case{"gaffer_smoke", "smoke"},
                                            Case{"hydrogen", "smoke"}, Case{"headsq", "mr"}),
                          caseName);
 

@@ -502,7 +502,7 @@ class TransferFunctionPresetTest : public ::testing::TestWithParam<Scan> {};
 
 TEST_P(TransferFunctionPresetTest, EveryPresetLeavesTheBackgroundBinTransparentAndShowsSomething) {
     const Scan& scan = GetParam();
-    if (!test::haveData(scan.input)) GTEST_SKIP() << scan.input << " not in ../shared/data";
+    if (!test::haveData(scan.input)) return test::missingData(scan.input);
     const auto stats = scanStats(scan);
     const std::size_t mode = stats.modeBin();
     const double binWidth = (stats.valueMax - stats.valueMin) / double(stats.histogram.size());

@@ -1,20 +1,7 @@
-#include "render/detail/RaycastShader.h"
-
-namespace bc::render::detail {
-
-const std::string& raycastVertexShader() {
-    static const std::string s = R"(#version 450 core
-void main() {
-    vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-)";
-    return s;
-}
-
-// The optical model is render/OPTICS.md; ReferenceRenderer.cpp is its double-precision twin.
-const std::string& raycastFragmentShader() {
-    static const std::string s = R"(#version 450 core
+#version 450 core
+// The raycaster: one full-screen pass per front-to-back brick batch. The optical model is
+// render/OPTICS.md; ReferenceRenderer.cpp is its double-precision twin. Page-table entry kinds
+// (-1 absent, -2 constant, -3 deferred) are render/detail/RaycastShader.h's kPage*.
 layout(binding = 0) uniform sampler3D uPool;
 layout(binding = 1) uniform sampler1D uTf;
 layout(binding = 2) uniform sampler2D uPrev;
@@ -244,8 +231,3 @@ void main() {
     if (leaps > 0u) atomicAdd(leapCount, leaps);
     outColor = acc;
 }
-)";
-    return s;
-}
-
-} // namespace bc::render::detail
