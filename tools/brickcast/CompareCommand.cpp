@@ -2,7 +2,7 @@
 // are apart (max abs, RMSE, PSNR, SSIM), and optionally a picture of where.
 #include "render/Image.h"
 #include "render/ImageMetrics.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>

@@ -15,8 +15,8 @@
 #include "client/Error.h"
 #include "client/Orbit.h"
 #include "server/DaemonConfig.h"
-#include "server/cli/BenchDatasets.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/BenchDatasets.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 

@@ -1,4 +1,4 @@
-#include "server/cli/BenchReport.h"
+#include "tools/brickcast/BenchReport.h"
 
 #include <cmath>
 #include <cstdio>

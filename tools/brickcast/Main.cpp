@@ -1,7 +1,7 @@
 // brickcast: ingest volumes into brick stores and inspect them (later: render, bench).
 #include "brickstore/Error.h"
 #include "render/Error.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 #include <cstdio>

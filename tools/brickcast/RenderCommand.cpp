@@ -11,7 +11,7 @@
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 #include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>

@@ -23,8 +23,8 @@
 #include "render/ImageMetrics.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
-#include "server/cli/BenchDatasets.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/BenchDatasets.h"
+#include "tools/brickcast/Commands.h"
 #include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>

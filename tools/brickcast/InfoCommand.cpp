@@ -1,6 +1,6 @@
 // brickcast info STORE [--json]: what a store holds, from its header and index alone.
 #include "brickstore/BrickStore.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 #include <algorithm>

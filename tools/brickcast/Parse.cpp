@@ -1,4 +1,4 @@
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 
 #include <charconv>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "server/cli/BenchDatasets.h"
+#include "tools/brickcast/BenchDatasets.h"
 
 #include <algorithm>
 #include <cstdio>

@@ -1,6 +1,6 @@
 // brickcast verify STORE: full scrub; non-zero exit naming every corrupt brick.
 #include "brickstore/BrickStore.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 #include <chrono>

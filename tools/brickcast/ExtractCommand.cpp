@@ -2,7 +2,7 @@
 #include "brickstore/BrickStore.h"
 #include "brickstore/Error.h"
 #include "brickstore/StoreVolume.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 #include <cstdio>

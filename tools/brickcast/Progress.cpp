@@ -1,4 +1,4 @@
-#include "server/cli/Progress.h"
+#include "tools/brickcast/Progress.h"
 
 #include <cstdio>
 #include <unistd.h>

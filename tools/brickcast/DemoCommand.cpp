@@ -3,7 +3,7 @@
 #include "brickstore/BrickStore.h"
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 #include <cstdio>

@@ -17,9 +17,9 @@
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
-#include "server/cli/BenchDatasets.h"
-#include "server/cli/BenchReport.h"
-#include "server/cli/Commands.h"
+#include "tools/brickcast/BenchDatasets.h"
+#include "tools/brickcast/BenchReport.h"
+#include "tools/brickcast/Commands.h"
 #include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>

@@ -2,8 +2,8 @@
 #include "brickstore/Error.h"
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
-#include "server/cli/Commands.h"
-#include "server/cli/Progress.h"
+#include "tools/brickcast/Commands.h"
+#include "tools/brickcast/Progress.h"
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
