@@ -21,8 +21,8 @@ namespace {
 using namespace bc;
 
 struct Options {
-    std::string host = "127.0.0.1", token, volume, tf, tfSwitch, codec = "zstd",
-                renderer = "gpu", outputDir, cameraFile, size = "256,256";
+    std::string host = "127.0.0.1", token, volume, tf, tfSwitch, codec = "zstd", renderer = "gpu",
+                outputDir, cameraFile, size = "256,256";
     std::uint16_t port = 7411;
     int frames = 36, saveEvery = 1, quality = 0;
     double step = 1.0, elevation = 20.0, distance = 1.0;
@@ -42,7 +42,8 @@ std::vector<protocol::SetCamera> readPath(const std::string& path) {
         protocol::SetCamera c;
         for (auto* v : {&c.eye, &c.target, &c.up})
             for (double& x : *v)
-                if (!(s >> x)) throw std::runtime_error(path + ":" + std::to_string(n) + ": need 9 numbers");
+                if (!(s >> x))
+                    throw std::runtime_error(path + ":" + std::to_string(n) + ": need 9 numbers");
         s >> c.fovYDeg;
         out.push_back(c);
     }
@@ -93,10 +94,14 @@ protocol::RenderOptions renderOptions(const Options& o) {
     r.codec = codecOf(o.codec);
     r.codecQuality = std::uint8_t(o.quality);
     r.quality = protocol::Quality::Refined;
-    if (o.renderer == "cpu") r.renderer = protocol::Renderer::CpuRaycaster;
-    else if (o.renderer == "reference") r.renderer = protocol::Renderer::Reference;
-    else if (o.renderer == "splat") r.renderer = protocol::Renderer::Splatter;
-    else if (o.renderer == "splat-gpu") r.renderer = protocol::Renderer::GpuSplatter;
+    if (o.renderer == "cpu")
+        r.renderer = protocol::Renderer::CpuRaycaster;
+    else if (o.renderer == "reference")
+        r.renderer = protocol::Renderer::Reference;
+    else if (o.renderer == "splat")
+        r.renderer = protocol::Renderer::Splatter;
+    else if (o.renderer == "splat-gpu")
+        r.renderer = protocol::Renderer::GpuSplatter;
     else if (o.renderer != "gpu")
         throw CLI::ValidationError("--renderer", "gpu, cpu, splat, splat-gpu or reference");
     return r;
@@ -129,7 +134,8 @@ int fly(const Options& o) {
         switchTo = o.tfSwitch.substr(0, at);
         switchAt = std::stoi(o.tfSwitch.substr(at + 1));
     }
-    const auto path = o.cameraFile.empty() ? std::vector<protocol::SetCamera>() : readPath(o.cameraFile);
+    const auto path =
+        o.cameraFile.empty() ? std::vector<protocol::SetCamera>() : readPath(o.cameraFile);
     const int frames = path.empty() ? o.frames : int(path.size());
     if (!o.outputDir.empty()) std::filesystem::create_directories(o.outputDir);
     std::vector<double> latency;
@@ -138,31 +144,38 @@ int fly(const Options& o) {
     if (o.continuous) c.requestFrame(protocol::FrameMode::ContinuousOn);
     for (int f = 0; f < frames; ++f) {
         if (f == switchAt) c.setTransferFunction(preset(switchTo));
-        protocol::SetCamera cam = path.empty() ? client::orbitCamera(info, 360.0 * f / frames, o.elevation, o.distance)
-                                               : path[std::size_t(f)];
+        protocol::SetCamera cam =
+            path.empty() ? client::orbitCamera(info, 360.0 * f / frames, o.elevation, o.distance)
+                         : path[std::size_t(f)];
         cam.cameraId = std::uint32_t(f + 1);
         const auto sent = std::chrono::steady_clock::now();
         c.setCamera(cam);
         if (!o.continuous) c.requestFrame();
         client::ReceivedFrame frame = c.nextFrame();
-        while (frame.header.cameraId != cam.cameraId) frame = c.nextFrame(); // older views
-        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - sent).count();
+        while (frame.header.cameraId != cam.cameraId)
+            frame = c.nextFrame(); // older views
+        const double ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - sent)
+                .count();
         latency.push_back(ms);
         bytes += frame.wireBytes;
-        std::printf("frame %3d  camera %3u  %.1f ms  render %.1f ms  encode %.2f ms  %llu bytes%s\n", f,
-                    frame.header.cameraId, ms, frame.header.renderMs, frame.header.encodeMs,
-                    (unsigned long long)frame.wireBytes, frame.header.refined ? "" : "  (interactive)");
+        std::printf(
+            "frame %3d  camera %3u  %.1f ms  render %.1f ms  encode %.2f ms  %llu bytes%s\n", f,
+            frame.header.cameraId, ms, frame.header.renderMs, frame.header.encodeMs,
+            (unsigned long long)frame.wireBytes, frame.header.refined ? "" : "  (interactive)");
         if (!o.outputDir.empty() && f % std::max(o.saveEvery, 1) == 0) {
             char name[64];
             std::snprintf(name, sizeof name, "frame_%04d.png", f);
             writePng((std::filesystem::path(o.outputDir) / name).string(), frame);
         }
     }
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::printf("\n%d frames of %s in %.2f s: %.2f frames/s; latency p50 %.1f ms, p99 %.1f ms, max "
                 "%.1f ms; %.2f MiB received (%.1f KiB a frame)\n",
                 frames, info.name.c_str(), seconds, frames / seconds, percentile(latency, 50),
-                percentile(latency, 99), percentile(latency, 100), double(c.bytesReceived()) / (1 << 20),
+                percentile(latency, 99), percentile(latency, 100),
+                double(c.bytesReceived()) / (1 << 20),
                 double(bytes) / 1024.0 / std::max(frames, 1));
     c.bye();
     return 0;
@@ -178,21 +191,29 @@ int main(int argc, char** argv) {
     app.add_option("--token", o.token, "Token, when the server requires one");
     app.add_flag("--list", o.list, "List the server's volumes and exit");
     app.add_option("--volume", o.volume, "Catalog name (default: the first)");
-    app.add_option("--frames", o.frames, "Orbit frames")->capture_default_str()->check(CLI::Range(1, 100000));
+    app.add_option("--frames", o.frames, "Orbit frames")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 100000));
     app.add_option("--elevation", o.elevation, "Orbit elevation, degrees")->capture_default_str();
-    app.add_option("--distance", o.distance, "Orbit distance (1 = the volume fills the view)")->capture_default_str();
-    app.add_option("--camera-path", o.cameraFile, "Camera file instead of the orbit (ex ey ez tx ty tz ux uy uz [fov] a line)");
+    app.add_option("--distance", o.distance, "Orbit distance (1 = the volume fills the view)")
+        ->capture_default_str();
+    app.add_option("--camera-path", o.cameraFile,
+                   "Camera file instead of the orbit (ex ey ez tx ty tz ux uy uz [fov] a line)");
     app.add_option("--size", o.size, "Frame W,H")->capture_default_str();
     app.add_option("--step", o.step, "Sample step, voxels")->capture_default_str();
     app.add_option("--tf", o.tf, "Transfer-function preset");
-    app.add_option("--tf-switch", o.tfSwitch, "PRESET@FRAME: switch the transfer function mid-flight");
+    app.add_option("--tf-switch", o.tfSwitch,
+                   "PRESET@FRAME: switch the transfer function mid-flight");
     app.add_option("--codec", o.codec, "raw, zstd, delta or jpeg")->capture_default_str();
-    app.add_option("--quality", o.quality, "JPEG quality or zstd level (0 = default)")->check(CLI::Range(0, 100));
-    app.add_option("--renderer", o.renderer, "gpu, cpu, splat, splat-gpu or reference")->capture_default_str();
+    app.add_option("--quality", o.quality, "JPEG quality or zstd level (0 = default)")
+        ->check(CLI::Range(0, 100));
+    app.add_option("--renderer", o.renderer, "gpu, cpu, splat, splat-gpu or reference")
+        ->capture_default_str();
     app.add_flag("--continuous", o.continuous, "Continuous mode instead of one request a frame");
     app.add_option("-o,--output-dir", o.outputDir, "Save frames as PNG here");
     app.add_option("--save-every", o.saveEvery, "Save every Nth frame")->capture_default_str();
-    app.add_option("--timeout-ms", o.timeoutMs, "Longest wait for any reply")->capture_default_str();
+    app.add_option("--timeout-ms", o.timeoutMs, "Longest wait for any reply")
+        ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
     try {
         return fly(o);

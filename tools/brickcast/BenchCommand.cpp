@@ -17,10 +17,10 @@
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
+#include "tools/TransferFunctionFile.h"
 #include "tools/brickcast/BenchDatasets.h"
 #include "tools/brickcast/BenchReport.h"
 #include "tools/brickcast/Commands.h"
-#include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>
 
@@ -284,7 +284,7 @@ void runBench(const BenchOptions& o) {
             *s.store, brickstore::BrickCacheConfig{4ull << 30});
         if (!d.budgetMb) s.volume = std::make_unique<render::ReferenceVolume>(*s.store, 0);
         s.tf = tools::loadTransferFunction(d.preset,
-                                              render::VolumeValueStats::fromStore(s.store->info()));
+                                           render::VolumeValueStats::fromStore(s.store->info()));
         benchScene(s, d, o, report);
         stepSweep(s, d, o, report);
     }

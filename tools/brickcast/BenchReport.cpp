@@ -19,7 +19,9 @@ std::string psnrText(double psnr) {
 }
 
 /// gnuplot reads "inf" badly: the plot caps PSNR at 150 dB.
-double plotted(double psnr) { return std::isfinite(psnr) ? std::min(psnr, 150.0) : 150.0; }
+double plotted(double psnr) {
+    return std::isfinite(psnr) ? std::min(psnr, 150.0) : 150.0;
+}
 
 std::string ssimText(double ssim) {
     if (std::isnan(ssim)) return "n/a";
@@ -34,8 +36,7 @@ double BenchReport::plainMs(const BenchRow& row) const {
     for (const auto& r : mRows)
         if (r.kind == "path" && r.technique.starts_with("plain") &&
             r.technique.ends_with(" (CPU)") == row.technique.ends_with(" (CPU)") &&
-            r.dataset == row.dataset &&
-            r.tf == row.tf && r.path == row.path && r.size == row.size)
+            r.dataset == row.dataset && r.tf == row.tf && r.path == row.path && r.size == row.size)
             return r.ms;
     return 0.0;
 }
@@ -51,8 +52,8 @@ void BenchReport::printMarkdown() const {
                     "%.2f | %.0f | %d |\n",
                     r.dataset.c_str(), r.tf.c_str(), r.path.c_str(), r.size, r.technique.c_str(),
                     r.ms, plain > 0 ? plain / r.ms : 0.0, r.spp, r.overOracle,
-                    psnrText(r.psnr).c_str(), ssimText(r.ssim).c_str(), r.octreeRebuildMs, r.frustumBuildMs,
-                    r.frustumTriangles, r.frustumFrames);
+                    psnrText(r.psnr).c_str(), ssimText(r.ssim).c_str(), r.octreeRebuildMs,
+                    r.frustumBuildMs, r.frustumTriangles, r.frustumFrames);
     }
     std::printf("\nRun time against error (all techniques, orbit; error against the CPU reference "
                 "at the finest step)\n\n| dataset / TF | size | step | ms/frame | samples/px | "
@@ -66,15 +67,16 @@ void BenchReport::printMarkdown() const {
 
 void BenchReport::writeCsv(const std::string& path) const {
     std::ofstream f(path);
-    f << "kind,dataset,tf,path,size,technique,step,ms,speedup,samples_per_pixel,samples_over_oracle,"
+    f << "kind,dataset,tf,path,size,technique,step,ms,speedup,samples_per_pixel,samples_over_"
+         "oracle,"
          "psnr_db,ssim,octree_rebuild_ms,frustum_build_ms,frustum_triangles,frustum_frames\n";
     for (const auto& r : mRows) {
         const double plain = r.kind == "path" ? plainMs(r) : 0.0;
         f << r.kind << ',' << r.dataset << ',' << r.tf << ',' << r.path << ',' << r.size << ','
           << r.technique << ',' << r.step << ',' << r.ms << ',' << (plain > 0 ? plain / r.ms : 0)
-          << ',' << r.spp << ',' << r.overOracle << ',' << psnrText(r.psnr) << ',' << ssimText(r.ssim)
-          << ',' << r.octreeRebuildMs << ',' << r.frustumBuildMs << ',' << r.frustumTriangles
-          << ',' << r.frustumFrames << '\n';
+          << ',' << r.spp << ',' << r.overOracle << ',' << psnrText(r.psnr) << ','
+          << ssimText(r.ssim) << ',' << r.octreeRebuildMs << ',' << r.frustumBuildMs << ','
+          << r.frustumTriangles << ',' << r.frustumFrames << '\n';
     }
     if (!f) throw std::runtime_error(path + ": cannot write the CSV");
 }
@@ -95,7 +97,8 @@ void BenchReport::writePlot(const std::string& path, const std::string& scratch)
         }
         std::ofstream out(r.kind == "sweep" ? sweep : sets, std::ios::app);
         std::size_t kind = 0; // gnuplot point type of the technique set
-        for (; kind < mTechniques.size() && mTechniques[kind] != r.technique; ++kind) {}
+        for (; kind < mTechniques.size() && mTechniques[kind] != r.technique; ++kind) {
+        }
         if (kind == mTechniques.size()) mTechniques.push_back(r.technique);
         out << r.ms << ' ' << plotted(r.psnr) << ' ' << kind + 4 << '\n';
     }
@@ -121,7 +124,8 @@ void BenchReport::writePlot(const std::string& path, const std::string& scratch)
     }
     const std::string command = "gnuplot '" + script + "'";
     if (std::system(command.c_str()) != 0)
-        throw std::runtime_error("--plot: gnuplot failed or is missing (apt-get install gnuplot-nox)");
+        throw std::runtime_error(
+            "--plot: gnuplot failed or is missing (apt-get install gnuplot-nox)");
 }
 
 } // namespace bc::cli

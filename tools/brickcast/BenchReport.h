@@ -14,7 +14,8 @@ struct BenchRow {
     std::uint32_t size = 0;
     double step = 1.0;
     double ms = 0, spp = 0;
-    double overOracle = std::nan(""), psnr = std::nan(""), ssim = std::nan(""); ///< NaN: no reference
+    double overOracle = std::nan(""), psnr = std::nan(""),
+           ssim = std::nan(""); ///< NaN: no reference
     double octreeRebuildMs = 0, frustumBuildMs = 0, frustumTriangles = 0;
     int frustumFrames = 0;
 };

@@ -30,8 +30,9 @@ void addLoadtestCommand(CLI::App& app);
 
 /// Renders one frame of a store on the GPU (or the CPU reference) and writes a PNG; prints
 /// the frame's summary line. @throw what the store, TF and renderer throw.
-void renderStoreToPng(const std::string& storePath, const std::string& output, const std::string& tfName,
-                      const std::string& orbit, const std::string& size, bool reference);
+void renderStoreToPng(const std::string& storePath, const std::string& output,
+                      const std::string& tfName, const std::string& orbit, const std::string& size,
+                      bool reference);
 
 /// "256,256,113" -> {256,256,113}. @throw std::invalid_argument naming `what`.
 /// "a,b,c" -> numbers, each finite; between minCount and maxCount of them.

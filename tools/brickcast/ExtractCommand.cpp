@@ -25,7 +25,8 @@ void runExtract(const std::string& path, const std::string& output, std::uint32_
         for (std::uint64_t z = 0; z < info.dims[2];) {
             std::uint64_t n = std::min(chunk, info.dims[2] - z);
             source->readSlices(n, std::span(buf).first(n * info.sliceBytes()));
-            out.write(reinterpret_cast<const char*>(buf.data()), std::streamsize(n * info.sliceBytes()));
+            out.write(reinterpret_cast<const char*>(buf.data()),
+                      std::streamsize(n * info.sliceBytes()));
             if (!out) throw brickstore::StoreIoError(temp + ": write failed");
             z += n;
         }
@@ -36,10 +37,11 @@ void runExtract(const std::string& path, const std::string& output, std::uint32_
         std::remove(temp.c_str());
         throw;
     }
-    std::fprintf(stderr, "%s: level %u, %llu x %llu x %llu %s, spacing %g x %g x %g mm\n", output.c_str(), level,
-                 (unsigned long long)info.dims[0], (unsigned long long)info.dims[1],
-                 (unsigned long long)info.dims[2], std::string(brickstore::voxelTypeName(info.type)).c_str(),
-                 info.spacingMm[0], info.spacingMm[1], info.spacingMm[2]);
+    std::fprintf(stderr, "%s: level %u, %llu x %llu x %llu %s, spacing %g x %g x %g mm\n",
+                 output.c_str(), level, (unsigned long long)info.dims[0],
+                 (unsigned long long)info.dims[1], (unsigned long long)info.dims[2],
+                 std::string(brickstore::voxelTypeName(info.type)).c_str(), info.spacingMm[0],
+                 info.spacingMm[1], info.spacingMm[2]);
 }
 
 } // namespace
@@ -50,8 +52,10 @@ void addExtractCommand(CLI::App& app) {
     auto level = std::make_shared<std::uint32_t>(0);
     auto* cmd = app.add_subcommand("extract", "Write one pyramid level back out as a raw file");
     cmd->add_option("STORE", *path, "Store file")->required();
-    cmd->add_option("-o,--output", *output, "Raw file (native type, little-endian, x fastest)")->required();
-    cmd->add_option("--level", *level, "Pyramid level (0 = full resolution)")->capture_default_str();
+    cmd->add_option("-o,--output", *output, "Raw file (native type, little-endian, x fastest)")
+        ->required();
+    cmd->add_option("--level", *level, "Pyramid level (0 = full resolution)")
+        ->capture_default_str();
     cmd->callback([path, output, level] { runExtract(*path, *output, *level); });
 }
 

@@ -76,8 +76,8 @@ protocol::SetTransferFunction windowTf(double lo) {
     tf.shadingSource = protocol::ShadingSource::Message;
     tf.shading = true;
     auto point = [](double f, float a) {
-        return protocol::TfPoint{protocol::Placement::Fraction, std::clamp(f, 0.0, 1.0),
-                                 {1.0f, 0.85f, 0.7f, a}};
+        return protocol::TfPoint{
+            protocol::Placement::Fraction, std::clamp(f, 0.0, 1.0), {1.0f, 0.85f, 0.7f, a}};
     };
     tf.points = {point(lo, 0.0f), point(lo + 0.05, 0.04f), point(lo + 0.25, 0.3f),
                  point(std::min(lo + 0.3, 1.0), 0.0f)};
@@ -142,8 +142,9 @@ void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, do
                  const ServerDelta& d, std::uint32_t failures) {
     std::printf("\n## brickcast loadtest: %u clients on %s (%s, %s), %.1f s\n\n", o.clients,
                 o.volume.c_str(), o.renderer.c_str(), o.size.c_str(), wallS);
-    std::printf("| Path | Clients | Frames | Frames/s (all its clients) | Latency p50 ms | p99 ms | "
-                "Render p50 ms | Bytes/frame |\n|---|---|---|---|---|---|---|---|\n");
+    std::printf(
+        "| Path | Clients | Frames | Frames/s (all its clients) | Latency p50 ms | p99 ms | "
+        "Render p50 ms | Bytes/frame |\n|---|---|---|---|---|---|---|---|\n");
     auto line = [&](const std::string& path) {
         std::vector<double> latency, render;
         std::map<std::uint32_t, bool> clients;
@@ -161,10 +162,12 @@ void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, do
                     quantile(latency, 0.5), quantile(latency, 0.99), quantile(render, 0.5),
                     bytes / double(latency.size()));
     };
-    for (const auto& p : kPaths) line(p);
+    for (const auto& p : kPaths)
+        line(p);
     line("all");
     const std::string& v = o.volume;
-    const double hHits = d.of("host_cache_hits_total", v), hMiss = d.of("host_cache_misses_total", v);
+    const double hHits = d.of("host_cache_hits_total", v),
+                 hMiss = d.of("host_cache_misses_total", v);
     const double gHits = d.of("gpu_pool_hits_total", v), gUp = d.of("gpu_pool_uploads_total", v);
     const double upBytes = d.of("gpu_pool_bytes_uploaded_total", v);
     const double upRefetched = d.of("gpu_pool_bytes_refetched_total", v);
@@ -193,13 +196,15 @@ void runLoadtest(const LoadtestOptions& o) {
     if (o.frames < 1 || o.frames > 1000000) throw std::invalid_argument("--frames: 1..1000000");
     if (!(o.durationS >= 0 && o.durationS <= 86400))
         throw std::invalid_argument("--duration-s: 0..86400 (0: --frames alone)");
-    if (!(o.timeoutS > 0 && o.timeoutS <= 86400)) throw std::invalid_argument("--timeout-s: (0, 86400]");
+    if (!(o.timeoutS > 0 && o.timeoutS <= 86400))
+        throw std::invalid_argument("--timeout-s: (0, 86400]");
     if (o.tfEvery < 1) throw std::invalid_argument("--tf-every: at least 1");
     const auto paths = splitList(o.paths);
     if (paths.empty()) throw std::invalid_argument("--paths: none given");
     for (const auto& p : paths)
         if (std::find(kPaths.begin(), kPaths.end(), p) == kPaths.end())
-            throw std::invalid_argument("--paths: '" + p + "' is not orbit, zoom, jumps or tf-sweep");
+            throw std::invalid_argument("--paths: '" + p +
+                                        "' is not orbit, zoom, jumps or tf-sweep");
     const auto size = parseNumbers(o.size, "--size", 2, 2);
     if (size[0] < 1 || size[1] < 1 || size[0] > 4096 || size[1] > 4096 ||
         size[0] != std::floor(size[0]) || size[1] != std::floor(size[1]))
@@ -254,7 +259,8 @@ void runLoadtest(const LoadtestOptions& o) {
                     r.client = i;
                     r.frame = f;
                     r.path = path;
-                    r.latencyMs = std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
+                    r.latencyMs =
+                        std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
                     r.renderMs = frame.header.renderMs;
                     r.queueMs = frame.header.queueMs;
                     r.bytes = frame.wireBytes;
@@ -270,18 +276,21 @@ void runLoadtest(const LoadtestOptions& o) {
             std::lock_guard lock(mutex);
             rows.insert(rows.end(), mine.begin(), mine.end());
         });
-    for (auto& t : threads) t.join();
+    for (auto& t : threads)
+        t.join();
     const double wallS = std::chrono::duration<double>(Clock::now() - start).count();
     delta.after = control.stats();
     control.bye();
-    for (const auto& e : errors) std::fprintf(stderr, "loadtest: %s\n", e.c_str());
+    for (const auto& e : errors)
+        std::fprintf(stderr, "loadtest: %s\n", e.c_str());
     std::sort(rows.begin(), rows.end(), [](const FrameRow& a, const FrameRow& b) {
         return a.client != b.client ? a.client < b.client : a.frame < b.frame;
     });
     printReport(o, rows, wallS, delta, std::uint32_t(errors.size()));
     if (!o.csv.empty()) {
         std::ofstream out(o.csv);
-        out << "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_drawn\n";
+        out << "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_"
+               "drawn\n";
         for (const auto& r : rows)
             out << r.client << ',' << r.path << ',' << r.frame << ',' << r.latencyMs << ','
                 << r.renderMs << ',' << r.queueMs << ',' << r.bytes << ',' << r.bytesUploaded << ','
@@ -305,17 +314,20 @@ void addLoadtestCommand(CLI::App& app) {
     cmd->add_option("--token", o->token, "Token, when the server wants one");
     cmd->add_option("--volume", o->volume, "Catalog name to open")->capture_default_str();
     cmd->add_option("--clients", o->clients, "Concurrent clients")->capture_default_str();
-    cmd->add_option("--paths", o->paths, "Camera paths, one per client in turn: orbit, zoom, "
-                                         "jumps, tf-sweep")
+    cmd->add_option("--paths", o->paths,
+                    "Camera paths, one per client in turn: orbit, zoom, "
+                    "jumps, tf-sweep")
         ->capture_default_str();
     cmd->add_option("--frames", o->frames, "Frames per client")->capture_default_str();
     cmd->add_option("--duration-s", o->durationS, "Stop after this long (0: --frames decides)")
         ->capture_default_str();
-    cmd->add_option("--timeout-s", o->timeoutS, "Hard bound on the whole run")->capture_default_str();
+    cmd->add_option("--timeout-s", o->timeoutS, "Hard bound on the whole run")
+        ->capture_default_str();
     cmd->add_option("--tf-every", o->tfEvery, "tf-sweep: frames between transfer functions")
         ->capture_default_str();
     cmd->add_option("--size", o->size, "Frame W,H")->capture_default_str();
-    cmd->add_option("--renderer", o->renderer, "gpu, cpu, splat or splat-gpu")->capture_default_str();
+    cmd->add_option("--renderer", o->renderer, "gpu, cpu, splat or splat-gpu")
+        ->capture_default_str();
     cmd->add_option("--codec", o->codec, "raw, zstd, delta or jpeg")->capture_default_str();
     cmd->add_option("--step", o->step, "Sample step, voxels")->capture_default_str();
     cmd->add_option("--csv", o->csv, "Write every frame as CSV");

@@ -13,7 +13,8 @@ namespace {
 std::vector<std::string> splitComma(const std::string& text) {
     std::vector<std::string> parts;
     std::stringstream ss(text);
-    for (std::string p; std::getline(ss, p, ',');) parts.push_back(p);
+    for (std::string p; std::getline(ss, p, ',');)
+        parts.push_back(p);
     return parts;
 }
 
@@ -47,7 +48,8 @@ std::vector<double> parseNumbers(const std::string& text, const std::string& wha
 
 std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what) {
     auto parts = splitComma(text);
-    if (parts.size() != 3) throw std::invalid_argument(what + ": expected X,Y,Z, got '" + text + "'");
+    if (parts.size() != 3)
+        throw std::invalid_argument(what + ": expected X,Y,Z, got '" + text + "'");
     std::array<std::uint64_t, 3> out{};
     for (int i = 0; i < 3; ++i) {
         const auto& p = parts[i];
@@ -60,7 +62,8 @@ std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::str
 
 std::array<double, 3> parseTripleDouble(const std::string& text, const std::string& what) {
     auto parts = splitComma(text);
-    if (parts.size() != 3) throw std::invalid_argument(what + ": expected A,B,C, got '" + text + "'");
+    if (parts.size() != 3)
+        throw std::invalid_argument(what + ": expected A,B,C, got '" + text + "'");
     std::array<double, 3> out{};
     for (int i = 0; i < 3; ++i) {
         std::size_t used = 0;

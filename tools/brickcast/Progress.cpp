@@ -16,8 +16,8 @@ void ProgressLine::update(const brickstore::IngestProgress& p) {
     double done = p.sourceBytesTotal ? double(p.sourceBytesRead) / double(p.sourceBytesTotal) : 0.0;
     double left = done > 0 ? p.seconds * (1.0 - done) / done : 0.0;
     std::fprintf(stderr, "\r  bricks %llu/%llu  %5.1f%%  %7.1f MB/s  %5.0f s left   ",
-                 (unsigned long long)p.bricksDone, (unsigned long long)p.bricksTotal, 100.0 * done, mbps,
-                 left);
+                 (unsigned long long)p.bricksDone, (unsigned long long)p.bricksTotal, 100.0 * done,
+                 mbps, left);
     std::fflush(stderr);
 }
 

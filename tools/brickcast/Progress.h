@@ -7,14 +7,14 @@
 namespace bc::cli {
 
 class ProgressLine {
-public:
+  public:
     /// Shows progress only when `enabled` and stderr is a terminal.
     explicit ProgressLine(bool enabled);
     void update(const brickstore::IngestProgress& p);
     /// Clears the line.
     void finish();
 
-private:
+  private:
     bool mActive;
     std::chrono::steady_clock::time_point mLastDraw{};
 };

@@ -11,8 +11,8 @@
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
-#include "tools/brickcast/Commands.h"
 #include "tools/TransferFunctionFile.h"
+#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -58,7 +58,7 @@ render::Camera cameraOf(const RenderCliOptions& o, const render::Box& box) {
     } else {
         const auto v = parseNumbers(o.orbit.empty() ? "30,20" : o.orbit, "--orbit", 2, 3);
         c = render::Camera::orbit(box, v[0], v[1], v.size() > 2 ? v[2] : 1.0, o.fov);
-        if (!o.up.empty()) c.up = vec3Of(o.up, "--up");  // e.g. 0,0,-1 for scans stored head-down
+        if (!o.up.empty()) c.up = vec3Of(o.up, "--up"); // e.g. 0,0,-1 for scans stored head-down
     }
     c.orthographic = o.ortho;
     c.validate();
@@ -153,8 +153,8 @@ void runRender(const RenderCliOptions& o) {
     } else {
         if (o.renderer == "gpu" || o.renderer == "splat-gpu")
             context = std::make_unique<render::EglContext>();
-        cache = std::make_unique<brickstore::BrickCache>(*store,
-                                                         brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
+        cache = std::make_unique<brickstore::BrickCache>(
+            *store, brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
         if (o.renderer == "splat") {
             auto splatter = std::make_shared<render::HybridSplatter>();
             draw = [&, splatter](render::FrameStats& s) {
@@ -163,7 +163,8 @@ void runRender(const RenderCliOptions& o) {
             describe = [splatter] {
                 const auto& f = splatter->lastFrame();
                 return "hybrid splatter (CPU, " + std::to_string(f.points) + " points, " +
-                       std::to_string(f.splats) + " splats, " + std::to_string(f.culled) + " culled)";
+                       std::to_string(f.splats) + " splats, " + std::to_string(f.culled) +
+                       " culled)";
             };
         } else if (o.renderer == "splat-gpu") {
             auto splatter = std::make_shared<render::GpuSplatter>();
@@ -181,8 +182,8 @@ void runRender(const RenderCliOptions& o) {
                 return raycaster->render(*store, *cache, tf, camera, options, s);
             };
             describe = [] {
-                return "CPU raycaster (float, " + std::to_string(std::thread::hardware_concurrency()) +
-                       " threads)";
+                return "CPU raycaster (float, " +
+                       std::to_string(std::thread::hardware_concurrency()) + " threads)";
             };
         } else {
             auto raycaster =
@@ -243,7 +244,8 @@ void renderStoreToPng(const std::string& storePath, const std::string& output,
 void addRenderCommand(CLI::App& app) {
     auto o = std::make_shared<RenderCliOptions>();
     auto* cmd = app.add_subcommand(
-        "render", "Render one frame of a store to PNG (GPU or CPU raycaster, or the CPU reference)");
+        "render",
+        "Render one frame of a store to PNG (GPU or CPU raycaster, or the CPU reference)");
     cmd->add_option("STORE", o->store, "Store file")->required();
     cmd->add_option("-o,--output", o->output, "PNG to write")->required();
     cmd->add_option("--size", o->size, "Image W,H")->capture_default_str();

@@ -23,9 +23,9 @@
 #include "render/ImageMetrics.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
+#include "tools/TransferFunctionFile.h"
 #include "tools/brickcast/BenchDatasets.h"
 #include "tools/brickcast/Commands.h"
-#include "tools/TransferFunctionFile.h"
 
 #include <CLI/CLI.hpp>
 
@@ -241,10 +241,11 @@ std::vector<ViewResult> benchDataset(Scene& s, const Dataset& d, const SplatBenc
         r.cullMaxAbs = render::compareImages(splat.first, plain.first).maxAbs;
         if (gpu) {
             render::GpuSplatter splatter(culling);
-            const Timed g = timeFrames(cams, [&](const render::Camera& c, render::HybridSplatStats&) {
-                render::FrameStats st;
-                return splatter.render(*s.store, *s.cache, *s.tf, c, ro, st);
-            });
+            const Timed g =
+                timeFrames(cams, [&](const render::Camera& c, render::HybridSplatStats&) {
+                    render::FrameStats st;
+                    return splatter.render(*s.store, *s.cache, *s.tf, c, ro, st);
+                });
             r.gpuMs = g.ms;
             r.gpuMaxAbs = render::compareImages(g.first, plain.first).maxAbs;
         }
@@ -254,11 +255,12 @@ std::vector<ViewResult> benchDataset(Scene& s, const Dataset& d, const SplatBenc
             render::RenderOptions co = ro;
             co.width = co.height = o.size * rc.supersampling;
             co.stepVoxels = rc.step;
-            const Timed t = timeFrames(cams, [&](const render::Camera& c, render::HybridSplatStats&) {
-                render::FrameStats st;
-                return downsample(raycaster.render(*s.store, *s.cache, *s.tf, c, co, st),
-                                  rc.supersampling);
-            });
+            const Timed t =
+                timeFrames(cams, [&](const render::Camera& c, render::HybridSplatStats&) {
+                    render::FrameStats st;
+                    return downsample(raycaster.render(*s.store, *s.cache, *s.tf, c, co, st),
+                                      rc.supersampling);
+                });
             const auto c = render::compareImages(t.first, reference);
             rc.ms = t.ms;
             rc.psnr = c.psnrDb;
@@ -288,8 +290,9 @@ std::string raycastText(const RaycastConfig* r) {
 void printTables(const std::vector<std::pair<Dataset, std::string>>& sets,
                  const std::vector<std::uint64_t>& visible,
                  const std::vector<std::vector<ViewResult>>& results, const SplatBenchOptions& o) {
-    std::printf("\n## Figure 9 layout: hybrid splatter ms per %u^2 frame (share drawn as splats)\n\n",
-                o.size);
+    std::printf(
+        "\n## Figure 9 layout: hybrid splatter ms per %u^2 frame (share drawn as splats)\n\n",
+        o.size);
     std::printf("| Dataset | TF | Resolution | Non-transparent voxels | All splats | Mixed | "
                 "All points |\n|---|---|---|---|---|---|---|\n");
     for (std::size_t i = 0; i < results.size(); ++i) {
@@ -315,13 +318,13 @@ void printTables(const std::vector<std::pair<Dataset, std::string>>& sets,
             char gpu[48] = "not run";
             if (!std::isnan(r.gpuMs))
                 std::snprintf(gpu, sizeof gpu, "%.0f (%.5f)", r.gpuMs, r.gpuMaxAbs);
-            std::printf("| %s %s | %s | %.2f | %llu (%llu) | %.0f | %.1f | %.4f | %.0f (%.4f) | %s | "
-                        "%s | %s | %s |\n",
-                        r.dataset.c_str(), r.preset.c_str(), r.view.c_str(), r.distanceFactor,
-                        (unsigned long long)(r.n.points + r.n.splats),
-                        (unsigned long long)r.n.culled, r.splatMs, r.psnr, r.ssim, r.noCullMs,
-                        r.cullMaxAbs, gpu, raycastText(r.defaultRaycast()).c_str(),
-                        raycastText(eq).c_str(), ratio);
+            std::printf(
+                "| %s %s | %s | %.2f | %llu (%llu) | %.0f | %.1f | %.4f | %.0f (%.4f) | %s | "
+                "%s | %s | %s |\n",
+                r.dataset.c_str(), r.preset.c_str(), r.view.c_str(), r.distanceFactor,
+                (unsigned long long)(r.n.points + r.n.splats), (unsigned long long)r.n.culled,
+                r.splatMs, r.psnr, r.ssim, r.noCullMs, r.cullMaxAbs, gpu,
+                raycastText(r.defaultRaycast()).c_str(), raycastText(eq).c_str(), ratio);
         }
 }
 
@@ -368,7 +371,8 @@ void runSplatBench(const SplatBenchOptions& o) {
     std::vector<Dataset> datasets = realDatasets(o.data, o.datasets, o.tf, "bench-splat");
     if (!o.noChecker && (o.datasets.empty() || o.datasets.find("checker") != std::string::npos))
         datasets.push_back(checkerBox());
-    if (datasets.empty()) throw std::invalid_argument("--datasets: none of the named scans is here");
+    if (datasets.empty())
+        throw std::invalid_argument("--datasets: none of the named scans is here");
 
     std::optional<render::EglContext> context;
     if (!o.noGpu) {
@@ -422,8 +426,9 @@ void addSplatBenchCommand(CLI::App& app) {
         "Hybrid splatter timings in the layout of Yuan et al. 2003 Fig. 9, beside the raycaster "
         "at equal error");
     cmd->add_option("--data", o->data, "Folder of the real scans")->capture_default_str();
-    cmd->add_option("--datasets", o->datasets,
-                    "Comma-separated scan names, 'checker' for the 100^3 checker box (default: all)");
+    cmd->add_option(
+        "--datasets", o->datasets,
+        "Comma-separated scan names, 'checker' for the 100^3 checker box (default: all)");
     cmd->add_option("--tf", o->tf, "One preset or file for every scan (default: each scan's own)");
     cmd->add_option("--size", o->size, "Image edge")->capture_default_str();
     cmd->add_option("--frames", o->frames, "Timed frames per view")->capture_default_str();

@@ -19,7 +19,8 @@ void addVerifyCommand(CLI::App& app) {
         auto store = brickstore::BrickStore::open(*path);
         auto faults = store->verify(*threads);
         double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        for (const auto& f : faults) std::fprintf(stderr, "corrupt: %s\n", f.c_str());
+        for (const auto& f : faults)
+            std::fprintf(stderr, "corrupt: %s\n", f.c_str());
         if (!faults.empty()) {
             std::fprintf(stderr, "%s: %zu corrupt brick(s) of %llu\n", path->c_str(), faults.size(),
                          (unsigned long long)store->layout().brickCount());

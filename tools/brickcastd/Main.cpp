@@ -19,9 +19,12 @@ int main(int argc, char** argv) {
     app.add_option("--listen", listen, "HOST:PORT, overriding the config (port 0: any free port)");
     app.add_option("--port-file", portFile, "Write the bound port here once listening");
     app.add_option("--metrics", metrics,
-                   "HOST:PORT (loopback) for GET /metrics in the Prometheus text format, overriding the config");
-    app.add_option("--metrics-port-file", metricsPortFile, "Write the metrics port here once listening");
-    app.add_flag("--print-default-config", printDefault, "Print the embedded default config and exit");
+                   "HOST:PORT (loopback) for GET /metrics in the Prometheus text format, "
+                   "overriding the config");
+    app.add_option("--metrics-port-file", metricsPortFile,
+                   "Write the metrics port here once listening");
+    app.add_flag("--print-default-config", printDefault,
+                 "Print the embedded default config and exit");
     app.add_flag("-q,--quiet", quiet, "Log errors only");
     CLI11_PARSE(app, argc, argv);
     if (printDefault) {
