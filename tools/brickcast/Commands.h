@@ -24,8 +24,6 @@ void addExtractCommand(CLI::App& app);
 void addDemoCommand(CLI::App& app);
 void addRenderCommand(CLI::App& app);
 void addCompareCommand(CLI::App& app);
-void addBenchCommand(CLI::App& app);
-void addSplatBenchCommand(CLI::App& app);
 void addLoadtestCommand(CLI::App& app);
 
 /// Renders one frame of a store on the GPU (or the CPU reference) and writes a PNG; prints
@@ -34,18 +32,7 @@ void renderStoreToPng(const std::string& storePath, const std::string& output,
                       const std::string& tfName, const std::string& orbit, const std::string& size,
                       bool reference);
 
-/// "256,256,113" -> {256,256,113}. @throw std::invalid_argument naming `what`.
-/// "a,b,c" -> numbers, each finite; between minCount and maxCount of them.
-/// @throw std::invalid_argument naming `what` and the part at fault.
-std::vector<double> parseNumbers(const std::string& text, const std::string& what,
-                                 std::size_t minCount, std::size_t maxCount);
-std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what);
-std::array<double, 3> parseTripleDouble(const std::string& text, const std::string& what);
-
 /// The text `brickcast info` prints.
 void printStoreInfo(const brickstore::BrickStore& store);
-
-/// Human-readable byte count ("1.50 GiB").
-std::string formatBytes(double bytes);
 
 } // namespace bc::cli

@@ -3,6 +3,7 @@
 #include "brickstore/BrickStore.h"
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
+#include "tools/Parse.h"
 #include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
@@ -22,8 +23,8 @@ struct DemoOptions {
 void runDemo(const DemoOptions& o) {
     std::filesystem::create_directories(o.folder);
     const std::string storePath = (std::filesystem::path(o.folder) / "phantom.bcs").string();
-    auto source =
-        brickstore::makeSynthetic(brickstore::SynthKind::Phantom, parseTriple(o.dims, "--dims"), 1);
+    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom,
+                                            tools::parseTriple(o.dims, "--dims"), 1);
     std::printf("== ingest %s\n", source->info().description.c_str());
     auto report = brickstore::ingest(*source, storePath, {});
     std::printf("   %.2f s, %.1f MB/s, %llu bricks of which %llu constant (not stored)\n\n",

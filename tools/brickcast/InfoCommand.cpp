@@ -1,5 +1,6 @@
 // brickcast info STORE [--json]: what a store holds, from its header and index alone.
 #include "brickstore/BrickStore.h"
+#include "tools/Parse.h"
 #include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
@@ -73,7 +74,7 @@ void printStoreInfo(const brickstore::BrickStore& store) {
     double overhead =
         double(edge) * edge * edge / (double(g.brickVoxels) * g.brickVoxels * g.brickVoxels) - 1.0;
     std::printf("store       %s (%s)\n", store.path().c_str(),
-                formatBytes(double(info.fileBytes)).c_str());
+                tools::formatBytes(double(info.fileBytes)).c_str());
     std::printf("source      %s\n", v.description.c_str());
     std::printf("volume      %llu x %llu x %llu %s, spacing %g x %g x %g mm\n",
                 (unsigned long long)v.dims[0], (unsigned long long)v.dims[1],
@@ -88,10 +89,10 @@ void printStoreInfo(const brickstore::BrickStore& store) {
         "bricks      %u^3 payload + %u apron = %u^3 stored (%.1f%% apron overhead), leaves %u^3\n",
         g.brickVoxels, g.apronVoxels, edge, 100.0 * overhead, g.leafVoxels);
     double raw = double(v.voxelCount()) * double(brickstore::voxelBytes(v.type));
-    std::printf("stored      %llu of %llu bricks, %s (level-0 volume %s)\n",
-                (unsigned long long)info.storedBricks,
-                (unsigned long long)store.layout().brickCount(),
-                formatBytes(double(info.storedBytes)).c_str(), formatBytes(raw).c_str());
+    std::printf(
+        "stored      %llu of %llu bricks, %s (level-0 volume %s)\n",
+        (unsigned long long)info.storedBricks, (unsigned long long)store.layout().brickCount(),
+        tools::formatBytes(double(info.storedBytes)).c_str(), tools::formatBytes(raw).c_str());
     for (std::uint32_t l = 0; l < store.layout().levels().size(); ++l) {
         const auto& level = store.layout().levels()[l];
         auto s = summarise(store, l);
@@ -99,7 +100,7 @@ void printStoreInfo(const brickstore::BrickStore& store) {
                     l, (unsigned long long)level.dims[0], (unsigned long long)level.dims[1],
                     (unsigned long long)level.dims[2], level.bricks[0], level.bricks[1],
                     level.bricks[2], (unsigned long long)s.stored,
-                    formatBytes(double(s.storedBytes)).c_str());
+                    tools::formatBytes(double(s.storedBytes)).c_str());
     }
     // A coarse histogram: 16 groups of bins, log-scaled bar.
     const auto& h = info.histogram;

@@ -2,6 +2,7 @@
 #include "brickstore/Error.h"
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
+#include "tools/Parse.h"
 #include "tools/brickcast/Commands.h"
 #include "tools/brickcast/Progress.h"
 
@@ -24,21 +25,21 @@ struct IngestOptions {
 brickstore::SourceSpec toSpec(const IngestOptions& o) {
     brickstore::SourceSpec spec;
     spec.input = o.input;
-    if (!o.dims.empty()) spec.dims = parseTriple(o.dims, "--dims");
+    if (!o.dims.empty()) spec.dims = tools::parseTriple(o.dims, "--dims");
     if (!o.type.empty()) {
         spec.type = brickstore::parseVoxelType(o.type);
         if (!spec.type)
             throw brickstore::FormatError(o.input, "type",
                                           "unknown type '" + o.type + "'; use u8, u16, i16 or f32");
     }
-    if (!o.spacing.empty()) spec.spacingMm = parseTripleDouble(o.spacing, "--spacing");
+    if (!o.spacing.empty()) spec.spacingMm = tools::parseTripleDouble(o.spacing, "--spacing");
     if (o.endian != "little" && o.endian != "big")
         throw brickstore::FormatError(o.input, "endian",
                                       "'" + o.endian + "' is neither little nor big");
     spec.endian = o.endian == "big" ? brickstore::Endian::Big : brickstore::Endian::Little;
     spec.gridName = o.grid;
     spec.seed = o.seed;
-    if (!o.mosaic.empty()) spec.mosaic = parseTriple(o.mosaic, "--mosaic");
+    if (!o.mosaic.empty()) spec.mosaic = tools::parseTriple(o.mosaic, "--mosaic");
     return spec;
 }
 
@@ -57,14 +58,15 @@ void runIngest(const IngestOptions& o) {
     std::printf(
         "  %llu bricks (%llu stored, %llu constant, not stored), %s in %.2f s (%.1f MB/s)\n",
         (unsigned long long)report.bricks, (unsigned long long)report.storedBricks,
-        (unsigned long long)report.constantBricks, formatBytes(double(report.sourceBytes)).c_str(),
-        report.seconds, double(report.sourceBytes) / 1e6 / report.seconds);
+        (unsigned long long)report.constantBricks,
+        tools::formatBytes(double(report.sourceBytes)).c_str(), report.seconds,
+        double(report.sourceBytes) / 1e6 / report.seconds);
     std::printf("  store %s; stored bricks compress %.2fx; constant bricks saved %s\n",
-                formatBytes(double(report.fileBytes)).c_str(),
+                tools::formatBytes(double(report.fileBytes)).c_str(),
                 report.storedBytes
                     ? double(report.uncompressedBrickBytes) / double(report.storedBytes)
                     : 0.0,
-                formatBytes(double(report.constantBrickBytes)).c_str());
+                tools::formatBytes(double(report.constantBrickBytes)).c_str());
 }
 
 } // namespace

@@ -15,7 +15,7 @@
 #include "client/Error.h"
 #include "client/Orbit.h"
 #include "server/DaemonConfig.h"
-#include "tools/brickcast/BenchDatasets.h"
+#include "tools/Parse.h"
 #include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
@@ -176,16 +176,17 @@ void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, do
     std::printf("\n| Tier | Hits | Misses | Hit rate | Bytes moved | Of them re-fetched | "
                 "Moved / distinct |\n|---|---|---|---|---|---|---|\n");
     std::printf("| disk -> host | %.0f | %.0f | %s | %s | %s | %s |\n", hHits, hMiss,
-                percent(hHits, hHits + hMiss).c_str(), formatBytes(loaded).c_str(),
-                formatBytes(reloaded).c_str(), ratio(loaded, loaded - reloaded).c_str());
+                percent(hHits, hHits + hMiss).c_str(), tools::formatBytes(loaded).c_str(),
+                tools::formatBytes(reloaded).c_str(), ratio(loaded, loaded - reloaded).c_str());
     std::printf("| host -> GPU | %.0f | %.0f | %s | %s | %s | %s |\n", gHits, gUp,
-                percent(gHits, gHits + gUp).c_str(), formatBytes(upBytes).c_str(),
-                formatBytes(upRefetched).c_str(), ratio(upBytes, upBytes - upRefetched).c_str());
+                percent(gHits, gHits + gUp).c_str(), tools::formatBytes(upBytes).c_str(),
+                tools::formatBytes(upRefetched).c_str(),
+                ratio(upBytes, upBytes - upRefetched).c_str());
     std::printf("\nServer: %.0f frames, %.0f render errors, %.0f ms rendering, %s sent; %u client "
                 "failures.\n",
                 d.of("frames_total", ""), d.of("render_errors_total", ""),
-                d.of("render_ms_total", ""), formatBytes(d.of("frame_bytes_total", "")).c_str(),
-                failures);
+                d.of("render_ms_total", ""),
+                tools::formatBytes(d.of("frame_bytes_total", "")).c_str(), failures);
 }
 
 void runLoadtest(const LoadtestOptions& o) {
@@ -199,13 +200,13 @@ void runLoadtest(const LoadtestOptions& o) {
     if (!(o.timeoutS > 0 && o.timeoutS <= 86400))
         throw std::invalid_argument("--timeout-s: (0, 86400]");
     if (o.tfEvery < 1) throw std::invalid_argument("--tf-every: at least 1");
-    const auto paths = splitList(o.paths);
+    const auto paths = tools::splitList(o.paths);
     if (paths.empty()) throw std::invalid_argument("--paths: none given");
     for (const auto& p : paths)
         if (std::find(kPaths.begin(), kPaths.end(), p) == kPaths.end())
             throw std::invalid_argument("--paths: '" + p +
                                         "' is not orbit, zoom, jumps or tf-sweep");
-    const auto size = parseNumbers(o.size, "--size", 2, 2);
+    const auto size = tools::parseNumbers(o.size, "--size", 2, 2);
     if (size[0] < 1 || size[1] < 1 || size[0] > 4096 || size[1] > 4096 ||
         size[0] != std::floor(size[0]) || size[1] != std::floor(size[1]))
         throw std::invalid_argument("--size: W,H whole numbers 1..4096");

@@ -1,11 +1,9 @@
-// brickcast: ingest volumes into brick stores and inspect them (later: render, bench).
-#include "brickstore/Error.h"
-#include "render/Error.h"
+// brickcast: ingest volumes into brick stores, inspect, verify and extract them, render and
+// compare frames, and load-test a running daemon.
+#include "tools/RunCommandLine.h"
 #include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
-#include <cstdio>
-#include <exception>
 
 int main(int argc, char** argv) {
     CLI::App app{"brickcast: out-of-core volume bricking, rendering and streaming"};
@@ -17,25 +15,6 @@ int main(int argc, char** argv) {
     bc::cli::addDemoCommand(app);
     bc::cli::addCompareCommand(app);
     bc::cli::addRenderCommand(app);
-    bc::cli::addBenchCommand(app);
-    bc::cli::addSplatBenchCommand(app);
     bc::cli::addLoadtestCommand(app);
-    try {
-        app.parse(argc, argv);
-    } catch (const CLI::ParseError& e) {
-        return app.exit(e);
-    } catch (const bc::brickstore::FormatError& e) {
-        std::fprintf(stderr, "brickcast: bad input: %s\n", e.what());
-        return 1;
-    } catch (const bc::brickstore::StoreCorrupt& e) {
-        std::fprintf(stderr, "brickcast: corrupt store: %s\n", e.what());
-        return 1;
-    } catch (const bc::render::RenderInputError& e) {
-        std::fprintf(stderr, "brickcast: bad input: %s\n", e.what());
-        return 1;
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "brickcast: %s\n", e.what());
-        return 1;
-    }
-    return 0;
+    return bc::tools::runCommandLine(app, argc, argv, "brickcast");
 }

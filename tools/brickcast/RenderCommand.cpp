@@ -11,6 +11,7 @@
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
+#include "tools/Parse.h"
 #include "tools/TransferFunctionFile.h"
 #include "tools/brickcast/Commands.h"
 
@@ -41,7 +42,7 @@ struct RenderCliOptions {
 };
 
 glm::dvec3 vec3Of(const std::string& text, const std::string& what) {
-    const auto v = parseNumbers(text, what, 3, 3);
+    const auto v = tools::parseNumbers(text, what, 3, 3);
     return {v[0], v[1], v[2]};
 }
 
@@ -56,7 +57,7 @@ render::Camera cameraOf(const RenderCliOptions& o, const render::Box& box) {
         c.fovYDeg = o.fov;
         c.orthoHeight = 2.0 * box.radius();
     } else {
-        const auto v = parseNumbers(o.orbit.empty() ? "30,20" : o.orbit, "--orbit", 2, 3);
+        const auto v = tools::parseNumbers(o.orbit.empty() ? "30,20" : o.orbit, "--orbit", 2, 3);
         c = render::Camera::orbit(box, v[0], v[1], v.size() > 2 ? v[2] : 1.0, o.fov);
         if (!o.up.empty()) c.up = vec3Of(o.up, "--up"); // e.g. 0,0,-1 for scans stored head-down
     }
@@ -67,7 +68,7 @@ render::Camera cameraOf(const RenderCliOptions& o, const render::Box& box) {
 
 render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     render::RenderOptions r;
-    const auto wh = parseNumbers(o.size, "--size", 2, 2);
+    const auto wh = tools::parseNumbers(o.size, "--size", 2, 2);
     if (wh[0] < 1 || wh[1] < 1 || wh[0] > 16384 || wh[1] > 16384 || wh[0] != std::floor(wh[0]) ||
         wh[1] != std::floor(wh[1]))
         throw std::invalid_argument("--size: '" + o.size + "' must be two integers in 1..16384");
@@ -75,7 +76,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.height = std::uint32_t(wh[1]);
     r.stepVoxels = o.step;
     r.earlyTermination = o.ert != "off";
-    if (r.earlyTermination) r.ertThreshold = parseNumbers(o.ert, "--ert", 1, 1)[0];
+    if (r.earlyTermination) r.ertThreshold = tools::parseNumbers(o.ert, "--ert", 1, 1)[0];
     r.skip = render::parseSkipMode(o.skip);
     r.shading = !o.noShading;
     r.level = o.level;
@@ -210,7 +211,7 @@ void runRender(const RenderCliOptions& o) {
         double(stats.samples) / (double(options.width) * options.height),
         (unsigned long long)stats.bricksVisited, (unsigned long long)stats.bricksSkipped,
         (unsigned long long)stats.bricksCulled, (unsigned long long)stats.bricksUploaded,
-        formatBytes(double(stats.bytesUploaded)).c_str(), stats.batches, renderer.c_str());
+        tools::formatBytes(double(stats.bytesUploaded)).c_str(), stats.batches, renderer.c_str());
     if (o.repeat > 1) {
         std::vector<double> warm(frameMs.begin() + 1, frameMs.end());
         std::sort(warm.begin(), warm.end());

@@ -1,4 +1,4 @@
-#include "tools/brickcast/BenchReport.h"
+#include "bench/BenchReport.h"
 
 #include <cmath>
 #include <cstdio>
@@ -7,7 +7,7 @@
 #include <map>
 #include <stdexcept>
 
-namespace bc::cli {
+namespace bc::bench {
 namespace {
 
 std::string psnrText(double psnr) {
@@ -128,4 +128,4 @@ void BenchReport::writePlot(const std::string& path, const std::string& scratch)
             "--plot: gnuplot failed or is missing (apt-get install gnuplot-nox)");
 }
 
-} // namespace bc::cli
+} // namespace bc::bench

@@ -1,12 +1,12 @@
 #pragma once
-// The rows of `brickcast bench` and their three outputs: a markdown table, CSV, and a PNG
+// The rows of bc_bench_render and their three outputs: a markdown table, CSV, and a PNG
 // plot of run time against error drawn by gnuplot.
 #include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
 
-namespace bc::cli {
+namespace bc::bench {
 
 struct BenchRow {
     std::string kind = "path"; ///< "path" (technique sets) or "sweep" (steps, all techniques)
@@ -37,4 +37,4 @@ class BenchReport {
     std::vector<std::string> mTechniques; ///< technique sets in plot order
 };
 
-} // namespace bc::cli
+} // namespace bc::bench

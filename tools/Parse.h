@@ -1,16 +1,22 @@
-#include "tools/brickcast/Commands.h"
-
+#pragma once
+// Command-line text to values, for the programs (tools/) and the benchmarks (bench/). Errors
+// name the option at fault (`what`) and the part of the text that is wrong.
+#include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
-namespace bc::cli {
-namespace {
+namespace bc::tools {
+namespace detail {
 
-std::vector<std::string> splitComma(const std::string& text) {
+/// "a,,b" -> {"a", "", "b"}: every part, empty ones included.
+inline std::vector<std::string> splitComma(const std::string& text) {
     std::vector<std::string> parts;
     std::stringstream ss(text);
     for (std::string p; std::getline(ss, p, ',');)
@@ -18,10 +24,12 @@ std::vector<std::string> splitComma(const std::string& text) {
     return parts;
 }
 
-} // namespace
+} // namespace detail
 
-std::vector<double> parseNumbers(const std::string& text, const std::string& what,
-                                 std::size_t minCount, std::size_t maxCount) {
+/// "a,b,c" -> numbers, each finite; between minCount and maxCount of them.
+/// @throw std::invalid_argument naming `what` and the part at fault.
+inline std::vector<double> parseNumbers(const std::string& text, const std::string& what,
+                                        std::size_t minCount, std::size_t maxCount) {
     std::vector<double> out;
     std::size_t pos = 0;
     while (pos <= text.size()) {
@@ -46,8 +54,9 @@ std::vector<double> parseNumbers(const std::string& text, const std::string& wha
     return out;
 }
 
-std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what) {
-    auto parts = splitComma(text);
+/// "256,256,113" -> {256,256,113}. @throw std::invalid_argument naming `what`.
+inline std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::string& what) {
+    auto parts = detail::splitComma(text);
     if (parts.size() != 3)
         throw std::invalid_argument(what + ": expected X,Y,Z, got '" + text + "'");
     std::array<std::uint64_t, 3> out{};
@@ -60,8 +69,9 @@ std::array<std::uint64_t, 3> parseTriple(const std::string& text, const std::str
     return out;
 }
 
-std::array<double, 3> parseTripleDouble(const std::string& text, const std::string& what) {
-    auto parts = splitComma(text);
+/// "1,1,2.5" -> {1,1,2.5}. @throw std::invalid_argument naming `what`.
+inline std::array<double, 3> parseTripleDouble(const std::string& text, const std::string& what) {
+    auto parts = detail::splitComma(text);
     if (parts.size() != 3)
         throw std::invalid_argument(what + ": expected A,B,C, got '" + text + "'");
     std::array<double, 3> out{};
@@ -78,7 +88,17 @@ std::array<double, 3> parseTripleDouble(const std::string& text, const std::stri
     return out;
 }
 
-std::string formatBytes(double bytes) {
+/// "a,b,,c" -> {"a", "b", "c"}: a comma-separated list, empty items left out.
+inline std::vector<std::string> splitList(const std::string& text) {
+    std::vector<std::string> out;
+    std::stringstream in(text);
+    for (std::string item; std::getline(in, item, ',');)
+        if (!item.empty()) out.push_back(item);
+    return out;
+}
+
+/// Human-readable byte count ("1.50 GiB").
+inline std::string formatBytes(double bytes) {
     const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
     int u = 0;
     while (std::fabs(bytes) >= 1024.0 && u < 4) {
@@ -90,4 +110,4 @@ std::string formatBytes(double bytes) {
     return buf;
 }
 
-} // namespace bc::cli
+} // namespace bc::tools

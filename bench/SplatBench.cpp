@@ -1,16 +1,17 @@
-// brickcast bench-splat: the hybrid splatter's timings in the layout of Yuan et al. 2003,
-// Figure 9 (issue 6), beside the raycaster at equal error. For each dataset three views on
-// one orbit: "all splats" (every visible voxel projects to at least the point threshold; the
-// framing view when that holds, else as close as it must be), "mixed" (the volume centre at
-// the threshold) and "all points" (the nearest voxel below it). Per view: the splatter's
-// median ms, the share of drawn voxels that were splats, its error against the float64
-// reference (k x k supersampled: the pixel's area average, which is what an antialiased
-// image should converge to), the same with occlusion culling off (and the largest pixel
-// difference, which must be 0: culling changes no pixel), the GPU splatter when EGL gives a
-// context (its ms and largest difference from the CPU splatter), and the CPU raycaster in every
-// (step, supersampling) configuration of the sweep: its default (1 voxel, no
-// supersampling), and the fastest configuration whose PSNR is at least the splatter's, the
-// raycaster "at equal error". Ratios come from one run: the machines are shared and noisy.
+// bc_bench_splat (formerly `brickcast bench-splat`): the hybrid splatter's timings in the layout of
+// Yuan et al. 2003, Figure 9 (issue 6), beside the raycaster at equal error. For each dataset three
+// views on one orbit: "all splats" (every visible voxel projects to at least the point threshold;
+// the framing view when that holds, else as close as it must be), "mixed" (the volume centre at the
+// threshold) and "all points" (the nearest voxel below it). Per view: the splatter's median ms, the
+// share of drawn voxels that were splats, its error against the float64 reference (k x k
+// supersampled: the pixel's area average, which is what an antialiased image should converge to),
+// the same with occlusion culling off (and the largest pixel difference, which must be 0: culling
+// changes no pixel), the GPU splatter when EGL gives a context (its ms and largest difference from
+// the CPU splatter), and the CPU raycaster in every (step, supersampling) configuration of the
+// sweep: its default (1 voxel, no supersampling), and the fastest configuration whose PSNR is at
+// least the splatter's, the raycaster "at equal error". Ratios come from one run: the machines are
+// shared and noisy.
+#include "bench/BenchDatasets.h"
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "brickstore/Ingest.h"
@@ -23,9 +24,9 @@
 #include "render/ImageMetrics.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
+#include "tools/Parse.h"
+#include "tools/RunCommandLine.h"
 #include "tools/TransferFunctionFile.h"
-#include "tools/brickcast/BenchDatasets.h"
-#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 
@@ -40,7 +41,7 @@
 #include <thread>
 #include <unistd.h>
 
-namespace bc::cli {
+namespace bc::bench {
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -359,10 +360,10 @@ void runSplatBench(const SplatBenchOptions& o) {
     if (!(o.referenceStep > 0.0 && o.referenceStep <= 4.0))
         throw std::invalid_argument("--reference-step: (0, 4]");
     std::vector<RaycastConfig> sweep;
-    for (double step : parseNumbers(o.steps, "--steps", 1, 16)) {
+    for (double step : tools::parseNumbers(o.steps, "--steps", 1, 16)) {
         if (!(step > 0.0 && step <= 16.0))
             throw std::invalid_argument("--steps: each step in (0, 16] voxels");
-        for (double k : parseNumbers(o.supersampling, "--supersampling", 1, 8)) {
+        for (double k : tools::parseNumbers(o.supersampling, "--supersampling", 1, 8)) {
             if (k != std::floor(k) || k < 1 || k > 8)
                 throw std::invalid_argument("--supersampling: whole factors 1..8");
             sweep.push_back({step, std::uint32_t(k)});
@@ -418,33 +419,32 @@ void runSplatBench(const SplatBenchOptions& o) {
 }
 
 } // namespace
+} // namespace bc::bench
 
-void addSplatBenchCommand(CLI::App& app) {
-    auto o = std::make_shared<SplatBenchOptions>();
-    auto* cmd = app.add_subcommand(
-        "bench-splat",
-        "Hybrid splatter timings in the layout of Yuan et al. 2003 Fig. 9, beside the raycaster "
-        "at equal error");
-    cmd->add_option("--data", o->data, "Folder of the real scans")->capture_default_str();
-    cmd->add_option(
-        "--datasets", o->datasets,
+int main(int argc, char** argv) {
+    bc::bench::SplatBenchOptions o;
+    CLI::App app{"Hybrid splatter timings in the layout of Yuan et al. 2003 Fig. 9, beside the "
+                 "raycaster at equal error",
+                 "bc_bench_splat"};
+    app.add_option("--data", o.data, "Folder of the real scans")->capture_default_str();
+    app.add_option(
+        "--datasets", o.datasets,
         "Comma-separated scan names, 'checker' for the 100^3 checker box (default: all)");
-    cmd->add_option("--tf", o->tf, "One preset or file for every scan (default: each scan's own)");
-    cmd->add_option("--size", o->size, "Image edge")->capture_default_str();
-    cmd->add_option("--frames", o->frames, "Timed frames per view")->capture_default_str();
-    cmd->add_option("--steps", o->steps, "Raycaster steps swept, voxels")->capture_default_str();
-    cmd->add_option("--supersampling", o->supersampling, "Raycaster supersampling factors swept")
+    app.add_option("--tf", o.tf, "One preset or file for every scan (default: each scan's own)");
+    app.add_option("--size", o.size, "Image edge")->capture_default_str();
+    app.add_option("--frames", o.frames, "Timed frames per view")->capture_default_str();
+    app.add_option("--steps", o.steps, "Raycaster steps swept, voxels")->capture_default_str();
+    app.add_option("--supersampling", o.supersampling, "Raycaster supersampling factors swept")
         ->capture_default_str();
-    cmd->add_option("--reference-step", o->referenceStep, "Step of the float64 reference")
+    app.add_option("--reference-step", o.referenceStep, "Step of the float64 reference")
         ->capture_default_str();
-    cmd->add_option("--reference-supersampling", o->referenceSupersampling,
-                    "Supersampling factor of the reference")
+    app.add_option("--reference-supersampling", o.referenceSupersampling,
+                   "Supersampling factor of the reference")
         ->capture_default_str();
-    cmd->add_option("--brick", o->brick, "Brick edge of the stores")->capture_default_str();
-    cmd->add_option("--csv", o->csv, "Write every measurement as CSV");
-    cmd->add_flag("--no-checker", o->noChecker, "Leave out the generated 100^3 checker box");
-    cmd->add_flag("--no-gpu", o->noGpu, "Leave out the GPU splatter (slow on llvmpipe)");
-    cmd->callback([o] { runSplatBench(*o); });
+    app.add_option("--brick", o.brick, "Brick edge of the stores")->capture_default_str();
+    app.add_option("--csv", o.csv, "Write every measurement as CSV");
+    app.add_flag("--no-checker", o.noChecker, "Leave out the generated 100^3 checker box");
+    app.add_flag("--no-gpu", o.noGpu, "Leave out the GPU splatter (slow on llvmpipe)");
+    app.callback([&o] { bc::bench::runSplatBench(o); });
+    return bc::tools::runCommandLine(app, argc, argv, "bc_bench_splat");
 }
-
-} // namespace bc::cli

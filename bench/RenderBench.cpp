@@ -1,10 +1,12 @@
-// brickcast bench: run time against error (issue 4). For each real dataset and transfer
-// function, each technique set, each camera path and image size: median ms/frame, samples
-// per pixel, samples taken / oracle samples, speed-up over plain in the same run, PSNR and
-// SSIM against the CPU reference, octree rebuild ms, occlusion-frustum build ms and
+// bc_bench_render (formerly `brickcast bench`): run time against error (issue 4). For each
+// real dataset and transfer function, each technique set, each camera path and image size: median
+// ms/frame, samples per pixel, samples taken / oracle samples, speed-up over plain in the same run,
+// PSNR and SSIM against the CPU reference, octree rebuild ms, occlusion-frustum build ms and
 // triangles; then a step sweep (run time against error), and the octree rebuild of a 512^3
 // volume. A markdown table on stdout, CSV with --csv, a PNG plot (gnuplot) with --plot.
 // Timings are whole frames on whatever EGL gives (llvmpipe without a GPU): say which.
+#include "bench/BenchDatasets.h"
+#include "bench/BenchReport.h"
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "brickstore/Ingest.h"
@@ -17,10 +19,9 @@
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
+#include "tools/Parse.h"
+#include "tools/RunCommandLine.h"
 #include "tools/TransferFunctionFile.h"
-#include "tools/brickcast/BenchDatasets.h"
-#include "tools/brickcast/BenchReport.h"
-#include "tools/brickcast/Commands.h"
 
 #include <CLI/CLI.hpp>
 
@@ -34,7 +35,7 @@
 #include <thread>
 #include <unistd.h>
 
-namespace bc::cli {
+namespace bc::bench {
 namespace {
 
 struct BenchOptions {
@@ -154,7 +155,7 @@ BenchRow measure(Scene& s, const TechniqueSet& t, const std::string& renderer,
 }
 
 std::vector<double> numbersOf(const std::string& text, const char* what) {
-    auto out = parseNumbers(text, what, 1, 64);
+    auto out = tools::parseNumbers(text, what, 1, 64);
     for (double v : out)
         if (!(v > 0)) throw std::invalid_argument(std::string(what) + ": values must be positive");
     return out;
@@ -165,7 +166,7 @@ void benchScene(Scene& s, const Dataset& d, const BenchOptions& o, BenchReport& 
     for (double size : numbersOf(o.sizes, "--sizes")) {
         render::RenderOptions base;
         base.width = base.height = std::uint32_t(size);
-        for (const auto& path : splitList(o.paths)) {
+        for (const auto& path : tools::splitList(o.paths)) {
             const auto cams = cameraPath(path, box, o.frames);
             render::FrameStats rs;
             std::optional<render::Image> reference;
@@ -254,7 +255,7 @@ void runBench(const BenchOptions& o) {
     if (o.frames < 1 || o.frames > 1000) throw std::invalid_argument("--frames: 1..1000");
     if (o.renderer != "gpu" && o.renderer != "cpu" && o.renderer != "both")
         throw std::invalid_argument("--renderer: '" + o.renderer + "' is not gpu, cpu or both");
-    for (const auto& path : splitList(o.paths))
+    for (const auto& path : tools::splitList(o.paths))
         if (path != "orbit" && path != "jumps")
             throw std::invalid_argument("--paths: '" + path + "' is not orbit or jumps");
     for (double size : numbersOf(o.sizes, "--sizes"))
@@ -296,32 +297,32 @@ void runBench(const BenchOptions& o) {
 }
 
 } // namespace
+} // namespace bc::bench
 
-void addBenchCommand(CLI::App& app) {
-    auto o = std::make_shared<BenchOptions>();
-    auto* cmd = app.add_subcommand(
-        "bench", "Run time against error of every technique set on the real scans");
-    cmd->add_option("--data", o->data, "Folder of the real scans")->capture_default_str();
-    cmd->add_option("--datasets", o->datasets, "Comma-separated scan names (default: all present)");
-    cmd->add_option("--tf", o->tf, "One preset or file for every scan (default: each scan's own)");
-    cmd->add_option("--sizes", o->sizes, "Image edges, comma-separated")->capture_default_str();
-    cmd->add_option("--paths", o->paths, "Camera paths: orbit, jumps")->capture_default_str();
-    cmd->add_option("--frames", o->frames, "Timed frames per path")->capture_default_str();
-    cmd->add_option("--steps", o->steps, "Step sweep, voxels")->capture_default_str();
-    cmd->add_option("--brick", o->brick, "Brick edge of the stores")->capture_default_str();
-    cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")
+int main(int argc, char** argv) {
+    bc::bench::BenchOptions o;
+    CLI::App app{"Run time against error of every technique set on the real scans",
+                 "bc_bench_render"};
+    app.add_option("--data", o.data, "Folder of the real scans")->capture_default_str();
+    app.add_option("--datasets", o.datasets, "Comma-separated scan names (default: all present)");
+    app.add_option("--tf", o.tf, "One preset or file for every scan (default: each scan's own)");
+    app.add_option("--sizes", o.sizes, "Image edges, comma-separated")->capture_default_str();
+    app.add_option("--paths", o.paths, "Camera paths: orbit, jumps")->capture_default_str();
+    app.add_option("--frames", o.frames, "Timed frames per path")->capture_default_str();
+    app.add_option("--steps", o.steps, "Step sweep, voxels")->capture_default_str();
+    app.add_option("--brick", o.brick, "Brick edge of the stores")->capture_default_str();
+    app.add_option("--gpu-budget-mb", o.gpuBudgetMb, "GPU brick pool budget")
         ->capture_default_str();
-    cmd->add_option("--renderer", o->renderer,
-                    "gpu (the EGL raycaster), cpu (the CPU raycaster) or both, alternating per set")
+    app.add_option("--renderer", o.renderer,
+                   "gpu (the EGL raycaster), cpu (the CPU raycaster) or both, alternating per set")
         ->capture_default_str();
-    cmd->add_option("--csv", o->csv, "Write every row as CSV");
-    cmd->add_option("--plot", o->plot, "Draw run time against error as PNG (needs gnuplot)");
-    cmd->add_flag("--no-rebuild-512", o->noRebuild512, "Skip the 512^3 octree rebuild timing");
-    cmd->add_flag("--no-generated", o->noGenerated, "Skip the generated out-of-core volume");
-    cmd->add_option("--generated-budget-mb", o->generatedBudgetMb,
-                    "GPU budget of the generated volume (which is four times larger)")
+    app.add_option("--csv", o.csv, "Write every row as CSV");
+    app.add_option("--plot", o.plot, "Draw run time against error as PNG (needs gnuplot)");
+    app.add_flag("--no-rebuild-512", o.noRebuild512, "Skip the 512^3 octree rebuild timing");
+    app.add_flag("--no-generated", o.noGenerated, "Skip the generated out-of-core volume");
+    app.add_option("--generated-budget-mb", o.generatedBudgetMb,
+                   "GPU budget of the generated volume (which is four times larger)")
         ->capture_default_str();
-    cmd->callback([o] { runBench(*o); });
+    app.callback([&o] { bc::bench::runBench(o); });
+    return bc::tools::runCommandLine(app, argc, argv, "bc_bench_render");
 }
-
-} // namespace bc::cli

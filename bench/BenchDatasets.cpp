@@ -1,20 +1,12 @@
-#include "tools/brickcast/BenchDatasets.h"
+#include "bench/BenchDatasets.h"
+#include "tools/Parse.h"
 
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <optional>
-#include <sstream>
 
-namespace bc::cli {
-
-std::vector<std::string> splitList(const std::string& text) {
-    std::vector<std::string> out;
-    std::stringstream in(text);
-    for (std::string item; std::getline(in, item, ',');)
-        if (!item.empty()) out.push_back(item);
-    return out;
-}
+namespace bc::bench {
 
 std::vector<Dataset> realDatasets(const std::string& dataDir, const std::string& wanted,
                                   const std::string& tfOverride, const char* who) {
@@ -38,7 +30,7 @@ std::vector<Dataset> realDatasets(const std::string& dataDir, const std::string&
     add("Iguana", "ct-bone", at("Iguana.nii.gz"));
     add("gaffer_smoke", "smoke", at("gaffer_smoke.vdb"));
     add("hydrogen", "smoke", at("hydrogen_64x64x64_float32.raw"));
-    const auto names = splitList(wanted);
+    const auto names = tools::splitList(wanted);
     std::vector<Dataset> out;
     for (auto& d : all) {
         if (!names.empty() && std::find(names.begin(), names.end(), d.name) == names.end())
@@ -57,4 +49,4 @@ std::vector<Dataset> realDatasets(const std::string& dataDir, const std::string&
     return out;
 }
 
-} // namespace bc::cli
+} // namespace bc::bench

@@ -1,13 +1,13 @@
 #pragma once
 // The real scans the benchmarks run on (../shared/data, see MANIFEST.md), each with the
-// transfer-function preset meant for its modality. Shared by `brickcast bench` and
-// `brickcast bench-splat`.
+// transfer-function preset meant for its modality. Shared by bc_bench_render and
+// bc_bench_splat.
 #include "brickstore/Readers.h"
 
 #include <string>
 #include <vector>
 
-namespace bc::cli {
+namespace bc::bench {
 
 struct Dataset {
     std::string name, preset;
@@ -16,13 +16,10 @@ struct Dataset {
     std::string tfJson;         ///< a transfer function of its own (generated volumes) or empty
 };
 
-/// "a,b,,c" -> {"a", "b", "c"}.
-std::vector<std::string> splitList(const std::string& text);
-
 /// The scans under `dataDir` named in the comma-separated `wanted` (all when empty), each
 /// once per preset; `tfOverride` (when not empty) replaces every preset. Scans whose files
 /// are missing are reported on stderr with `who` and left out.
 std::vector<Dataset> realDatasets(const std::string& dataDir, const std::string& wanted,
                                   const std::string& tfOverride, const char* who);
 
-} // namespace bc::cli
+} // namespace bc::bench
