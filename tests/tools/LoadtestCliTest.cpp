@@ -1,7 +1,7 @@
 // `brickcast loadtest` against a daemon in this process: every path flown by its client, the
 // frames in the CSV, the cache tiers' traffic taken from the server's counters; bad options
 // named, and a server that is not loopback refused before connecting.
-#include "ServerTestSupport.h"
+#include "tests/server/ServerTestSupport.h"
 
 #include <cstdio>
 #include <fstream>

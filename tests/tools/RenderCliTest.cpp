@@ -1,13 +1,12 @@
 // `brickcast render`: end to end through the command line, bad input named, no usable EGL a
-// clear error (never a crash), and the interactive level choice reported.
-#include "RenderTestSupport.h"
+// clear error (never a crash).
+#include "tests/render/RenderTestSupport.h"
 #include "render/Image.h"
 
 #include <nlohmann/json.hpp>
 
 #include <array>
 #include <fstream>
-#include <sstream>
 #include <sys/wait.h>
 
 namespace bc::render {
@@ -112,27 +111,6 @@ TEST_F(RenderCli, NoUsableEglIsAClearErrorNotACrash) {
                        "__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent.json EGL_PLATFORM=surfaceless");
     EXPECT_EQ(r.exitCode, 1) << r.text;
     EXPECT_TRUE(contains(r.text, "no usable EGL")) << r.text;
-}
-
-// Interactive mode draws a coarser level when level 0 does not fit the budget, and says so.
-TEST(RaycasterInteractive, DrawsACoarserLevelWhenTheViewExceedsTheBudgetAndReportsIt) {
-    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {128, 128, 96}, 2);
-    test::glContext();
-    auto t = test::ingestStore(*source, {16, 2, 8});
-    const auto tf = TransferFunction::preset("ct-bone", t->stats);
-    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
-    Raycaster raycaster({1ull << 20});  // 1 MiB: 64 slots of 20^3 u8... fewer than level 0 needs
-    RenderOptions o;
-    o.width = o.height = 96;
-    FrameStats full, fast;
-    test::gpuFrame(*t, raycaster, tf, camera, o, &full);
-    o.interactive = true;
-    const Image coarse = test::gpuFrame(*t, raycaster, tf, camera, o, &fast);
-    EXPECT_EQ(full.level, 0u);
-    EXPECT_GT(full.batches, 1u);
-    EXPECT_GT(fast.level, 0u);
-    EXPECT_EQ(fast.batches, 1u);
-    EXPECT_TRUE(test::allFinite(coarse));
 }
 
 } // namespace

@@ -1,6 +1,6 @@
 // brickcast-client end to end against a daemon in this process: listing, a camera path file,
 // PNG frames and the latency summary; a bad camera file is named with its line.
-#include "ServerTestSupport.h"
+#include "tests/server/ServerTestSupport.h"
 
 #include <cstdio>
 #include <fstream>
