@@ -14,7 +14,7 @@ packages=(
   libglm-dev libpng-dev                               # vector maths, PNG images
   libasio-dev libtomlplusplus-dev libturbojpeg0-dev   # brickcastd: networking, config file, JPEG frames
   libgtest-dev clang libclang-rt-14-dev               # tests; the protocol fuzzer (libFuzzer)
-  gnuplot-nox                                         # brickcast bench --plot
+  gnuplot-nox                                         # bc_bench_render --plot
 )
 missing=()
 for p in "${packages[@]}"; do
