@@ -33,13 +33,16 @@ TEST_F(DaemonBehaviour, CameraUpdatesCoalesceAndTheFrameAnswersTheLatest) {
     const auto v = c.openVolume("small");
     c.setRenderOptions(smallCpuFrames(200)); // slow enough that cameras pile up behind a frame
     c.requestFrame(protocol::FrameMode::ContinuousOn);
-    for (std::uint32_t i = 1; i <= 40; ++i) c.setCamera(orbitCamera(v, 3.0 * i, i));
+    for (std::uint32_t i = 1; i <= 40; ++i)
+        c.setCamera(orbitCamera(v, 3.0 * i, i));
     std::vector<std::uint32_t> answered;
-    while (answered.empty() || answered.back() != 40) answered.push_back(c.nextFrame().header.cameraId);
+    while (answered.empty() || answered.back() != 40)
+        answered.push_back(c.nextFrame().header.cameraId);
     c.requestFrame(protocol::FrameMode::ContinuousOff);
     std::printf("[coalesce] 40 cameras answered by %zu frames\n", answered.size());
     EXPECT_LT(answered.size(), 40u) << "every camera was drawn: nothing coalesced";
-    EXPECT_TRUE(std::is_sorted(answered.begin(), answered.end())) << "an older view after a newer one";
+    EXPECT_TRUE(std::is_sorted(answered.begin(), answered.end()))
+        << "an older view after a newer one";
 }
 
 TEST_F(DaemonBehaviour, MovingCameraGetsInteractiveFramesThenOneRefinedFrameAtRest) {
@@ -53,7 +56,8 @@ TEST_F(DaemonBehaviour, MovingCameraGetsInteractiveFramesThenOneRefinedFrameAtRe
     for (std::uint32_t i = 1; i <= 5; ++i) { // one camera a frame, faster than the rest interval
         c.setCamera(orbitCamera(v, 10.0 * i, i));
         auto f = c.nextFrame();
-        while (f.header.cameraId != i) f = c.nextFrame();
+        while (f.header.cameraId != i)
+            f = c.nextFrame();
         interactive += !f.header.refined;
     }
     const auto rest = c.nextFrame(); // nothing sent: the refined frame follows rest_ms later
@@ -79,7 +83,8 @@ TEST_F(DaemonBehaviour, SessionsOnOneVolumeShareItsCacheAndBudgetsFollowTheSessi
         return -1.0;
     };
     const auto s = b.stats();
-    EXPECT_GT(counter(s, "host_cache_hits_total{volume=\"small\"}"), 0) << "the second session loaded its own bricks";
+    EXPECT_GT(counter(s, "host_cache_hits_total{volume=\"small\"}"), 0)
+        << "the second session loaded its own bricks";
     // Budgets: a catalog of two volumes, three leases on one and one on the other.
     Log quiet(true);
     DaemonConfig config = generatedConfig(*sDir, {{"small", 32}, {"other", 24}});
@@ -108,7 +113,8 @@ TEST_F(DaemonBehaviour, AClientThatTricklesBytesIsTimedOut) {
         reply = c.next(100);
     }
     if (!reply) reply = c.next(10000);
-    ASSERT_TRUE(reply) << "a message trickled for " << (bytes.size() - 1) * 100 << " ms was not cut";
+    ASSERT_TRUE(reply) << "a message trickled for " << (bytes.size() - 1) * 100
+                       << " ms was not cut";
     auto* e = std::get_if<protocol::Error>(&*reply);
     ASSERT_TRUE(e);
     EXPECT_EQ(e->code, protocol::ErrorCode::Timeout);

@@ -9,7 +9,7 @@ namespace {
 
 struct Output {
     int exitCode = -1;
-    std::string text;  ///< stdout and stderr together
+    std::string text; ///< stdout and stderr together
 };
 
 Output brickcast(const std::string& args) {
@@ -18,13 +18,16 @@ Output brickcast(const std::string& args) {
     FILE* p = ::popen(cmd.c_str(), "r");
     if (!p) return out;
     std::array<char, 4096> buf{};
-    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.text.append(buf.data(), n);
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;)
+        out.text.append(buf.data(), n);
     int status = ::pclose(p);
     out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return out;
 }
 
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+bool contains(const std::string& text, const std::string& part) {
+    return text.find(part) != std::string::npos;
+}
 
 TEST(CliTest, IngestInfoVerifyExtractRoundTrip) {
     bc::test::TempDir dir;
@@ -43,7 +46,9 @@ TEST(CliTest, IngestInfoVerifyExtractRoundTrip) {
     ASSERT_EQ(extract.exitCode, 0) << extract.text;
     EXPECT_EQ(std::filesystem::file_size(raw), 40u * 30 * 20);
     // Re-ingesting the extracted raw and extracting again gives the same bytes.
-    ASSERT_EQ(brickcast("ingest " + raw + " --dims 40,30,20 --type u8 -q -o " + dir.file("d.bcs")).exitCode, 0);
+    ASSERT_EQ(brickcast("ingest " + raw + " --dims 40,30,20 --type u8 -q -o " + dir.file("d.bcs"))
+                  .exitCode,
+              0);
     ASSERT_EQ(brickcast("extract " + dir.file("d.bcs") + " -o " + dir.file("d.raw")).exitCode, 0);
     EXPECT_TRUE(bc::test::readFile(raw) == bc::test::readFile(dir.file("d.raw")));
     auto level1 = brickcast("extract " + store + " --level 1 -o " + dir.file("l1.raw"));
@@ -54,9 +59,10 @@ TEST(CliTest, IngestInfoVerifyExtractRoundTrip) {
 TEST(CliTest, VerifyNamesTheCorruptBrickAndFails) {
     bc::test::TempDir dir;
     const std::string store = dir.file("v.bcs");
-    ASSERT_EQ(brickcast("ingest synth:phantom --dims 48,48,48 --brick 16 -q -o " + store).exitCode, 0);
+    ASSERT_EQ(brickcast("ingest synth:phantom --dims 48,48,48 --brick 16 -q -o " + store).exitCode,
+              0);
     auto bytes = bc::test::readFile(store);
-    bytes[4096 + 100] ^= 0x01;  // inside the first brick written
+    bytes[4096 + 100] ^= 0x01; // inside the first brick written
     bc::test::writeFile(store, bytes.data(), bytes.size());
     auto verify = brickcast("verify " + store);
     EXPECT_NE(verify.exitCode, 0);
@@ -68,14 +74,16 @@ TEST(CliTest, VerifyNamesTheCorruptBrickAndFails) {
 TEST(CliTest, BadInputIsNamedAndLeavesNoStore) {
     bc::test::TempDir dir;
     const std::string store = dir.file("x.bcs");
-    auto missing = brickcast("ingest " + dir.file("nope.raw") + " --dims 4,4,4 --type u8 -o " + store);
+    auto missing =
+        brickcast("ingest " + dir.file("nope.raw") + " --dims 4,4,4 --type u8 -o " + store);
     EXPECT_EQ(missing.exitCode, 1);
     EXPECT_TRUE(contains(missing.text, "nope.raw")) << missing.text;
     bc::test::writeFile(dir.file("blob.bin"), std::string(64, 'x'));
     auto noDims = brickcast("ingest " + dir.file("blob.bin") + " -o " + store);
     EXPECT_EQ(noDims.exitCode, 1);
     EXPECT_TRUE(contains(noDims.text, "blob.bin: dims")) << noDims.text;
-    auto badType = brickcast("ingest " + dir.file("blob.bin") + " --dims 4,4,4 --type u32 -o " + store);
+    auto badType =
+        brickcast("ingest " + dir.file("blob.bin") + " --dims 4,4,4 --type u32 -o " + store);
     EXPECT_TRUE(contains(badType.text, "blob.bin: type")) << badType.text;
     auto badKind = brickcast("ingest synth:teapot --dims 4,4,4 -o " + store);
     EXPECT_TRUE(contains(badKind.text, "synth:teapot")) << badKind.text;

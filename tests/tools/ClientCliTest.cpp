@@ -13,7 +13,8 @@ std::pair<int, std::string> run(const std::string& command) {
     std::string out;
     FILE* p = ::popen((command + " 2>&1").c_str(), "r");
     char buf[4096];
-    while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+    while (std::size_t n = std::fread(buf, 1, sizeof buf, p))
+        out.append(buf, n);
     const int status = ::pclose(p);
     return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
@@ -32,9 +33,9 @@ TEST(ClientCli, ListsFliesACameraFileSavesPngsAndPrintsLatency) {
                         << "120 16 40  16 16 16  0 0 1\n"
                         << "16 120 40  16 16 16  0 0 1 25\n"
                         << "-80 16 40  16 16 16  0 0 1\n";
-    const auto [status, out] = run(exe + " --volume alpha --camera-path " + path +
-                                   " --size 40,32 --renderer cpu --codec delta -o " + frames +
-                                   " --tf-switch ct-bone@1");
+    const auto [status, out] =
+        run(exe + " --volume alpha --camera-path " + path +
+            " --size 40,32 --renderer cpu --codec delta -o " + frames + " --tf-switch ct-bone@1");
     EXPECT_EQ(status, 0) << out;
     EXPECT_NE(out.find("3 frames of alpha"), std::string::npos) << out;
     EXPECT_NE(out.find("latency p50"), std::string::npos) << out;

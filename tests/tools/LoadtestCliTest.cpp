@@ -15,7 +15,8 @@ std::pair<int, std::string> run(const std::string& command) {
     std::string out;
     FILE* p = ::popen((command + " 2>&1").c_str(), "r");
     char buf[4096];
-    while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+    while (std::size_t n = std::fread(buf, 1, sizeof buf, p))
+        out.append(buf, n);
     const int status = ::pclose(p);
     return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
@@ -24,9 +25,12 @@ TEST(LoadtestCli, FliesEveryPathAndReportsLatencyAndTheCacheTiers) {
     TempDir dir;
     TestDaemon d(generatedConfig(dir, {{"lt", 96}}));
     const std::string csv = dir.file("frames.csv");
-    const std::string exe = std::string(BC_BRICKCAST_EXE) + " loadtest --port " + std::to_string(d.port);
-    const auto [status, out] = run(exe + " --volume lt --clients 4 --frames 5 --size 40,32 "
-                                         "--tf-every 2 --csv " + csv);
+    const std::string exe =
+        std::string(BC_BRICKCAST_EXE) + " loadtest --port " + std::to_string(d.port);
+    const auto [status, out] = run(exe +
+                                   " --volume lt --clients 4 --frames 5 --size 40,32 "
+                                   "--tf-every 2 --csv " +
+                                   csv);
     ASSERT_EQ(status, 0) << out;
     for (const char* path : {"| orbit | 1 | 5 |", "| zoom | 1 | 5 |", "| jumps | 1 | 5 |",
                              "| tf-sweep | 1 | 5 |", "| all | 4 | 20 |"})
@@ -36,12 +40,14 @@ TEST(LoadtestCli, FliesEveryPathAndReportsLatencyAndTheCacheTiers) {
     std::ifstream f(csv);
     std::string line;
     std::getline(f, line);
-    EXPECT_EQ(line, "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_drawn");
+    EXPECT_EQ(line,
+              "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_drawn");
     std::set<std::string> paths;
     int frames = 0;
     while (std::getline(f, line)) {
         ++frames;
-        paths.insert(line.substr(line.find(',') + 1, line.find(',', line.find(',') + 1) - line.find(',') - 1));
+        paths.insert(line.substr(line.find(',') + 1,
+                                 line.find(',', line.find(',') + 1) - line.find(',') - 1));
     }
     EXPECT_EQ(frames, 20);
     EXPECT_EQ(paths, (std::set<std::string>{"orbit", "zoom", "jumps", "tf-sweep"}));

@@ -1,7 +1,7 @@
 // `brickcast render`: end to end through the command line, bad input named, no usable EGL a
 // clear error (never a crash).
-#include "tests/render/RenderTestSupport.h"
 #include "render/Image.h"
+#include "tests/render/RenderTestSupport.h"
 
 #include <nlohmann/json.hpp>
 
@@ -14,7 +14,7 @@ namespace {
 
 struct Output {
     int exitCode = -1;
-    std::string text;  ///< stdout and stderr together
+    std::string text; ///< stdout and stderr together
 };
 
 Output brickcast(const std::string& args, const std::string& env = "") {
@@ -23,16 +23,19 @@ Output brickcast(const std::string& args, const std::string& env = "") {
     FILE* p = ::popen(cmd.c_str(), "r");
     if (!p) return out;
     std::array<char, 4096> buf{};
-    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) out.text.append(buf.data(), n);
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;)
+        out.text.append(buf.data(), n);
     const int status = ::pclose(p);
     out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return out;
 }
 
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+bool contains(const std::string& text, const std::string& part) {
+    return text.find(part) != std::string::npos;
+}
 
 class RenderCli : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override {
         store = dir.file("phantom.bcs");
         auto r = brickcast("ingest synth:phantom --dims 64,64,48 --brick 16 -o " + store);
@@ -43,10 +46,13 @@ protected:
 };
 
 TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
-    const std::string gpu = dir.file("gpu.png"), ref = dir.file("ref.png"), stats = dir.file("s.json");
-    auto a = brickcast("render " + store + " -o " + gpu + " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --stats " + stats);
+    const std::string gpu = dir.file("gpu.png"), ref = dir.file("ref.png"),
+                      stats = dir.file("s.json");
+    auto a = brickcast("render " + store + " -o " + gpu +
+                       " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --stats " + stats);
     ASSERT_EQ(a.exitCode, 0) << a.text;
-    auto b = brickcast("render " + store + " -o " + ref + " --size 96,64 --tf ct-bone --orbit 40,25 --reference");
+    auto b = brickcast("render " + store + " -o " + ref +
+                       " --size 96,64 --tf ct-bone --orbit 40,25 --reference");
     ASSERT_EQ(b.exitCode, 0) << b.text;
     const Image ga = readPng(gpu), rb = readPng(ref);
     EXPECT_EQ(ga.width, 96u);
@@ -69,7 +75,8 @@ TEST_F(RenderCli, RepeatDrawsWarmFramesOfTheSameImage) {
         const std::string args = " --size 64,48 --tf ct-bone --orbit 40,25 --renderer " + renderer;
         auto a = brickcast("render " + store + " -o " + one + args);
         ASSERT_EQ(a.exitCode, 0) << a.text;
-        auto b = brickcast("render " + store + " -o " + three + args + " --repeat 3 --stats " + stats);
+        auto b =
+            brickcast("render " + store + " -o " + three + args + " --repeat 3 --stats " + stats);
         ASSERT_EQ(b.exitCode, 0) << b.text;
         EXPECT_TRUE(contains(b.text, "3 frames: first")) << b.text;
         EXPECT_LE(compareImages(readPng(one), readPng(three)).maxAbs, 1.0 / 255.0) << renderer;
@@ -95,7 +102,8 @@ TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
     test::writeFile(tf, std::string(R"({"points":[{"value":1,"rgba":[1,1,1,2]}]})"));
     auto bad = brickcast("render " + store + " -o " + out + " --tf " + tf);
     EXPECT_NE(bad.exitCode, 0);
-    EXPECT_TRUE(contains(bad.text, "bad.json") && contains(bad.text, "points[0].rgba[3]")) << bad.text;
+    EXPECT_TRUE(contains(bad.text, "bad.json") && contains(bad.text, "points[0].rgba[3]"))
+        << bad.text;
     auto preset = brickcast("render " + store + " -o " + out + " --tf no-such-preset");
     EXPECT_NE(preset.exitCode, 0);
     EXPECT_TRUE(contains(preset.text, "ct-bone")) << "lists the presets: " << preset.text;

@@ -19,7 +19,8 @@ struct RunResult {
 
 RunResult run(const std::vector<std::string>& args) {
     std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    for (const auto& a : args)
+        argv.push_back(const_cast<char*>(a.c_str()));
     argv.push_back(nullptr);
     auto t0 = std::chrono::steady_clock::now();
     pid_t pid = ::fork();
@@ -41,16 +42,21 @@ TEST(LargeVolumeTest, FourGiBPhantomIngestsInMemoryThatDoesNotGrowWithDepthAndVe
     bc::test::TempDir dir;
     const std::string exe = BC_BRICKCAST_EXE;
     // Same slice area, 8x the depth: 512 MiB and 4 GiB of u16.
-    auto small = run({exe, "ingest", "synth:phantom", "--dims", "2048,2048,64", "-q", "-o", dir.file("small.bcs")});
+    auto small = run({exe, "ingest", "synth:phantom", "--dims", "2048,2048,64", "-q", "-o",
+                      dir.file("small.bcs")});
     ASSERT_EQ(small.exitCode, 0);
     std::filesystem::remove(dir.file("small.bcs"));
-    auto large = run({exe, "ingest", "synth:phantom", "--dims", "2048,2048,512", "-q", "-o", dir.file("large.bcs")});
+    auto large = run({exe, "ingest", "synth:phantom", "--dims", "2048,2048,512", "-q", "-o",
+                      dir.file("large.bcs")});
     ASSERT_EQ(large.exitCode, 0);
-    std::printf("ingest 2048x2048x64 u16 (0.5 GiB): %.1f s, peak RSS %.0f MiB\n", small.seconds, small.peakRssKiB / 1024.0);
-    std::printf("ingest 2048x2048x512 u16 (4 GiB): %.1f s, peak RSS %.0f MiB\n", large.seconds, large.peakRssKiB / 1024.0);
+    std::printf("ingest 2048x2048x64 u16 (0.5 GiB): %.1f s, peak RSS %.0f MiB\n", small.seconds,
+                small.peakRssKiB / 1024.0);
+    std::printf("ingest 2048x2048x512 u16 (4 GiB): %.1f s, peak RSS %.0f MiB\n", large.seconds,
+                large.peakRssKiB / 1024.0);
     EXPECT_LT(double(large.peakRssKiB), 1.25 * double(small.peakRssKiB));
     auto verify = run({exe, "verify", dir.file("large.bcs")});
-    std::printf("verify 4 GiB store: %.1f s, peak RSS %.0f MiB\n", verify.seconds, verify.peakRssKiB / 1024.0);
+    std::printf("verify 4 GiB store: %.1f s, peak RSS %.0f MiB\n", verify.seconds,
+                verify.peakRssKiB / 1024.0);
     EXPECT_EQ(verify.exitCode, 0);
 }
 
