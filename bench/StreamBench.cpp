@@ -46,12 +46,14 @@ protocol::RenderOptions optionsOf(const Options& o, protocol::Codec codec) {
     r.width = r.height = std::uint16_t(o.size);
     r.codec = codec;
     r.quality = protocol::Quality::Refined;
-    r.renderer = o.renderer == "gpu" ? protocol::Renderer::GpuRaycaster : protocol::Renderer::CpuRaycaster;
+    r.renderer =
+        o.renderer == "gpu" ? protocol::Renderer::GpuRaycaster : protocol::Renderer::CpuRaycaster;
     return r;
 }
 
 /// One client's orbit; the samples of its frames (the first, which warms caches, dropped).
-std::vector<FrameSample> fly(std::uint16_t port, const Options& o, protocol::Codec codec, int seed) {
+std::vector<FrameSample> fly(std::uint16_t port, const Options& o, protocol::Codec codec,
+                             int seed) {
     client::ClientConfig cc;
     cc.port = port;
     cc.timeoutMs = 600000;
@@ -61,7 +63,8 @@ std::vector<FrameSample> fly(std::uint16_t port, const Options& o, protocol::Cod
     std::vector<FrameSample> out;
     for (int f = 0; f <= o.frames; ++f) {
         const auto start = Clock::now();
-        c.setCamera(client::orbitCamera(info, 17.0 * seed + 3.0 * f, 20.0, 1.0, std::uint32_t(f + 1)));
+        c.setCamera(
+            client::orbitCamera(info, 17.0 * seed + 3.0 * f, 20.0, 1.0, std::uint32_t(f + 1)));
         c.requestFrame();
         const auto frame = c.nextFrame();
         const double ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
@@ -83,12 +86,16 @@ void loadTable(std::uint16_t port, const Options& o) {
         const auto start = Clock::now();
         std::vector<std::thread> threads;
         for (int i = 0; i < n; ++i)
-            threads.emplace_back([&, i] { got[std::size_t(i)] = fly(port, o, protocol::Codec::Zstd, i); });
-        for (auto& t : threads) t.join();
+            threads.emplace_back(
+                [&, i] { got[std::size_t(i)] = fly(port, o, protocol::Codec::Zstd, i); });
+        for (auto& t : threads)
+            t.join();
         const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
         std::vector<double> latency, queue, render;
         for (const auto& g : got)
-            for (const auto& s : g) latency.push_back(s.latencyMs), queue.push_back(s.queueMs), render.push_back(s.renderMs);
+            for (const auto& s : g)
+                latency.push_back(s.latencyMs), queue.push_back(s.queueMs),
+                    render.push_back(s.renderMs);
         std::printf("| %d | %zu | %.1f | %.1f | %.1f | %.1f | %.1f |\n", n, latency.size(),
                     double(n * (o.frames + 1)) / seconds, percentile(latency, 50),
                     percentile(latency, 99), percentile(queue, 50), percentile(render, 50));
@@ -99,18 +106,20 @@ void loadTable(std::uint16_t port, const Options& o) {
 void codecTable(std::uint16_t port, const Options& o) {
     std::printf("\n| codec | render ms (p50) | encode ms (p50) | encode / render | bytes a frame "
                 "(median) | latency p50 ms |\n|---|---|---|---|---|---|\n");
-    const std::pair<const char*, protocol::Codec> codecs[] = {{"raw", protocol::Codec::Raw},
-                                                              {"zstd", protocol::Codec::Zstd},
-                                                              {"zstd delta", protocol::Codec::ZstdDelta},
-                                                              {"JPEG", protocol::Codec::Jpeg}};
+    const std::pair<const char*, protocol::Codec> codecs[] = {
+        {"raw", protocol::Codec::Raw},
+        {"zstd", protocol::Codec::Zstd},
+        {"zstd delta", protocol::Codec::ZstdDelta},
+        {"JPEG", protocol::Codec::Jpeg}};
     for (const auto& [name, codec] : codecs) {
         const auto s = fly(port, o, codec, 0);
         std::vector<double> render, encode, bytes, latency;
         for (const auto& x : s)
-            render.push_back(x.renderMs), encode.push_back(x.encodeMs), bytes.push_back(double(x.bytes)),
-                latency.push_back(x.latencyMs);
+            render.push_back(x.renderMs), encode.push_back(x.encodeMs),
+                bytes.push_back(double(x.bytes)), latency.push_back(x.latencyMs);
         std::printf("| %s | %.2f | %.3f | %.3f | %.0f | %.1f |\n", name, percentile(render, 50),
-                    percentile(encode, 50), percentile(encode, 50) / std::max(percentile(render, 50), 1e-9),
+                    percentile(encode, 50),
+                    percentile(encode, 50) / std::max(percentile(render, 50), 1e-9),
                     percentile(bytes, 50), percentile(latency, 50));
         std::fflush(stdout);
     }
@@ -122,14 +131,16 @@ int main(int argc, char** argv) {
     CLI::App app{"Streaming load benchmark: frames/s and latency against clients, codecs"};
     Options o;
     app.add_option("--clients", o.clients, "Client counts, comma-separated")->capture_default_str();
-    app.add_option("--frames", o.frames, "Frames per client (after one warm-up)")->capture_default_str();
+    app.add_option("--frames", o.frames, "Frames per client (after one warm-up)")
+        ->capture_default_str();
     app.add_option("--size", o.size, "Frame edge")->capture_default_str();
     app.add_option("--renderer", o.renderer, "cpu or gpu")->capture_default_str();
     app.add_option("--edge", o.edge, "Generated phantom edge (voxels)")->capture_default_str();
     app.add_option("--store", o.store, "Serve this brick store instead of the phantom");
     CLI11_PARSE(app, argc, argv);
     try {
-        const auto dir = std::filesystem::temp_directory_path() / ("bc-stream-bench-" + std::to_string(::getpid()));
+        const auto dir = std::filesystem::temp_directory_path() /
+                         ("bc-stream-bench-" + std::to_string(::getpid()));
         server::DaemonConfig config;
         config.source = "<bench>";
         config.listenPort = 0;

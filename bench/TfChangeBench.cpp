@@ -90,8 +90,8 @@ int main(int argc, char** argv) {
     protocol::RenderOptions ro;
     ro.width = ro.height = std::uint16_t(o.size);
     ro.quality = protocol::Quality::Refined;
-    ro.renderer = o.renderer == "gpu" ? protocol::Renderer::GpuRaycaster
-                                      : protocol::Renderer::CpuRaycaster;
+    ro.renderer =
+        o.renderer == "gpu" ? protocol::Renderer::GpuRaycaster : protocol::Renderer::CpuRaycaster;
     std::vector<std::unique_ptr<client::Client>> clients;
     protocol::VolumeInfo info;
     for (int i = 0; i < o.sessions; ++i) {

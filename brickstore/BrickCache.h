@@ -17,7 +17,7 @@ namespace bc::brickstore {
 class BrickStore;
 
 struct BrickCacheConfig {
-    std::uint64_t budgetBytes = 1ull << 30;  ///< bytes of decompressed bricks kept resident
+    std::uint64_t budgetBytes = 1ull << 30; ///< bytes of decompressed bricks kept resident
 };
 
 /// A request that waits for another thread's load of the same brick counts as a hit; a
@@ -26,7 +26,7 @@ struct BrickCacheStats {
     std::uint64_t hits = 0;
     std::uint64_t misses = 0;
     std::uint64_t evictions = 0;
-    std::uint64_t bytesLoaded = 0;    ///< bytes brought in by misses
+    std::uint64_t bytesLoaded = 0; ///< bytes brought in by misses
     std::uint64_t bytesEvicted = 0;
     /// Misses of bricks this cache held before and evicted: the traffic a larger budget
     /// (or a better eviction order) would have saved.
@@ -46,7 +46,7 @@ class CacheCore;
 
 /// A pinned, decompressed brick. Move-only; unpins in its destructor. The cache must outlive it.
 class BrickPin {
-public:
+  public:
     BrickPin() = default;
     BrickPin(BrickPin&& other) noexcept;
     BrickPin& operator=(BrickPin&& other) noexcept;
@@ -59,7 +59,7 @@ public:
     std::span<const std::byte> data() const;
     explicit operator bool() const { return mEntry != nullptr; }
 
-private:
+  private:
     friend class BrickCache;
     BrickPin(detail::CacheCore* core, detail::CacheEntry* entry) : mCore(core), mEntry(entry) {}
     void release();
@@ -68,7 +68,7 @@ private:
 };
 
 class BrickCache {
-public:
+  public:
     /// Sizes `out` and fills it with brick `key`; may throw (StoreCorrupt).
     using Loader = std::function<void(const BrickKey& key, std::vector<std::byte>& out)>;
 
@@ -88,7 +88,7 @@ public:
     void setBudgetBytes(std::uint64_t budgetBytes);
     BrickCacheStats stats() const;
 
-private:
+  private:
     std::unique_ptr<detail::CacheCore> mCore;
 };
 

@@ -129,9 +129,12 @@ void BrickStore::readBrick(const BrickKey& key, std::span<std::byte> out) const 
         throw StoreCorrupt(mPath + ": brick " + key.toString() + ": " + why);
     };
     if (detail::checksum(frame) != r.payloadChecksum) fail("payload checksum mismatch");
-    std::size_t n = ZSTD_decompressDCtx(threadDCtx(), out.data(), out.size(), frame.data(), frame.size());
+    std::size_t n =
+        ZSTD_decompressDCtx(threadDCtx(), out.data(), out.size(), frame.data(), frame.size());
     if (ZSTD_isError(n)) fail(std::string("cannot decompress: ") + ZSTD_getErrorName(n));
-    if (n != out.size()) fail("decompressed to " + std::to_string(n) + " bytes, expected " + std::to_string(out.size()));
+    if (n != out.size())
+        fail("decompressed to " + std::to_string(n) + " bytes, expected " +
+             std::to_string(out.size()));
 }
 
 std::vector<ValueRange> BrickStore::leafRanges(const BrickKey& key) const {
@@ -151,21 +154,24 @@ std::vector<std::string> BrickStore::verify(unsigned threads) const {
     auto worker = [&] {
         std::vector<std::byte> buffer(brickBytes());
         for (std::uint64_t i = next++; i < mRecords.size(); i = next++) {
-            if (!mRecords[i].stored()) continue;  // nothing on disk to check
+            if (!mRecords[i].stored()) continue; // nothing on disk to check
             BrickKey key = mLayout->keyOf(i);
             try {
                 readBrick(key, buffer);
                 auto leaves = leafRanges(key);
                 auto range = detail::brickRange(mInfo.volume.type, buffer);
                 auto expect = detail::leafRanges(mInfo.volume.type, buffer, mInfo.geometry);
-                bool leavesOk = std::equal(leaves.begin(), leaves.end(), expect.begin(), expect.end(),
-                                           [](const ValueRange& a, const ValueRange& b) {
-                                               return a.min == b.min && a.max == b.max;
-                                           });
+                bool leavesOk =
+                    std::equal(leaves.begin(), leaves.end(), expect.begin(), expect.end(),
+                               [](const ValueRange& a, const ValueRange& b) {
+                                   return a.min == b.min && a.max == b.max;
+                               });
                 if (range.min != mRecords[i].range.min || range.max != mRecords[i].range.max)
-                    throw StoreCorrupt(mPath + ": brick " + key.toString() + ": value range differs from the index");
+                    throw StoreCorrupt(mPath + ": brick " + key.toString() +
+                                       ": value range differs from the index");
                 if (!leavesOk)
-                    throw StoreCorrupt(mPath + ": brick " + key.toString() + ": leaf ranges differ from the voxels");
+                    throw StoreCorrupt(mPath + ": brick " + key.toString() +
+                                       ": leaf ranges differ from the voxels");
             } catch (const StoreCorrupt& e) {
                 std::lock_guard lock(mutex);
                 faults.emplace_back(i, e.what());
@@ -173,11 +179,13 @@ std::vector<std::string> BrickStore::verify(unsigned threads) const {
         }
     };
     std::vector<std::jthread> pool;
-    for (unsigned t = 0; t < threads; ++t) pool.emplace_back(worker);
+    for (unsigned t = 0; t < threads; ++t)
+        pool.emplace_back(worker);
     pool.clear();
     std::sort(faults.begin(), faults.end());
     std::vector<std::string> out;
-    for (auto& f : faults) out.push_back(std::move(f.second));
+    for (auto& f : faults)
+        out.push_back(std::move(f.second));
     return out;
 }
 

@@ -20,13 +20,13 @@ struct ValueRange {
 
 /// One index entry (FORMAT.md "Brick record").
 struct BrickRecord {
-    std::uint64_t offset = 0;           ///< file offset of the zstd frame (0 if not stored)
+    std::uint64_t offset = 0; ///< file offset of the zstd frame (0 if not stored)
     std::uint32_t compressedBytes = 0;
-    std::uint32_t leafBytes = 0;        ///< leaf table that follows the frame
-    std::uint32_t flags = 0;            ///< kBrickStored
-    ValueRange range;                   ///< min == max == value for a brick not stored
-    std::uint64_t payloadChecksum = 0;  ///< XXH3-64 of the compressed frame
-    std::uint64_t leafChecksum = 0;     ///< XXH3-64 of the leaf table
+    std::uint32_t leafBytes = 0;       ///< leaf table that follows the frame
+    std::uint32_t flags = 0;           ///< kBrickStored
+    ValueRange range;                  ///< min == max == value for a brick not stored
+    std::uint64_t payloadChecksum = 0; ///< XXH3-64 of the compressed frame
+    std::uint64_t leafChecksum = 0;    ///< XXH3-64 of the leaf table
     bool stored() const { return (flags & 1u) != 0; }
 };
 constexpr std::uint32_t kBrickStored = 1u;
@@ -39,8 +39,9 @@ struct StoreInfo {
     double valueMax = 0.0;
     std::uint64_t fileBytes = 0;
     std::uint64_t storedBricks = 0;
-    std::uint64_t storedBytes = 0;       ///< compressed payloads plus leaf tables
-    std::vector<std::uint64_t> histogram;///< level-0 voxels in equal bins over [valueMin, valueMax]
+    std::uint64_t storedBytes = 0; ///< compressed payloads plus leaf tables
+    std::vector<std::uint64_t>
+        histogram; ///< level-0 voxels in equal bins over [valueMin, valueMax]
 };
 
 namespace detail {
@@ -48,7 +49,7 @@ class MappedFile;
 }
 
 class BrickStore {
-public:
+  public:
     /// Opens and validates header and index (offsets inside the file, no overlaps, sizes
     /// within limits, checksums of header and index). Brick payloads are checked on read.
     /// @throw StoreCorrupt naming the store and what is wrong; StoreIoError if unreadable.
@@ -77,7 +78,7 @@ public:
     /// Returns one line per fault, naming the brick; empty when the store is sound.
     std::vector<std::string> verify(unsigned threads = 0) const;
 
-private:
+  private:
     BrickStore() = default;
     std::string mPath;
     std::uint64_t mInstance = 0;

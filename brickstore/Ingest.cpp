@@ -33,7 +33,7 @@ std::size_t zstdCheck(std::size_t code, const char* what) {
 
 /// Bounded queue of cut bricks between the reading thread and the compression workers.
 class JobQueue {
-public:
+  public:
     explicit JobQueue(std::size_t capacity) : mCapacity(capacity) {}
     /// Blocks while full. Returns false if the queue was aborted.
     bool push(detail::BrickJob&& job) {
@@ -68,7 +68,7 @@ public:
         mNotFull.notify_all();
     }
 
-private:
+  private:
     std::size_t mCapacity;
     std::mutex mMutex;
     std::condition_variable mNotEmpty, mNotFull;
@@ -94,7 +94,8 @@ struct IngestState {
     }
 };
 
-void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job, std::vector<std::byte>& buf) {
+void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
+                   std::vector<std::byte>& buf) {
     BrickRecord& rec = s.records[job.index];
     const std::size_t vb = voxelBytes(s.type);
     if (detail::isConstant(job.voxels, vb)) {
@@ -127,7 +128,8 @@ void workerLoop(IngestState& s, JobQueue& queue) {
     std::unique_ptr<ZSTD_CCtx, CCtxDeleter> cctx(ZSTD_createCCtx());
     std::vector<std::byte> buf;
     try {
-        zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, s.zstdLevel), "level");
+        zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, s.zstdLevel),
+                  "level");
         zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_checksumFlag, 1), "checksum flag");
         while (auto job = queue.pop()) {
             compressBrick(s, cctx.get(), *job, buf);
@@ -154,29 +156,34 @@ std::vector<std::uint64_t> buildHistogram(IngestState& s, std::uint32_t bins, do
             const BrickRecord& r = s.records[i];
             auto extent = s.layout.payloadExtent(s.layout.keyOf(i));
             if (!r.stored()) {
-                partial[t][detail::histogramBin(r.range.min, lo, hi, bins)] += extent[0] * extent[1] * extent[2];
+                partial[t][detail::histogramBin(r.range.min, lo, hi, bins)] +=
+                    extent[0] * extent[1] * extent[2];
                 continue;
             }
             frame.resize(r.compressedBytes);
             s.file.readAt(r.offset, frame);
-            zstdCheck(ZSTD_decompressDCtx(dctx.get(), voxels.data(), voxels.size(), frame.data(), frame.size()),
+            zstdCheck(ZSTD_decompressDCtx(dctx.get(), voxels.data(), voxels.size(), frame.data(),
+                                          frame.size()),
                       "decompress for histogram");
             binner.add(voxels, edge, {a, a, a}, extent, partial[t]);
         }
     };
     {
         std::vector<std::jthread> pool;
-        for (unsigned t = 0; t < threads; ++t) pool.emplace_back(worker, t);
+        for (unsigned t = 0; t < threads; ++t)
+            pool.emplace_back(worker, t);
     }
     std::vector<std::uint64_t> total(bins);
     for (const auto& p : partial)
-        for (std::uint32_t b = 0; b < bins; ++b) total[b] += p[b];
+        for (std::uint32_t b = 0; b < bins; ++b)
+            total[b] += p[b];
     return total;
 }
 
 /// Reads every slice of the source into the level chain, reporting progress.
 void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestState& s,
-                  const std::function<void(const IngestProgress&)>& progress, Clock::time_point start) {
+                  const std::function<void(const IngestProgress&)>& progress,
+                  Clock::time_point start) {
     const VolumeInfo& info = source.info();
     const std::uint64_t sliceBytes = info.sliceBytes();
     const std::uint64_t chunk = std::max<std::uint64_t>(1, (8ull << 20) / sliceBytes);
@@ -184,7 +191,8 @@ void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestStat
     for (std::uint64_t z = 0; z < info.dims[2];) {
         std::uint64_t n = std::min(chunk, info.dims[2] - z);
         source.readSlices(n, std::span(staging).first(n * sliceBytes));
-        for (std::uint64_t i = 0; i < n; ++i) level0.pushSlice(staging.data() + i * sliceBytes);
+        for (std::uint64_t i = 0; i < n; ++i)
+            level0.pushSlice(staging.data() + i * sliceBytes);
         z += n;
         {
             std::lock_guard lock(s.errorMutex);
@@ -209,9 +217,11 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     const auto start = Clock::now();
     const VolumeInfo& info = source.info();
     validateVolumeInfo(info, info.description.empty() ? storePath : info.description);
-    StoreLayout layout(info.dims, config.geometry);  // throws std::invalid_argument
-    const std::uint32_t bins = std::clamp<std::uint32_t>(config.histogramBins, 1, detail::kMaxHistogramBins);
-    const unsigned threads = config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
+    StoreLayout layout(info.dims, config.geometry); // throws std::invalid_argument
+    const std::uint32_t bins =
+        std::clamp<std::uint32_t>(config.histogramBins, 1, detail::kMaxHistogramBins);
+    const unsigned threads =
+        config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
 
     detail::StoreFile file(storePath);
     IngestState s{layout, info.type, config.zstdLevel, file, {}, {}, {}, {}, {}};
@@ -223,11 +233,12 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     std::vector<std::unique_ptr<detail::LevelBuilder>> levels(nLevels);
     auto sink = [&](detail::BrickJob&& job) { queue.push(std::move(job)); };
     for (std::uint32_t l = nLevels; l-- > 0;)
-        levels[l] = std::make_unique<detail::LevelBuilder>(layout, l, info.type, sink,
-                                                           l + 1 < nLevels ? levels[l + 1].get() : nullptr);
+        levels[l] = std::make_unique<detail::LevelBuilder>(
+            layout, l, info.type, sink, l + 1 < nLevels ? levels[l + 1].get() : nullptr);
     {
         std::vector<std::jthread> workers;
-        for (unsigned t = 0; t < threads; ++t) workers.emplace_back([&] { workerLoop(s, queue); });
+        for (unsigned t = 0; t < threads; ++t)
+            workers.emplace_back([&] { workerLoop(s, queue); });
         try {
             streamSlices(source, *levels[0], s, progress, start);
             queue.finish();

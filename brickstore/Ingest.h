@@ -13,10 +13,10 @@ namespace bc::brickstore {
 
 struct IngestConfig {
     BrickGeometry geometry;
-    unsigned threads = 0;             ///< compression workers; 0 = hardware concurrency
+    unsigned threads = 0; ///< compression workers; 0 = hardware concurrency
     int zstdLevel = 3;
     std::uint32_t histogramBins = 256;
-    std::uint32_t queueBricks = 0;    ///< bricks in flight; 0 = 4 per worker
+    std::uint32_t queueBricks = 0; ///< bricks in flight; 0 = 4 per worker
 };
 
 struct IngestProgress {
@@ -28,13 +28,13 @@ struct IngestProgress {
 };
 
 struct IngestReport {
-    std::uint64_t sourceBytes = 0;       ///< level-0 voxels in native type
-    std::uint64_t bricks = 0;            ///< all levels
+    std::uint64_t sourceBytes = 0; ///< level-0 voxels in native type
+    std::uint64_t bricks = 0;      ///< all levels
     std::uint64_t storedBricks = 0;
-    std::uint64_t constantBricks = 0;    ///< not stored: every voxel (apron too) one value
-    std::uint64_t storedBytes = 0;       ///< compressed payloads plus leaf tables
+    std::uint64_t constantBricks = 0;         ///< not stored: every voxel (apron too) one value
+    std::uint64_t storedBytes = 0;            ///< compressed payloads plus leaf tables
     std::uint64_t uncompressedBrickBytes = 0; ///< stored bricks before compression
-    std::uint64_t constantBrickBytes = 0;///< bytes the constant bricks would have taken
+    std::uint64_t constantBrickBytes = 0;     ///< bytes the constant bricks would have taken
     std::uint64_t fileBytes = 0;
     double seconds = 0.0;
 };

@@ -52,8 +52,8 @@ std::optional<SynthKind> parseSynthKind(const std::string& name);
 /// Deterministic generators, any size, produced slice by slice:
 ///  Phantom: dense CT-like head (u16); Vessels: sparse branching tree, 1-5% occupied (u8);
 ///  Checker: 3D checkerboard of kCheckerPeriodVoxels-voxel cells (u8), for aliasing tests.
-std::unique_ptr<VolumeSource> makeSynthetic(SynthKind kind, const std::array<std::uint64_t, 3>& dims,
-                                            std::uint64_t seed);
+std::unique_ptr<VolumeSource>
+makeSynthetic(SynthKind kind, const std::array<std::uint64_t, 3>& dims, std::uint64_t seed);
 
 /// Tiles the volume that `open` returns tiles[0] x tiles[1] x tiles[2] times. `open` is called
 /// once per repetition along z (a reader streams forwards only).
@@ -62,7 +62,7 @@ std::unique_ptr<VolumeSource> makeMosaic(std::function<std::unique_ptr<VolumeSou
 
 /// Everything the `ingest` command line can say about its input.
 struct SourceSpec {
-    std::string input;                              ///< path, folder, or "synth:KIND"
+    std::string input; ///< path, folder, or "synth:KIND"
     std::optional<std::array<std::uint64_t, 3>> dims;
     std::optional<VoxelType> type;
     std::optional<std::array<double, 3>> spacingMm;

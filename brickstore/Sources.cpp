@@ -9,12 +9,14 @@ namespace bc::brickstore {
 namespace {
 
 bool endsWith(const std::string& s, const std::string& suffix) {
-    return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+    return s.size() >= suffix.size() &&
+           s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 /// "frog_500x470x136_uint8.raw" -> dims and type, the naming the shared data uses.
 void layoutFromName(const std::string& path, RawLayout& layout, bool& haveDims, bool& haveType) {
-    static const std::regex kPattern(R"((\d+)x(\d+)x(\d+)_(u?int8|u?int16|float32|u8|u16|i16|f32))");
+    static const std::regex kPattern(
+        R"((\d+)x(\d+)x(\d+)_(u?int8|u?int16|float32|u8|u16|i16|f32))");
     std::smatch m;
     std::string name = std::filesystem::path(path).filename().string();
     if (!std::regex_search(name, m, kPattern)) return;
@@ -24,7 +26,7 @@ void layoutFromName(const std::string& path, RawLayout& layout, bool& haveDims, 
     }
     if (!haveType) {
         std::string t = m[4];
-        if (t == "int8") return;  // not a stored type; let the caller say so
+        if (t == "int8") return; // not a stored type; let the caller say so
         if (auto vt = parseVoxelType(t)) {
             layout.type = *vt;
             haveType = true;
@@ -39,9 +41,10 @@ std::unique_ptr<VolumeSource> openRawFromSpec(const SourceSpec& spec) {
     if (haveType) layout.type = *spec.type;
     layoutFromName(spec.input, layout, haveDims, haveType);
     if (!haveDims)
-        throw FormatError(spec.input, "dims", "a raw file needs --dims X,Y,Z (or a name like vol_256x256x113_uint16.raw)");
-    if (!haveType)
-        throw FormatError(spec.input, "type", "a raw file needs --type u8|u16|i16|f32");
+        throw FormatError(
+            spec.input, "dims",
+            "a raw file needs --dims X,Y,Z (or a name like vol_256x256x113_uint16.raw)");
+    if (!haveType) throw FormatError(spec.input, "type", "a raw file needs --type u8|u16|i16|f32");
     if (spec.spacingMm) layout.spacingMm = *spec.spacingMm;
     layout.endian = spec.endian;
     return openRaw(spec.input, layout);
@@ -51,7 +54,9 @@ std::unique_ptr<VolumeSource> openOne(const SourceSpec& spec) {
     const std::string& in = spec.input;
     if (in.rfind("synth:", 0) == 0) {
         auto kind = parseSynthKind(in.substr(6));
-        if (!kind) throw FormatError(in, "kind", "unknown generator; use synth:phantom, synth:vessels or synth:checker");
+        if (!kind)
+            throw FormatError(
+                in, "kind", "unknown generator; use synth:phantom, synth:vessels or synth:checker");
         if (!spec.dims) throw FormatError(in, "dims", "a generator needs --dims X,Y,Z");
         return makeSynthetic(*kind, *spec.dims, spec.seed);
     }

@@ -30,13 +30,15 @@ StoreLayout::StoreLayout(const std::array<std::uint64_t, 3>& dims, const BrickGe
         LevelLayout level;
         level.dims = d;
         for (int a = 0; a < 3; ++a)
-            level.bricks[a] = static_cast<std::uint32_t>((d[a] + g.brickVoxels - 1) / g.brickVoxels);
+            level.bricks[a] =
+                static_cast<std::uint32_t>((d[a] + g.brickVoxels - 1) / g.brickVoxels);
         level.firstBrick = mBrickCount;
         mBrickCount += level.brickCount();
         mLevels.push_back(level);
         bool fits = d[0] <= g.brickVoxels && d[1] <= g.brickVoxels && d[2] <= g.brickVoxels;
         if (fits || mLevels.size() == kMaxLevels) break;
-        for (auto& v : d) v = (v + 1) / 2;
+        for (auto& v : d)
+            v = (v + 1) / 2;
     }
 }
 
@@ -74,7 +76,8 @@ BrickKey StoreLayout::keyOf(std::uint64_t index) const {
 
 std::array<std::uint64_t, 3> StoreLayout::payloadOrigin(const BrickKey& key) const {
     std::array<std::uint64_t, 3> o{};
-    for (int a = 0; a < 3; ++a) o[a] = std::uint64_t(key.pos[a]) * mGeometry.brickVoxels;
+    for (int a = 0; a < 3; ++a)
+        o[a] = std::uint64_t(key.pos[a]) * mGeometry.brickVoxels;
     return o;
 }
 

@@ -11,7 +11,7 @@ namespace bc::brickstore {
 /// One brick of one pyramid level. Level 0 is full resolution.
 struct BrickKey {
     std::uint32_t level = 0;
-    std::array<std::uint32_t, 3> pos{};  ///< brick coordinates along x, y, z
+    std::array<std::uint32_t, 3> pos{}; ///< brick coordinates along x, y, z
     bool operator==(const BrickKey&) const = default;
     /// "L0 (3,1,2)": how errors and tools name a brick.
     std::string toString() const;
@@ -25,9 +25,9 @@ struct LevelLayout {
 };
 
 struct BrickGeometry {
-    std::uint32_t brickVoxels = 64;  ///< payload edge B
-    std::uint32_t apronVoxels = 2;   ///< overlap A on every side; stored edge is B + 2A
-    std::uint32_t leafVoxels = 8;    ///< edge of a leaf block of per-leaf min/max
+    std::uint32_t brickVoxels = 64; ///< payload edge B
+    std::uint32_t apronVoxels = 2;  ///< overlap A on every side; stored edge is B + 2A
+    std::uint32_t leafVoxels = 8;   ///< edge of a leaf block of per-leaf min/max
 };
 
 /// Accepted ranges of BrickGeometry (checked on ingest and on open).
@@ -35,7 +35,7 @@ constexpr std::uint32_t kMinBrickVoxels = 4, kMaxBrickVoxels = 512, kMaxApronVox
 constexpr std::uint32_t kMaxLevels = 24;
 
 class StoreLayout {
-public:
+  public:
     /// Builds level 0 from `dims` and halves (rounding up) until a level fits in one brick.
     /// @throw std::invalid_argument on a geometry outside the accepted ranges.
     StoreLayout(const std::array<std::uint64_t, 3>& dims, const BrickGeometry& geometry);
@@ -44,7 +44,9 @@ public:
     const std::vector<LevelLayout>& levels() const { return mLevels; }
     std::uint64_t brickCount() const { return mBrickCount; }
     std::uint32_t storedEdge() const { return mGeometry.brickVoxels + 2 * mGeometry.apronVoxels; }
-    std::uint64_t storedVoxels() const { return std::uint64_t(storedEdge()) * storedEdge() * storedEdge(); }
+    std::uint64_t storedVoxels() const {
+        return std::uint64_t(storedEdge()) * storedEdge() * storedEdge();
+    }
     std::uint32_t leavesPerAxis() const;
     std::uint32_t leafCount() const { return leavesPerAxis() * leavesPerAxis() * leavesPerAxis(); }
 
@@ -57,7 +59,7 @@ public:
     /// Payload voxels of a brick that lie inside the volume (border bricks are partial).
     std::array<std::uint64_t, 3> payloadExtent(const BrickKey& key) const;
 
-private:
+  private:
     BrickGeometry mGeometry;
     std::vector<LevelLayout> mLevels;
     std::uint64_t mBrickCount = 0;

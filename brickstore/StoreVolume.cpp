@@ -14,23 +14,25 @@ namespace bc::brickstore {
 namespace {
 
 class StoreLevelSource final : public VolumeSource {
-public:
+  public:
     StoreLevelSource(const BrickStore& store, std::uint32_t level, unsigned threads)
         : mStore(store), mLevel(level),
           mThreads(threads ? threads : std::max(1u, std::thread::hardware_concurrency())) {
         const auto& layout = store.layout();
         if (level >= layout.levels().size())
-            throw std::out_of_range(store.path() + ": no level " + std::to_string(level) + " (the store has " +
-                                    std::to_string(layout.levels().size()) + ")");
+            throw std::out_of_range(store.path() + ": no level " + std::to_string(level) +
+                                    " (the store has " + std::to_string(layout.levels().size()) +
+                                    ")");
         mInfo = store.info().volume;
         mInfo.dims = layout.levels()[level].dims;
-        for (auto& s : mInfo.spacingMm) s *= double(1u << level);
+        for (auto& s : mInfo.spacingMm)
+            s *= double(1u << level);
         mSlab.resize(std::size_t(layout.geometry().brickVoxels) * mInfo.sliceBytes());
     }
 
     const VolumeInfo& info() const override { return mInfo; }
 
-private:
+  private:
     void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         const std::uint64_t sliceBytes = mInfo.sliceBytes();
         const std::uint32_t b = mStore.layout().geometry().brickVoxels;
@@ -54,7 +56,9 @@ private:
         auto worker = [&] {
             std::vector<std::byte> brick(mStore.brickBytes());
             for (std::uint64_t i = next++; i < perRow; i = next++) {
-                BrickKey key{mLevel, {std::uint32_t(i % level.bricks[0]), std::uint32_t(i / level.bricks[0]), bz}};
+                BrickKey key{
+                    mLevel,
+                    {std::uint32_t(i % level.bricks[0]), std::uint32_t(i / level.bricks[0]), bz}};
                 try {
                     mStore.readBrick(key, brick);
                     copyPayload(key, brick);
@@ -66,7 +70,8 @@ private:
         };
         {
             std::vector<std::jthread> pool;
-            for (unsigned t = 0; t < std::min<std::uint64_t>(mThreads, perRow); ++t) pool.emplace_back(worker);
+            for (unsigned t = 0; t < std::min<std::uint64_t>(mThreads, perRow); ++t)
+                pool.emplace_back(worker);
         }
         if (error) std::rethrow_exception(error);
         mSlabRow = bz;
@@ -81,7 +86,9 @@ private:
         for (std::uint64_t z = 0; z < extent[2]; ++z)
             for (std::uint64_t y = 0; y < extent[1]; ++y) {
                 const std::byte* src = brick.data() + (((z + a) * edge + (y + a)) * edge + a) * vb;
-                std::byte* dst = mSlab.data() + ((z * mInfo.dims[1] + origin[1] + y) * mInfo.dims[0] + origin[0]) * vb;
+                std::byte* dst =
+                    mSlab.data() +
+                    ((z * mInfo.dims[1] + origin[1] + y) * mInfo.dims[0] + origin[0]) * vb;
                 std::memcpy(dst, src, extent[0] * vb);
             }
     }
@@ -96,7 +103,8 @@ private:
 
 } // namespace
 
-std::unique_ptr<VolumeSource> openStoreLevel(const BrickStore& store, std::uint32_t level, unsigned threads) {
+std::unique_ptr<VolumeSource> openStoreLevel(const BrickStore& store, std::uint32_t level,
+                                             unsigned threads) {
     return std::make_unique<StoreLevelSource>(store, level, threads);
 }
 

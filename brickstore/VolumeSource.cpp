@@ -36,8 +36,9 @@ void validateVolumeInfo(const VolumeInfo& info, const std::string& file) {
                                   std::to_string(kMaxDimVoxels));
     }
     if (bytes > kMaxVolumeBytes)
-        throw FormatError(file, "dims", "volume of " + std::to_string(bytes) +
-                                            " bytes exceeds the limit of 1 PiB");
+        throw FormatError(file, "dims",
+                          "volume of " + std::to_string(bytes) +
+                              " bytes exceeds the limit of 1 PiB");
     for (int a = 0; a < 3; ++a) {
         double s = info.spacingMm[a];
         if (!std::isfinite(s) || s <= 0.0)

@@ -13,16 +13,16 @@
 namespace bc::brickstore {
 
 struct VolumeInfo {
-    std::array<std::uint64_t, 3> dims{};          ///< voxels along x, y, z
-    VoxelType type = VoxelType::U8;               ///< native type as stored
-    std::array<double, 3> spacingMm{1, 1, 1};     ///< voxel size along x, y, z
-    std::array<double, 3> originMm{0, 0, 0};      ///< position of voxel (0,0,0)'s centre
-    double background = 0.0;                      ///< value of regions with no data (VDB)
+    std::array<std::uint64_t, 3> dims{};      ///< voxels along x, y, z
+    VoxelType type = VoxelType::U8;           ///< native type as stored
+    std::array<double, 3> spacingMm{1, 1, 1}; ///< voxel size along x, y, z
+    std::array<double, 3> originMm{0, 0, 0};  ///< position of voxel (0,0,0)'s centre
+    double background = 0.0;                  ///< value of regions with no data (VDB)
     /// Physical value = stored value * valueScale + valueOffset (NIfTI scl_slope/scl_inter
     /// kept beside native voxels rather than applied, so a u8 scan stays u8).
     double valueScale = 1.0;
     double valueOffset = 0.0;
-    std::string description;                      ///< e.g. "NIfTI-1 CT_AVM.nii.gz, u8"
+    std::string description; ///< e.g. "NIfTI-1 CT_AVM.nii.gz, u8"
 
     std::uint64_t voxelCount() const { return dims[0] * dims[1] * dims[2]; }
     std::uint64_t sliceBytes() const { return dims[0] * dims[1] * voxelBytes(type); }
@@ -44,7 +44,7 @@ bool checkedVolumeBytes(const std::array<std::uint64_t, 3>& dims, std::size_t by
 /// Non-virtual interface: readSlices checks the arguments and keeps the slice cursor, so a
 /// reader implements only readNextSlices and may rely on its arguments being in range.
 class VolumeSource {
-public:
+  public:
     virtual ~VolumeSource() = default;
     /// Dims, type, spacing; valid from construction on.
     virtual const VolumeInfo& info() const = 0;
@@ -57,12 +57,12 @@ public:
     /// Index of the slice the next readSlices call starts at (0 to info().dims[2]).
     std::uint64_t nextSlice() const { return mNextSlice; }
 
-protected:
+  protected:
     /// Reads slices nextSlice() .. nextSlice() + count - 1 into `out`, whose size readSlices
     /// has checked; nextSlice() advances only after this returns.
     virtual void readNextSlices(std::uint64_t count, std::span<std::byte> out) = 0;
 
-private:
+  private:
     std::uint64_t mNextSlice = 0;
 };
 

@@ -6,10 +6,14 @@ namespace bc::brickstore {
 
 std::string_view voxelTypeName(VoxelType t) {
     switch (t) {
-    case VoxelType::U8: return "u8";
-    case VoxelType::U16: return "u16";
-    case VoxelType::I16: return "i16";
-    case VoxelType::F32: return "f32";
+    case VoxelType::U8:
+        return "u8";
+    case VoxelType::U16:
+        return "u16";
+    case VoxelType::I16:
+        return "i16";
+    case VoxelType::F32:
+        return "f32";
     }
     return "?";
 }
@@ -22,11 +26,14 @@ std::optional<VoxelType> parseVoxelType(std::string_view n) {
     return std::nullopt;
 }
 
-bool isValidVoxelType(std::uint8_t raw) { return raw >= 1 && raw <= 4; }
+bool isValidVoxelType(std::uint8_t raw) {
+    return raw >= 1 && raw <= 4;
+}
 
 double voxelAsDouble(VoxelType t, const std::byte* data, std::size_t i) {
     switch (t) {
-    case VoxelType::U8: return static_cast<double>(static_cast<std::uint8_t>(data[i]));
+    case VoxelType::U8:
+        return static_cast<double>(static_cast<std::uint8_t>(data[i]));
     case VoxelType::U16: {
         std::uint16_t v;
         std::memcpy(&v, data + 2 * i, 2);

@@ -77,9 +77,13 @@ protocol::VolumeInfo Client::openVolume(const std::string& name) {
     return std::get<protocol::VolumeOpened>(await(MessageType::VolumeOpened, id)).info;
 }
 
-void Client::setCamera(const protocol::SetCamera& camera) { send(camera, nextId()); }
+void Client::setCamera(const protocol::SetCamera& camera) {
+    send(camera, nextId());
+}
 
-void Client::setTransferFunction(const protocol::SetTransferFunction& tf) { send(tf, nextId()); }
+void Client::setTransferFunction(const protocol::SetTransferFunction& tf) {
+    send(tf, nextId());
+}
 
 void Client::setRenderOptions(const protocol::RenderOptions& options) {
     send(protocol::SetRenderOptions{options}, nextId());
@@ -101,7 +105,8 @@ ReceivedFrame Client::nextFrame() {
     const std::uint64_t before = mBytesReceived;
     for (;;) {
         protocol::Message m = nextMessage(&request);
-        if (auto* e = std::get_if<protocol::Error>(&m)) throw ServerError(e->code, e->fatal, e->message);
+        if (auto* e = std::get_if<protocol::Error>(&m))
+            throw ServerError(e->code, e->fatal, e->message);
         auto* frame = std::get_if<protocol::Frame>(&m);
         if (!frame) continue; // e.g. a Stats reply nobody waits for
         ReceivedFrame out;
@@ -160,7 +165,8 @@ protocol::Message Client::await(MessageType type, std::uint32_t request) {
     for (;;) {
         std::uint32_t id = 0;
         protocol::Message m = nextMessage(&id);
-        if (auto* e = std::get_if<protocol::Error>(&m)) throw ServerError(e->code, e->fatal, e->message);
+        if (auto* e = std::get_if<protocol::Error>(&m))
+            throw ServerError(e->code, e->fatal, e->message);
         if (protocol::typeOf(m) == type && id == request) return m;
         if (auto* f = std::get_if<protocol::Frame>(&m)) { // continuous frames keep coming
             ReceivedFrame out;

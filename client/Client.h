@@ -17,7 +17,7 @@ namespace bc::client {
 struct ClientConfig {
     std::string host = "127.0.0.1";
     std::uint16_t port = 7411;
-    std::string token;              ///< sent when the server requires one
+    std::string token;               ///< sent when the server requires one
     std::uint32_t timeoutMs = 30000; ///< any single wait (connect, a reply, a frame)
     std::uint32_t maxPayloadBytes = protocol::kDefaultMaxServerPayloadBytes;
 };

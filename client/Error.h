@@ -18,7 +18,8 @@ class ClientError : public std::runtime_error {
 class ServerError : public std::runtime_error {
   public:
     ServerError(protocol::ErrorCode code, bool fatal, const std::string& message)
-        : std::runtime_error(std::string(protocol::errorName(std::uint16_t(code))) + ": " + message),
+        : std::runtime_error(std::string(protocol::errorName(std::uint16_t(code))) + ": " +
+                             message),
           mCode(code), mFatal(fatal) {}
     protocol::ErrorCode code() const { return mCode; }
     bool fatal() const { return mFatal; }

@@ -123,8 +123,8 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
                     continue;
                 }
                 const auto& record = store.record(key);
-                const bool leavesEmpty = skip == SkipMode::All && occupancy &&
-                                         record.stored() && !occupancy->occupied(index, 0, {});
+                const bool leavesEmpty = skip == SkipMode::All && occupancy && record.stored() &&
+                                         !occupancy->occupied(index, 0, {});
                 if (leavesEmpty || (skip != SkipMode::None &&
                                     table.transparent(record.range.min, record.range.max))) {
                     ++plan.skipped;

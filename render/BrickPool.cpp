@@ -38,12 +38,15 @@ std::array<std::uint32_t, 3> BrickPool::slotGridFor(std::uint64_t n, std::uint64
     // The most slots, at most n, in a grid of at most perAxis a side; of equal counts the one
     // with the shortest longest side. For each depth the rest is a near-square layer.
     std::array<std::uint64_t, 3> best{1, 1, 1};
-    auto longest = [](const std::array<std::uint64_t, 3>& g) { return std::max({g[0], g[1], g[2]}); };
+    auto longest = [](const std::array<std::uint64_t, 3>& g) {
+        return std::max({g[0], g[1], g[2]});
+    };
     for (std::uint64_t nz = 1; nz <= std::min(perAxis, n); ++nz) {
         const std::uint64_t layer = n / nz;
         const std::uint64_t nx = std::min<std::uint64_t>(
             perAxis, std::max<std::uint64_t>(1, std::uint64_t(std::sqrt(double(layer)))));
-        const std::uint64_t ny = std::min<std::uint64_t>(perAxis, std::max<std::uint64_t>(1, layer / nx));
+        const std::uint64_t ny =
+            std::min<std::uint64_t>(perAxis, std::max<std::uint64_t>(1, layer / nx));
         const std::array<std::uint64_t, 3> g{nx, ny, nz};
         const std::uint64_t count = nx * ny * nz, bestCount = best[0] * best[1] * best[2];
         if (count > bestCount || (count == bestCount && longest(g) < longest(best))) best = g;

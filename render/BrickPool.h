@@ -90,7 +90,7 @@ class BrickPool {
     std::list<std::uint32_t> mLru;     ///< unpinned occupied slots, oldest first
     std::vector<std::list<std::uint32_t>::iterator> mLruPos;
     std::vector<std::uint32_t> mFree;
-    std::vector<std::uint16_t> mStaging; ///< i16 -> biased u16
+    std::vector<std::uint16_t> mStaging;        ///< i16 -> biased u16
     std::unordered_set<std::uint64_t> mEvicted; ///< evicted, not uploaded since
     BrickPoolStats mStats;
 };

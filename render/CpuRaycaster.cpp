@@ -26,7 +26,6 @@ double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-
 enum class Slot : std::uint8_t { Absent, Sampled, Constant };
 
 struct BrickRef {
@@ -114,8 +113,10 @@ int emptyLevel(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
 float exitParameter(glm::vec3 p0, glm::vec3 dv, glm::vec3 lo, float size) {
     float t = 3.0e38f;
     for (int a = 0; a < 3; ++a) {
-        if (dv[a] > 0.0f) t = std::min(t, (lo[a] + size - p0[a]) / dv[a]);
-        else if (dv[a] < 0.0f) t = std::min(t, (lo[a] - p0[a]) / dv[a]);
+        if (dv[a] > 0.0f)
+            t = std::min(t, (lo[a] + size - p0[a]) / dv[a]);
+        else if (dv[a] < 0.0f)
+            t = std::min(t, (lo[a] - p0[a]) / dv[a]);
     }
     return t;
 }
@@ -194,7 +195,8 @@ template <class T> Rgba marchRay(const Frame& f, float sx, float sy, RayCount& n
     const int total = int(std::ceil((t1 - t0) / f.stepMm - 0.5f));
     if (total <= 0) return acc;
     const glm::vec3 pin = ov + dv * t0;
-    glm::ivec3 cell = glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
+    glm::ivec3 cell =
+        glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
     glm::ivec3 stepDir;
     glm::vec3 tDelta, tMax;
     for (int a = 0; a < 3; ++a) {
@@ -345,10 +347,18 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     Image image(options.width, options.height);
     RayCount count;
     switch (store.info().volume.type) {
-    case brickstore::VoxelType::U8: renderTiles<std::uint8_t>(f, image, count); break;
-    case brickstore::VoxelType::U16: renderTiles<std::uint16_t>(f, image, count); break;
-    case brickstore::VoxelType::I16: renderTiles<std::int16_t>(f, image, count); break;
-    case brickstore::VoxelType::F32: renderTiles<float>(f, image, count); break;
+    case brickstore::VoxelType::U8:
+        renderTiles<std::uint8_t>(f, image, count);
+        break;
+    case brickstore::VoxelType::U16:
+        renderTiles<std::uint16_t>(f, image, count);
+        break;
+    case brickstore::VoxelType::I16:
+        renderTiles<std::int16_t>(f, image, count);
+        break;
+    case brickstore::VoxelType::F32:
+        renderTiles<float>(f, image, count);
+        break;
     }
     stats.renderMs = msSince(renderStart);
     stats.samples = count.samples;

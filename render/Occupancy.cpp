@@ -98,8 +98,8 @@ OccupancyRebuild OccupancyTrees::update(const TransferFunctionTable& table,
     std::vector<std::uint8_t> visible(table.entries);
     for (std::uint32_t i = 0; i < table.entries; ++i)
         visible[i] = table.rgba[4 * std::size_t(i) + 3] > 0.0f;
-    const bool newDomain = !mBuilt || table.entries != mEntries ||
-                           table.domainMin != mDomainMin || table.domainMax != mDomainMax;
+    const bool newDomain = !mBuilt || table.entries != mEntries || table.domainMin != mDomainMin ||
+                           table.domainMax != mDomainMax;
     const bool full = newDomain || config != mConfig;
     if (newDomain) { // entry spans depend on the domain alone
         const std::uint64_t leafCount = std::uint64_t(mLeaves) * mLeaves * mLeaves;

@@ -90,13 +90,13 @@ class OccupancyTrees {
 
     std::uint32_t mLevel = 0, mLeaves = 0, mLeafVoxels = 0, mDepth = 0, mWordsPerBrick = 0;
     std::uint64_t mBricks = 0;
-    std::vector<std::uint8_t> mStored;        ///< per brick: 1 when stored (has leaves)
+    std::vector<std::uint8_t> mStored; ///< per brick: 1 when stored (has leaves)
     std::vector<std::array<float, 2>> mBrickRange;
-    std::vector<std::array<float, 2>> mLeafRange; ///< per brick * leafCount
+    std::vector<std::array<float, 2>> mLeafRange;           ///< per brick * leafCount
     std::vector<std::array<std::uint32_t, 2>> mLeafEntries; ///< table entries [i, j] read
-    std::vector<std::uint8_t> mLeafFull;      ///< corrupt leaf table: always occupied
-    std::vector<std::uint8_t> mNonEmpty;      ///< per leaf, of the last update
-    std::vector<std::uint8_t> mRoot;          ///< per brick: any leaf non-empty
+    std::vector<std::uint8_t> mLeafFull;                    ///< corrupt leaf table: always occupied
+    std::vector<std::uint8_t> mNonEmpty;                    ///< per leaf, of the last update
+    std::vector<std::uint8_t> mRoot;                        ///< per brick: any leaf non-empty
     std::vector<std::uint32_t> mWords;
     std::vector<std::uint64_t> mChanged;
     std::vector<std::string> mFaults;

@@ -373,9 +373,9 @@ std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint
     return h;
 }
 
-bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
-                                 std::uint64_t scene, const RenderOptions& options,
-                                 const OccupancyTrees* octree, FrameStats& stats) {
+bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, std::uint64_t scene,
+                                 const RenderOptions& options, const OccupancyTrees* octree,
+                                 FrameStats& stats) {
     if (!options.occlusionFrustums) {
         if (mGpu->occlusion) mGpu->occlusion->invalidate();
         stats.occlusionReason = "off";
@@ -383,8 +383,8 @@ bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
     }
     if (!mGpu->occlusion) mGpu->occlusion = std::make_unique<detail::OcclusionFrustums>();
     const double voxels = options.skip == SkipMode::None ? 0.0
-                          : octree ? double(octree->leafVoxels())
-                                   : double(g.brickVoxels);
+                          : octree                       ? double(octree->leafVoxels())
+                                                         : double(g.brickVoxels);
     const double cellMm = voxels * std::min({g.spacing.x, g.spacing.y, g.spacing.z});
     bool used = false;
     if (options.skip == SkipMode::None) {
@@ -514,7 +514,8 @@ Image Raycaster::render(const Scene& scene, const View& view, const RenderOption
     stats.readbackMs = msSince(readStart);
     if (options.occlusionFrustums) {
         const auto captureStart = Clock::now();
-        mGpu->occlusion->capture(view.basis, sceneId, msSince(frameStart), useStarts, options.occlusion);
+        mGpu->occlusion->capture(view.basis, sceneId, msSince(frameStart), useStarts,
+                                 options.occlusion);
         stats.occlusionBuildMs += msSince(captureStart);
     }
     if (options.rayGuided) {

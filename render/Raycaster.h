@@ -83,9 +83,8 @@ class Raycaster final : public Renderer, public GpuResidency {
                                          std::vector<std::int32_t>& pages);
     void bindFrame(std::size_t pageInts, std::uint64_t brickCount, const RenderOptions& options);
     /// Draws `plan` in front-to-back batches that fit the pool; `pass` counts the passes.
-    void drawBatches(const BrickPlan& plan, std::uint64_t levelFirst,
-                     brickstore::BrickCache& cache, std::vector<std::int32_t>& pages, int& pass,
-                     FrameStats& stats);
+    void drawBatches(const BrickPlan& plan, std::uint64_t levelFirst, brickstore::BrickCache& cache,
+                     std::vector<std::int32_t>& pages, int& pass, FrameStats& stats);
     /// Draws `plan` in one batch without its `deferred` bricks (indices into plan.drawn), then
     /// loads those that stopped rays ask for and continues them, until none asks. False, with
     /// the image unfinished, when the rest of the plan or a request does not fit the pool.

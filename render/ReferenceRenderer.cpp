@@ -151,9 +151,8 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
         std::uint64_t mine = 0, mineOracle = 0;
         for (std::uint32_t y; (y = nextRow++) < options.height;)
             for (std::uint32_t x = 0; x < options.width; ++x) {
-                const auto acc =
-                    marchRay(context, view.ray(x, y, options.width, options.height), mine,
-                             mineOracle);
+                const auto acc = marchRay(context, view.ray(x, y, options.width, options.height),
+                                          mine, mineOracle);
                 float* px = image.pixel(x, y);
                 for (int i = 0; i < 4; ++i)
                     px[i] = float(std::clamp(acc[i], 0.0, 1.0));

@@ -72,8 +72,8 @@ struct ShadingModel {
 
 /// Per-frame statistics (DESIGN.md: every frame carries them).
 struct FrameStats {
-    std::uint32_t level = 0;          ///< pyramid level drawn
-    std::uint64_t samples = 0;        ///< volume samples classified
+    std::uint32_t level = 0;   ///< pyramid level drawn
+    std::uint64_t samples = 0; ///< volume samples classified
     /// CPU reference only: samples with non-zero opacity before the ray reaches the early
     /// termination threshold: the least any skipping renderer must take (the "oracle").
     std::uint64_t oracleSamples = 0;
@@ -95,13 +95,13 @@ struct FrameStats {
     std::uint64_t bricksRequested = 0;
     std::uint32_t resumePasses = 0;
     bool guidedFallback = false;
-    std::uint64_t octreeLeaps = 0;          ///< empty octree nodes leapt by rays
-    std::uint64_t octreeBricksRebuilt = 0;  ///< octrees rebuilt for this frame's TF (0: reused)
+    std::uint64_t octreeLeaps = 0;         ///< empty octree nodes leapt by rays
+    std::uint64_t octreeBricksRebuilt = 0; ///< octrees rebuilt for this frame's TF (0: reused)
     double octreeRebuildMs = 0.0;
-    bool occlusionUsed = false;            ///< ray starts came from occlusion frustums
-    const char* occlusionReason = "off";   ///< why not, when not used ("" when used)
-    std::uint64_t occlusionFrustums = 0;   ///< non-empty blocks extruded
-    std::uint64_t occlusionTriangles = 0;  ///< of the frustums and the outside pieces
+    bool occlusionUsed = false;           ///< ray starts came from occlusion frustums
+    const char* occlusionReason = "off";  ///< why not, when not used ("" when used)
+    std::uint64_t occlusionFrustums = 0;  ///< non-empty blocks extruded
+    std::uint64_t occlusionTriangles = 0; ///< of the frustums and the outside pieces
     double occlusionBuildMs = 0.0;
     std::uint64_t samplesSavedByStart = 0; ///< samples before the ray starts (not taken)
     double uploadMs = 0.0;

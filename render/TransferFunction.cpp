@@ -50,9 +50,12 @@ double finiteNumber(const Json& j, const std::string& source, const std::string&
 
 const char* placementKey(Placement p) {
     switch (p) {
-    case Placement::Value: return "value";
-    case Placement::Fraction: return "fraction";
-    case Placement::Percentile: return "percentile";
+    case Placement::Value:
+        return "value";
+    case Placement::Fraction:
+        return "fraction";
+    case Placement::Percentile:
+        return "percentile";
     }
     return "value";
 }
@@ -72,7 +75,9 @@ ControlPoint place(const PointSpec& spec, const VolumeValueStats& stats, const s
     ControlPoint p;
     p.rgba = spec.rgba;
     switch (spec.placement) {
-    case Placement::Value: p.value = x; break;
+    case Placement::Value:
+        p.value = x;
+        break;
     case Placement::Fraction:
         if (!(x >= 0.0 && x <= 1.0)) fail(source, f, formatNumber(x) + " outside [0, 1]");
         p.value = stats.valueMin + x * (stats.valueMax - stats.valueMin);
@@ -324,8 +329,9 @@ TransferFunction TransferFunction::fromPoints(const std::vector<PointSpec>& poin
 }
 
 void TransferFunction::setPoints(std::vector<ControlPoint> points, const VolumeValueStats& stats) {
-    std::stable_sort(points.begin(), points.end(),
-                     [](const ControlPoint& a, const ControlPoint& b) { return a.value < b.value; });
+    std::stable_sort(
+        points.begin(), points.end(),
+        [](const ControlPoint& a, const ControlPoint& b) { return a.value < b.value; });
     mPoints = std::move(points);
     mDomainMin = stats.valueMin;
     mDomainMax = stats.valueMax > stats.valueMin ? stats.valueMax : stats.valueMin + 1.0;

@@ -106,9 +106,8 @@ class TransferFunction {
     /// @throw RenderInputError naming the source and the point at fault: no points, more than
     /// kMaxPoints, a position or colour not finite or out of its range.
     static TransferFunction fromPoints(const std::vector<PointSpec>& points,
-                                       const std::string& sourceName,
-                                       const VolumeValueStats& stats, std::string name = {},
-                                       std::optional<bool> shading = {});
+                                       const std::string& sourceName, const VolumeValueStats& stats,
+                                       std::string name = {}, std::optional<bool> shading = {});
     /// The preset embedded from configs/tf at build time. Reads no file.
     /// @throw RenderInputError (source "presets", field "name") when there is no such preset;
     /// the message lists the presets and does not repeat the name asked for.

@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 out=brickcast-demo
 mkdir -p "$out"
 rm -f "$out/port"
-./build/server/brickcastd --listen 127.0.0.1:0 --port-file "$out/port" 2>"$out/brickcastd.log" &
+./build/tools/brickcastd --listen 127.0.0.1:0 --port-file "$out/port" 2>"$out/brickcastd.log" &
 daemon=$!
 trap 'kill -TERM "$daemon" 2>/dev/null || true' EXIT
 for _ in $(seq 1 600); do
@@ -17,7 +17,7 @@ for _ in $(seq 1 600); do
   sleep 0.1
 done
 port=$(cat "$out/port")
-./build/client/brickcast-client --port "$port" --volume phantom --frames 36 --size 256,256 \
+./build/tools/brickcast-client --port "$port" --volume phantom --frames 36 --size 256,256 \
   --tf ct-skin --tf-switch ct-bone@18 -o "$out/frames" --save-every 6 | tee "$out/latency.txt"
 kill -TERM "$daemon"
 wait "$daemon"

@@ -14,7 +14,8 @@ packages=(
   libglm-dev libpng-dev                               # vector maths, PNG images
   libasio-dev libtomlplusplus-dev libturbojpeg0-dev   # brickcastd: networking, config file, JPEG frames
   libgtest-dev clang libclang-rt-14-dev               # tests; the protocol fuzzer (libFuzzer)
-  gnuplot-nox                                         # brickcast bench --plot
+  clang-format                                        # the formatting check (test clang_format)
+  gnuplot-nox                                         # bc_bench_render --plot
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -15,10 +15,14 @@ namespace {
 
 protocol::VoxelType wireType(brickstore::VoxelType t) {
     switch (t) {
-    case brickstore::VoxelType::U8: return protocol::VoxelType::U8;
-    case brickstore::VoxelType::U16: return protocol::VoxelType::U16;
-    case brickstore::VoxelType::I16: return protocol::VoxelType::I16;
-    case brickstore::VoxelType::F32: return protocol::VoxelType::F32;
+    case brickstore::VoxelType::U8:
+        return protocol::VoxelType::U8;
+    case brickstore::VoxelType::U16:
+        return protocol::VoxelType::U16;
+    case brickstore::VoxelType::I16:
+        return protocol::VoxelType::I16;
+    case brickstore::VoxelType::F32:
+        return protocol::VoxelType::F32;
     }
     return protocol::VoxelType::U8;
 }
@@ -45,10 +49,11 @@ std::string generatedStore(const CatalogEntry& e, const std::string& storeDir) {
     const auto kind = brickstore::parseSynthKind(e.generate);
     if (!kind) throw std::invalid_argument("unknown generator '" + e.generate + "'");
     std::filesystem::create_directories(storeDir);
-    const std::string path = (std::filesystem::path(storeDir) /
-                              (e.generate + "_" + std::to_string(e.dims[0]) + "x" +
-                               std::to_string(e.dims[1]) + "x" + std::to_string(e.dims[2]) + ".bcs"))
-                                 .string();
+    const std::string path =
+        (std::filesystem::path(storeDir) /
+         (e.generate + "_" + std::to_string(e.dims[0]) + "x" + std::to_string(e.dims[1]) + "x" +
+          std::to_string(e.dims[2]) + ".bcs"))
+            .string();
     if (std::filesystem::exists(path)) return path;
     auto source = brickstore::makeSynthetic(*kind, e.dims, 1);
     brickstore::ingest(*source, path, {});
@@ -77,7 +82,9 @@ VolumeLease& VolumeLease::operator=(VolumeLease&& other) noexcept {
     return *this;
 }
 
-VolumeLease::~VolumeLease() { release(); }
+VolumeLease::~VolumeLease() {
+    release();
+}
 
 void VolumeLease::release() {
     if (mVolume) mCatalog->changeSessions(*mVolume, -1);
@@ -113,7 +120,8 @@ std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry, const std::stri
 
 std::vector<protocol::VolumeInfo> Catalog::list() const {
     std::vector<protocol::VolumeInfo> out;
-    for (const auto& v : mVolumes) out.push_back(v->info);
+    for (const auto& v : mVolumes)
+        out.push_back(v->info);
     return out;
 }
 
@@ -154,7 +162,8 @@ void Catalog::collect(MetricSet& m) const {
     for (const auto& v : mVolumes) {
         const auto c = v->cache->stats();
         const std::vector<std::pair<std::string, std::string>> l{{"volume", v->name}};
-        m.counter("host_cache_hits_total", "Brick requests served from the host cache", double(c.hits), l);
+        m.counter("host_cache_hits_total", "Brick requests served from the host cache",
+                  double(c.hits), l);
         m.counter("host_cache_misses_total", "Brick requests read from disk and decompressed",
                   double(c.misses), l);
         m.counter("host_cache_evictions_total", "Bricks evicted from the host cache (LRU)",
@@ -162,7 +171,8 @@ void Catalog::collect(MetricSet& m) const {
         m.counter("host_cache_bytes_loaded_total", "Decompressed bytes read from disk",
                   double(c.bytesLoaded), l);
         m.counter("host_cache_refetches_total",
-                  "Misses of bricks the host cache held before and evicted", double(c.refetches), l);
+                  "Misses of bricks the host cache held before and evicted", double(c.refetches),
+                  l);
         m.counter("host_cache_bytes_refetched_total",
                   "Bytes read again from disk after their eviction", double(c.bytesRefetched), l);
         m.gauge("host_cache_resident_bytes", "Decompressed bytes resident in the host cache",

@@ -18,10 +18,10 @@ struct Daemon::Impl {
     Impl(DaemonConfig c, Log& l, bool handleSignals)
         : config(std::move(c)), log(l), catalog(config, log),
           render(RenderServiceConfig{config.gpuBudgetBytes, config.restMs, config.prefetch,
-                                 config.hostBudgetBytes / 8},
+                                     config.hostBudgetBytes / 8},
                  catalog, log),
-          acceptor(io), signals(io), drainTimer(io),
-          context{config, catalog, render, log, capabilities(), {}, {}, 0} {
+          acceptor(io), signals(io),
+          drainTimer(io), context{config, catalog, render, log, capabilities(), {}, {}, 0} {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };
         context.collect = [this](MetricSet& m) { collect(m); };
         bind();
@@ -57,8 +57,9 @@ struct Daemon::Impl {
         try {
             asio::ip::tcp::resolver resolver(io);
             const asio::ip::tcp::endpoint ep =
-                resolver.resolve(config.listenHost, std::to_string(config.listenPort),
-                                 asio::ip::resolver_base::numeric_service)
+                resolver
+                    .resolve(config.listenHost, std::to_string(config.listenPort),
+                             asio::ip::resolver_base::numeric_service)
                     .begin()
                     ->endpoint();
             acceptor.open(ep.protocol());
@@ -89,8 +90,10 @@ struct Daemon::Impl {
                 double(queued));
         m.gauge("write_queue_messages_max", "The longest session write queue", double(deepest));
         m.counter("connections_accepted_total", "Client connections accepted", double(accepted));
-        m.counter("connections_refused_total", "Client connections refused (Busy)", double(refused));
-        m.counter("protocol_errors_total", "Error messages sent to clients", double(context.errorsSent));
+        m.counter("connections_refused_total", "Client connections refused (Busy)",
+                  double(refused));
+        m.counter("protocol_errors_total", "Error messages sent to clients",
+                  double(context.errorsSent));
     }
 
     void accept() {
@@ -128,7 +131,8 @@ struct Daemon::Impl {
         signals.cancel(ignored);
         if (metrics) metrics->stop();
         if (sessions.empty()) return io.stop();
-        for (auto& [id, s] : std::map(sessions)) s->shutdown();
+        for (auto& [id, s] : std::map(sessions))
+            s->shutdown();
         // Sessions close once their Bye is written; a stuck one is cut at the write deadline.
         drainTimer.expires_after(std::chrono::milliseconds(config.writeTimeoutMs + 500));
         drainTimer.async_wait([this](const asio::error_code& ec) {
@@ -158,9 +162,13 @@ Daemon::Daemon(DaemonConfig config, Log& log, bool handleSignals)
 
 Daemon::~Daemon() = default;
 
-std::uint16_t Daemon::port() const { return mImpl->port(); }
+std::uint16_t Daemon::port() const {
+    return mImpl->port();
+}
 
-std::uint16_t Daemon::metricsPort() const { return mImpl->metrics ? mImpl->metrics->port() : 0; }
+std::uint16_t Daemon::metricsPort() const {
+    return mImpl->metrics ? mImpl->metrics->port() : 0;
+}
 
 void Daemon::run() {
     mImpl->accept();

@@ -283,7 +283,8 @@ std::optional<bool> Reader::boolean(const toml::table& t, const std::string& pre
     if (!node) return std::nullopt;
     const auto* v = node->as_boolean();
     if (!v)
-        fail(node->source(), prefix + key, "expected true or false, got " + nodeTypeName(node->type()));
+        fail(node->source(), prefix + key,
+             "expected true or false, got " + nodeTypeName(node->type()));
     return v->get();
 }
 
@@ -457,8 +458,7 @@ PresetEntry Reader::readPreset(const toml::table& t, const std::string& prefix) 
     if (!in) fail(at, prefix + "file", "'" + e.file + "' cannot be read");
     e.json = text.str();
     try { // placed for a stand-in volume: every placement works, so only the text can fail
-        render::TransferFunction::parse(e.json, e.file,
-                                        render::VolumeValueStats{0.0, 1.0, {1, 1}});
+        render::TransferFunction::parse(e.json, e.file, render::VolumeValueStats{0.0, 1.0, {1, 1}});
     } catch (const render::RenderInputError& err) {
         fail(at, prefix + "file", err.what());
     }
@@ -525,7 +525,9 @@ void DaemonConfig::setListen(const std::string& text, const std::string& sourceN
     *this = std::move(next);
 }
 
-bool DaemonConfig::loopbackOnly() const { return isLoopback(listenHost); }
+bool DaemonConfig::loopbackOnly() const {
+    return isLoopback(listenHost);
+}
 
 void DaemonConfig::setMetrics(const std::string& text, const std::string& sourceName) {
     Listen l;

@@ -47,7 +47,7 @@ struct DaemonConfig {
     std::uint32_t restMs = 150;         ///< camera at rest this long -> a refined frame
     std::uint32_t writeQueueFrames = 2; ///< per session; older frames are dropped
     bool prefetch = true; ///< bricks of each GPU session's predicted next view, while idle
-    std::string storeDir;               ///< where generated volumes are ingested
+    std::string storeDir; ///< where generated volumes are ingested
     std::vector<CatalogEntry> volumes;
     std::vector<PresetEntry> presets; ///< [[preset]]: beside the built-in ones
 

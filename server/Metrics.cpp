@@ -34,10 +34,14 @@ std::string number(double v) {
 std::string escapeLabel(const std::string& v) {
     std::string out;
     for (char c : v) {
-        if (c == '\\') out += "\\\\";
-        else if (c == '"') out += "\\\"";
-        else if (c == '\n') out += "\\n";
-        else out += c;
+        if (c == '\\')
+            out += "\\\\";
+        else if (c == '"')
+            out += "\\\"";
+        else if (c == '\n')
+            out += "\\n";
+        else
+            out += c;
     }
     return out;
 }
@@ -45,9 +49,12 @@ std::string escapeLabel(const std::string& v) {
 std::string escapeHelp(const std::string& v) {
     std::string out;
     for (char c : v) {
-        if (c == '\\') out += "\\\\";
-        else if (c == '\n') out += "\\n";
-        else out += c;
+        if (c == '\\')
+            out += "\\\\";
+        else if (c == '\n')
+            out += "\\n";
+        else
+            out += c;
     }
     return out;
 }
@@ -155,8 +162,8 @@ void MetricSet::gauge(const std::string& name, const std::string& help, double v
 void MetricSet::histogram(const std::string& name, const std::string& help, const Histogram& h,
                           std::vector<std::pair<std::string, std::string>> labels) {
     checkLabels(labels);
-    Sample s{std::move(labels), h.sum(), h.bounds(), h.counts(), h.count(), h.quantile(0.5),
-             h.quantile(0.99)};
+    Sample s{std::move(labels), h.sum(),         h.bounds(),      h.counts(),
+             h.count(),         h.quantile(0.5), h.quantile(0.99)};
     family(name, help, Type::Histogram).samples.push_back(std::move(s));
 }
 
@@ -167,7 +174,8 @@ std::string MetricSet::prometheusText() const {
         out += "# HELP " + full + " " + escapeHelp(f.help) + "\n";
         out += "# TYPE " + full + " " +
                (f.type == Type::Counter ? "counter"
-                                        : f.type == Type::Gauge ? "gauge" : "histogram") +
+                : f.type == Type::Gauge ? "gauge"
+                                        : "histogram") +
                "\n";
         for (const Sample& s : f.samples) {
             if (f.type != Type::Histogram) {
@@ -188,7 +196,8 @@ std::string MetricSet::prometheusText() const {
     return out;
 }
 
-std::vector<std::pair<std::string, double>> MetricSet::statCounters(std::size_t maxNameBytes) const {
+std::vector<std::pair<std::string, double>>
+MetricSet::statCounters(std::size_t maxNameBytes) const {
     std::vector<std::pair<std::string, double>> out;
     auto add = [&](std::string name, double v) {
         if (name.size() > maxNameBytes) name.resize(maxNameBytes);

@@ -27,7 +27,7 @@ render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, bool int
     r.earlyTermination = (o.techniques & kTechEarlyTermination) != 0;
     r.ertThreshold = o.ertThreshold;
     const bool bricks = (o.techniques & kTechBrickSkipping) != 0;
-    r.skip = !bricks ? render::SkipMode::None
+    r.skip = !bricks                                ? render::SkipMode::None
              : (o.techniques & kTechOctreeSkipping) ? render::SkipMode::All
                                                     : render::SkipMode::Bricks;
     r.occlusionFrustums = bricks && (o.techniques & kTechOcclusionFrustums) != 0;
@@ -42,9 +42,12 @@ namespace {
 
 render::Placement toPlacement(protocol::Placement p) {
     switch (p) {
-    case protocol::Placement::Value: return render::Placement::Value;
-    case protocol::Placement::Fraction: return render::Placement::Fraction;
-    case protocol::Placement::Percentile: return render::Placement::Percentile;
+    case protocol::Placement::Value:
+        return render::Placement::Value;
+    case protocol::Placement::Fraction:
+        return render::Placement::Fraction;
+    case protocol::Placement::Percentile:
+        return render::Placement::Percentile;
     }
     return render::Placement::Value;
 }
@@ -73,7 +76,8 @@ toTransferFunction(const protocol::SetTransferFunction& m, const render::VolumeV
 }
 
 bool shadingFor(const protocol::RenderOptions& options,
-                const protocol::SetTransferFunction& tfMessage, const render::TransferFunction& tf) {
+                const protocol::SetTransferFunction& tfMessage,
+                const render::TransferFunction& tf) {
     if ((options.techniques & protocol::kTechShading) == 0) return false;
     if (tfMessage.shadingSource == protocol::ShadingSource::Message) return tfMessage.shading;
     return tf.shading().value_or(true);

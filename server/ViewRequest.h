@@ -37,8 +37,7 @@ toTransferFunction(const protocol::SetTransferFunction& message,
 /// Whether shading is on for this request: RenderOptions' shading bit, unless the transfer
 /// function message asked for its preset's default.
 bool shadingFor(const protocol::RenderOptions& options,
-                const protocol::SetTransferFunction& tfMessage,
-                const render::TransferFunction& tf);
+                const protocol::SetTransferFunction& tfMessage, const render::TransferFunction& tf);
 
 /// An interactive frame brought back to the requested size (pixel replication, exact).
 render::Image interactiveUpscale(const render::Image& half, std::uint32_t width,

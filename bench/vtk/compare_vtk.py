@@ -30,7 +30,7 @@ What it does
 
 How to run (from the repository root; Debian 12):
     apt-get install python3-vtk9 xvfb          # benchmark-only peer, not a project dependency
-    python3 bench/vtk/compare_vtk.py --brickcast build/server/brickcast --out /tmp/vtkcmp
+    python3 bench/vtk/compare_vtk.py --brickcast build/tools/brickcast --out /tmp/vtkcmp
 
 Debian's VTK 9.1 is built for X only (no EGL/OSMesa offscreen): without $DISPLAY the script
 re-runs itself under `xvfb-run -a` (and under /usr/bin/python3 when the current python3, e.g.
@@ -419,7 +419,7 @@ def metrics(np, img, ref):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--brickcast", default=os.path.join(REPO, "build", "server", "brickcast"))
+    ap.add_argument("--brickcast", default=os.path.join(REPO, "build", "tools", "brickcast"))
     ap.add_argument("--out", default="/tmp/vtkcmp")
     ap.add_argument("--data", default=DEFAULT_DATA)
     ap.add_argument("--dims", default="256,256,113")

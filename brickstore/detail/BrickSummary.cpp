@@ -8,15 +8,21 @@
 namespace bc::brickstore::detail {
 namespace {
 
-template <typename T> const T* as(const std::byte* p) { return reinterpret_cast<const T*>(p); }
+template <typename T> const T* as(const std::byte* p) {
+    return reinterpret_cast<const T*>(p);
+}
 
 /// Calls f with a value of the native C++ type of `type` as the template argument.
 template <typename F> decltype(auto) dispatch(VoxelType type, F&& f) {
     switch (type) {
-    case VoxelType::U8: return f(std::uint8_t{});
-    case VoxelType::U16: return f(std::uint16_t{});
-    case VoxelType::I16: return f(std::int16_t{});
-    case VoxelType::F32: break;
+    case VoxelType::U8:
+        return f(std::uint8_t{});
+    case VoxelType::U16:
+        return f(std::uint16_t{});
+    case VoxelType::I16:
+        return f(std::int16_t{});
+    case VoxelType::F32:
+        break;
     }
     return f(float{});
 }
@@ -30,9 +36,7 @@ template <typename T> ValueRange rangeOf(const T* v, std::size_t n) {
     return {static_cast<float>(lo), static_cast<float>(hi)};
 }
 
-template <typename T> struct MinMax {
-    T min, max;
-};
+template <typename T> struct MinMax { T min, max; };
 
 /// Min/max of v[begin, end) (a plain loop the compiler vectorises).
 template <typename T> MinMax<T> rowRange(const T* v, std::uint32_t begin, std::uint32_t end) {
@@ -48,7 +52,8 @@ template <typename T> MinMax<T> rowRange(const T* v, std::uint32_t begin, std::u
 /// Leaf i's window along an axis is stored [i*l, min((i+1)*l, b) + 2a): its payload voxels
 /// widened by the apron reach `a` on each side.
 template <typename T>
-void leafRangesT(const T* v, std::uint32_t edge, const BrickGeometry& g, std::vector<ValueRange>& out) {
+void leafRangesT(const T* v, std::uint32_t edge, const BrickGeometry& g,
+                 std::vector<ValueRange>& out) {
     const std::uint32_t b = g.brickVoxels, a = g.apronVoxels, l = g.leafVoxels;
     const std::uint32_t n = (b + l - 1) / l;
     auto lo = [&](std::uint32_t i) { return i * l; };
@@ -60,14 +65,16 @@ void leafRangesT(const T* v, std::uint32_t edge, const BrickGeometry& g, std::ve
     // x: per (z, y) row, n windows.
     std::vector<MinMax<T>> rows(std::size_t(edge) * edge * n);
     for (std::size_t zy = 0; zy < std::size_t(edge) * edge; ++zy)
-        for (std::uint32_t lx = 0; lx < n; ++lx) rows[zy * n + lx] = rowRange(v + zy * edge, lo(lx), hi(lx));
+        for (std::uint32_t lx = 0; lx < n; ++lx)
+            rows[zy * n + lx] = rowRange(v + zy * edge, lo(lx), hi(lx));
     // y: per z, n x n.
     std::vector<MinMax<T>> planes(std::size_t(edge) * n * n);
     for (std::uint32_t z = 0; z < edge; ++z)
         for (std::uint32_t ly = 0; ly < n; ++ly)
             for (std::uint32_t lx = 0; lx < n; ++lx) {
                 MinMax<T> m = rows[(std::size_t(z) * edge + lo(ly)) * n + lx];
-                for (std::uint32_t y = lo(ly) + 1; y < hi(ly); ++y) merge(m, rows[(std::size_t(z) * edge + y) * n + lx]);
+                for (std::uint32_t y = lo(ly) + 1; y < hi(ly); ++y)
+                    merge(m, rows[(std::size_t(z) * edge + y) * n + lx]);
                 planes[(std::size_t(z) * n + ly) * n + lx] = m;
             }
     // z: n x n x n.
@@ -75,7 +82,8 @@ void leafRangesT(const T* v, std::uint32_t edge, const BrickGeometry& g, std::ve
     for (std::uint32_t lz = 0; lz < n; ++lz)
         for (std::uint32_t j = 0; j < n * n; ++j) {
             MinMax<T> m = planes[std::size_t(lo(lz)) * n * n + j];
-            for (std::uint32_t z = lo(lz) + 1; z < hi(lz); ++z) merge(m, planes[std::size_t(z) * n * n + j]);
+            for (std::uint32_t z = lo(lz) + 1; z < hi(lz); ++z)
+                merge(m, planes[std::size_t(z) * n * n + j]);
             out[std::size_t(lz) * n * n + j] = {float(m.min), float(m.max)};
         }
 }
@@ -85,7 +93,7 @@ template <typename T> T mean8(double sum) {
         return static_cast<T>(sum / 8.0);
     } else {
         auto s = static_cast<std::int64_t>(sum);
-        return static_cast<T>((s + 4) >> 3);  // floor((s + 4) / 8): round half up
+        return static_cast<T>((s + 4) >> 3); // floor((s + 4) / 8): round half up
     }
 }
 
@@ -196,7 +204,8 @@ HistogramBinner::HistogramBinner(VoxelType type, double lo, double hi, std::size
 }
 
 void HistogramBinner::add(std::span<const std::byte> brick, std::uint32_t edge,
-                          const std::array<std::uint32_t, 3>& o, const std::array<std::uint64_t, 3>& e,
+                          const std::array<std::uint32_t, 3>& o,
+                          const std::array<std::uint64_t, 3>& e,
                           std::span<std::uint64_t> counts) const {
     dispatch(mType, [&](auto t) {
         using T = decltype(t);

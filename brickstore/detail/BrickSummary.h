@@ -35,13 +35,14 @@ void fillConstant(VoxelType type, double value, std::span<std::byte> out);
 
 /// Counts voxels into `bins` equal bins over [lo, hi] (8/16-bit types through a table).
 class HistogramBinner {
-public:
+  public:
     HistogramBinner(VoxelType type, double lo, double hi, std::size_t bins);
     /// Adds the voxels of box [origin, origin+extent) of a stored brick of edge `edge`.
-    void add(std::span<const std::byte> brick, std::uint32_t edge, const std::array<std::uint32_t, 3>& origin,
-             const std::array<std::uint64_t, 3>& extent, std::span<std::uint64_t> counts) const;
+    void add(std::span<const std::byte> brick, std::uint32_t edge,
+             const std::array<std::uint32_t, 3>& origin, const std::array<std::uint64_t, 3>& extent,
+             std::span<std::uint64_t> counts) const;
 
-private:
+  private:
     VoxelType mType;
     double mLo, mHi;
     std::size_t mBins;

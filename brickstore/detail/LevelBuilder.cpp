@@ -16,7 +16,9 @@ LevelBuilder::LevelBuilder(const StoreLayout& layout, std::uint32_t level, Voxel
     if (mNext) mDown.resize(((mDims[0] + 1) / 2) * ((mDims[1] + 1) / 2) * mVoxelBytes);
 }
 
-bool LevelBuilder::finished() const { return mReceived == mDims[2]; }
+bool LevelBuilder::finished() const {
+    return mReceived == mDims[2];
+}
 
 const std::byte* LevelBuilder::slice(std::int64_t z) const {
     z = std::clamp<std::int64_t>(z, 0, std::int64_t(mDims[2]) - 1);
@@ -56,7 +58,8 @@ void LevelBuilder::cutRow(std::uint32_t bz) {
         }
 }
 
-void LevelBuilder::cutBrick(std::uint32_t bx, std::uint32_t by, std::uint32_t bz, std::byte* out) const {
+void LevelBuilder::cutBrick(std::uint32_t bx, std::uint32_t by, std::uint32_t bz,
+                            std::byte* out) const {
     const std::int64_t b = mLayout.geometry().brickVoxels, a = mLayout.geometry().apronVoxels;
     const std::int64_t edge = mLayout.storedEdge();
     const std::int64_t dx = mDims[0], dy = mDims[1];
@@ -73,12 +76,14 @@ void LevelBuilder::cutBrick(std::uint32_t bx, std::uint32_t by, std::uint32_t bz
             const std::byte* row = src + std::size_t(y * dx) * vb;
             std::byte* dst = out + std::size_t((k * edge + j) * edge) * vb;
             std::int64_t i = 0;
-            for (; x0 + i < inBegin; ++i) std::memcpy(dst + i * vb, row, vb);
+            for (; x0 + i < inBegin; ++i)
+                std::memcpy(dst + i * vb, row, vb);
             if (inEnd > inBegin) {
                 std::memcpy(dst + i * vb, row + inBegin * vb, std::size_t(inEnd - inBegin) * vb);
                 i += inEnd - inBegin;
             }
-            for (; i < edge; ++i) std::memcpy(dst + i * vb, row + (dx - 1) * vb, vb);
+            for (; i < edge; ++i)
+                std::memcpy(dst + i * vb, row + (dx - 1) * vb, vb);
         }
     }
 }

@@ -14,12 +14,12 @@ namespace bc::brickstore::detail {
 
 /// A cut brick on its way to compression.
 struct BrickJob {
-    std::uint64_t index = 0;        ///< position in the store's brick list
-    std::vector<std::byte> voxels;  ///< (B + 2A)^3, native type
+    std::uint64_t index = 0;       ///< position in the store's brick list
+    std::vector<std::byte> voxels; ///< (B + 2A)^3, native type
 };
 
 class LevelBuilder {
-public:
+  public:
     using Sink = std::function<void(BrickJob&&)>;
 
     LevelBuilder(const StoreLayout& layout, std::uint32_t level, VoxelType type, Sink sink,
@@ -29,7 +29,7 @@ public:
     std::uint64_t received() const { return mReceived; }
     bool finished() const;
 
-private:
+  private:
     const std::byte* slice(std::int64_t z) const;
     void cutRow(std::uint32_t bz);
     void cutBrick(std::uint32_t bx, std::uint32_t by, std::uint32_t bz, std::byte* out) const;
@@ -41,7 +41,7 @@ private:
     std::array<std::uint64_t, 3> mDims;
     std::uint32_t mRingSlices;
     std::vector<std::byte> mRing;
-    std::vector<std::byte> mDown;  ///< next level's slice under construction
+    std::vector<std::byte> mDown; ///< next level's slice under construction
     Sink mSink;
     LevelBuilder* mNext;
     std::uint64_t mReceived = 0;

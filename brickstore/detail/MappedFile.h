@@ -7,7 +7,7 @@
 namespace bc::brickstore::detail {
 
 class MappedFile {
-public:
+  public:
     /// @throw StoreIoError naming the path when it cannot be opened or mapped.
     explicit MappedFile(const std::string& path);
     ~MappedFile();
@@ -15,7 +15,7 @@ public:
     MappedFile& operator=(const MappedFile&) = delete;
     std::span<const std::byte> bytes() const { return {mData, mSize}; }
 
-private:
+  private:
     const std::byte* mData = nullptr;
     std::size_t mSize = 0;
 };

@@ -6,14 +6,16 @@
 #include <cerrno>
 #include <csignal>
 #include <cstring>
-#include <filesystem>
 #include <fcntl.h>
+#include <filesystem>
 #include <unistd.h>
 
 namespace bc::brickstore::detail {
 namespace {
 
-std::string errnoText() { return std::strerror(errno); }
+std::string errnoText() {
+    return std::strerror(errno);
+}
 
 /// Removes `target.partial.PID` files whose ingest process no longer exists.
 void removeStalePartials(const std::filesystem::path& target) {
@@ -80,7 +82,8 @@ void StoreFile::writeAt(std::uint64_t offset, std::span<const std::byte> bytes) 
 void StoreFile::readAt(std::uint64_t offset, std::span<std::byte> out) const {
     std::size_t done = 0;
     while (done < out.size()) {
-        ssize_t n = ::pread(mFd, out.data() + done, out.size() - done, static_cast<off_t>(offset + done));
+        ssize_t n =
+            ::pread(mFd, out.data() + done, out.size() - done, static_cast<off_t>(offset + done));
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) throw StoreIoError(mTemp + ": read back failed: " + errnoText());
         done += static_cast<std::size_t>(n);
@@ -90,7 +93,8 @@ void StoreFile::readAt(std::uint64_t offset, std::span<std::byte> out) const {
 void StoreFile::commit() {
     if (::fsync(mFd) != 0) throw StoreIoError(mTemp + ": fsync failed: " + errnoText());
     if (::rename(mTemp.c_str(), mTarget.c_str()) != 0)
-        throw StoreIoError(mTarget + ": cannot rename the finished store into place: " + errnoText());
+        throw StoreIoError(mTarget +
+                           ": cannot rename the finished store into place: " + errnoText());
     mCommitted = true;
     syncFolder(mTarget);
 }

@@ -9,7 +9,7 @@
 namespace bc::brickstore::detail {
 
 class StoreFile {
-public:
+  public:
     /// Creates `target.partial.PID` (after removing stale partials of dead ingests).
     /// @throw StoreIoError naming the path.
     explicit StoreFile(const std::string& target);
@@ -29,7 +29,7 @@ public:
     void commit();
     const std::string& tempPath() const { return mTemp; }
 
-private:
+  private:
     std::string mTarget;
     std::string mTemp;
     int mFd = -1;

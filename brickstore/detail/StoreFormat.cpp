@@ -13,7 +13,9 @@ namespace bc::brickstore::detail {
 static_assert(std::endian::native == std::endian::little,
               "the store is little-endian; a big-endian host needs byte swaps here");
 
-std::uint64_t checksum(const void* data, std::size_t bytes) { return XXH3_64bits(data, bytes); }
+std::uint64_t checksum(const void* data, std::size_t bytes) {
+    return XXH3_64bits(data, bytes);
+}
 std::uint64_t checksum(std::span<const std::byte> bytes) {
     return checksum(bytes.data(), bytes.size());
 }
@@ -32,20 +34,38 @@ template <typename T> static T load(std::span<const std::byte> s) {
     std::memcpy(&v, s.data(), sizeof v);
     return v;
 }
-std::uint8_t ByteReader::u8() { return load<std::uint8_t>(take(1)); }
-std::uint32_t ByteReader::u32() { return load<std::uint32_t>(take(4)); }
-std::uint64_t ByteReader::u64() { return load<std::uint64_t>(take(8)); }
-float ByteReader::f32() { return load<float>(take(4)); }
-double ByteReader::f64() { return load<double>(take(8)); }
+std::uint8_t ByteReader::u8() {
+    return load<std::uint8_t>(take(1));
+}
+std::uint32_t ByteReader::u32() {
+    return load<std::uint32_t>(take(4));
+}
+std::uint64_t ByteReader::u64() {
+    return load<std::uint64_t>(take(8));
+}
+float ByteReader::f32() {
+    return load<float>(take(4));
+}
+double ByteReader::f64() {
+    return load<double>(take(8));
+}
 
 void ByteWriter::bytes(const void* data, std::size_t n) {
     auto p = static_cast<const std::byte*>(data);
     mBytes.insert(mBytes.end(), p, p + n);
 }
-void ByteWriter::u32(std::uint32_t v) { bytes(&v, 4); }
-void ByteWriter::u64(std::uint64_t v) { bytes(&v, 8); }
-void ByteWriter::f32(float v) { bytes(&v, 4); }
-void ByteWriter::f64(double v) { bytes(&v, 8); }
+void ByteWriter::u32(std::uint32_t v) {
+    bytes(&v, 4);
+}
+void ByteWriter::u64(std::uint64_t v) {
+    bytes(&v, 8);
+}
+void ByteWriter::f32(float v) {
+    bytes(&v, 4);
+}
+void ByteWriter::f64(double v) {
+    bytes(&v, 8);
+}
 
 // ---- header -------------------------------------------------------------------------------
 
@@ -54,7 +74,8 @@ std::vector<std::byte> encodeHeader(const StoreHeader& h) {
     w.bytes(kMagic, 8);
     w.u32(kFormatVersion);
     w.u32(static_cast<std::uint32_t>(kHeaderBytes));
-    for (auto d : h.volume.dims) w.u64(d);
+    for (auto d : h.volume.dims)
+        w.u64(d);
     w.u8(static_cast<std::uint8_t>(h.volume.type));
     w.zeros(3);
     w.u32(h.geometry.brickVoxels);
@@ -62,8 +83,10 @@ std::vector<std::byte> encodeHeader(const StoreHeader& h) {
     w.u32(h.geometry.leafVoxels);
     w.u32(h.levelCount);
     w.u32(h.histogramBins);
-    for (auto s : h.volume.spacingMm) w.f64(s);
-    for (auto o : h.volume.originMm) w.f64(o);
+    for (auto s : h.volume.spacingMm)
+        w.f64(s);
+    for (auto o : h.volume.originMm)
+        w.f64(o);
     w.f64(h.valueMin);
     w.f64(h.valueMax);
     w.f64(h.volume.background);
@@ -94,7 +117,8 @@ StoreHeader decodeHeader(std::span<const std::byte> bytes, const std::string& st
         throw StoreCorrupt(store + ": format version " + std::to_string(version) +
                            " is not supported (this build reads version 1)");
     if (r.u32() != kHeaderBytes) throw StoreCorrupt(store + ": header: unexpected header size");
-    for (auto& d : h.volume.dims) d = r.u64();
+    for (auto& d : h.volume.dims)
+        d = r.u64();
     std::uint8_t type = r.u8();
     if (!isValidVoxelType(type))
         throw StoreCorrupt(store + ": header: unknown voxel type " + std::to_string(type));
@@ -105,8 +129,10 @@ StoreHeader decodeHeader(std::span<const std::byte> bytes, const std::string& st
     h.geometry.leafVoxels = r.u32();
     h.levelCount = r.u32();
     h.histogramBins = r.u32();
-    for (auto& s : h.volume.spacingMm) s = r.f64();
-    for (auto& o : h.volume.originMm) o = r.f64();
+    for (auto& s : h.volume.spacingMm)
+        s = r.f64();
+    for (auto& o : h.volume.originMm)
+        o = r.f64();
     h.valueMin = r.f64();
     h.valueMax = r.f64();
     h.volume.background = r.f64();
@@ -139,8 +165,10 @@ std::vector<std::byte> encodeIndex(const StoreLayout& layout, std::span<const Br
                                    const std::string& description) {
     ByteWriter w;
     for (const auto& l : layout.levels()) {
-        for (auto d : l.dims) w.u64(d);
-        for (auto b : l.bricks) w.u32(b);
+        for (auto d : l.dims)
+            w.u64(d);
+        for (auto b : l.bricks)
+            w.u32(b);
         w.u32(0);
     }
     for (const auto& r : records) {
@@ -154,7 +182,8 @@ std::vector<std::byte> encodeIndex(const StoreLayout& layout, std::span<const Br
         w.u64(r.payloadChecksum);
         w.u64(r.leafChecksum);
     }
-    for (auto c : histogram) w.u64(c);
+    for (auto c : histogram)
+        w.u64(c);
     std::string d = description.substr(0, kMaxDescriptionBytes);
     w.u32(static_cast<std::uint32_t>(d.size()));
     w.bytes(d.data(), d.size());
@@ -172,7 +201,7 @@ static void checkRecord(const BrickRecord& r, const StoreLayout& layout, std::ui
         if (r.offset || r.compressedBytes || r.leafBytes) fail("constant brick with a payload");
         return;
     }
-    std::uint64_t brickBytes = layout.storedVoxels() * 4;  // bound for any type
+    std::uint64_t brickBytes = layout.storedVoxels() * 4; // bound for any type
     if (r.compressedBytes == 0 || r.compressedBytes > ZSTD_compressBound(brickBytes))
         fail("compressed size " + std::to_string(r.compressedBytes) + " out of range");
     if (r.leafBytes != layout.leafCount() * kLeafEntryBytes)
@@ -189,10 +218,14 @@ DecodedIndex decodeIndex(std::span<const std::byte> bytes, const StoreHeader& h,
     for (std::size_t li = 0; li < layout.levels().size(); ++li) {
         const auto& l = layout.levels()[li];
         bool same = true;
-        for (auto d : l.dims) same &= r.u64() == d;
-        for (auto b : l.bricks) same &= r.u32() == b;
+        for (auto d : l.dims)
+            same &= r.u64() == d;
+        for (auto b : l.bricks)
+            same &= r.u32() == b;
         r.u32();
-        if (!same) throw StoreCorrupt(store + ": index: level " + std::to_string(li) + " table is inconsistent");
+        if (!same)
+            throw StoreCorrupt(store + ": index: level " + std::to_string(li) +
+                               " table is inconsistent");
     }
     DecodedIndex out;
     out.records.resize(layout.brickCount());
@@ -210,7 +243,8 @@ DecodedIndex decodeIndex(std::span<const std::byte> bytes, const StoreHeader& h,
         checkRecord(rec, layout, i, store);
     }
     out.histogram.resize(h.histogramBins);
-    for (auto& c : out.histogram) c = r.u64();
+    for (auto& c : out.histogram)
+        c = r.u64();
     std::uint32_t len = r.u32();
     if (len > kMaxDescriptionBytes) throw StoreCorrupt(store + ": index: description too long");
     auto d = r.take(len);

@@ -57,7 +57,7 @@ DecodedIndex decodeIndex(std::span<const std::byte> bytes, const StoreHeader& he
 
 /// Little-endian cursor over a byte span; reading past the end throws StoreCorrupt.
 class ByteReader {
-public:
+  public:
     ByteReader(std::span<const std::byte> bytes, std::string context)
         : mBytes(bytes), mContext(std::move(context)) {}
     std::uint8_t u8();
@@ -68,7 +68,7 @@ public:
     std::span<const std::byte> take(std::size_t n);
     std::size_t position() const { return mPos; }
 
-private:
+  private:
     std::span<const std::byte> mBytes;
     std::string mContext;
     std::size_t mPos = 0;
@@ -76,7 +76,7 @@ private:
 
 /// Little-endian appender.
 class ByteWriter {
-public:
+  public:
     void u8(std::uint8_t v) { mBytes.push_back(std::byte{v}); }
     void u32(std::uint32_t v);
     void u64(std::uint64_t v);
@@ -86,7 +86,7 @@ public:
     void zeros(std::size_t n) { mBytes.insert(mBytes.end(), n, std::byte{0}); }
     std::vector<std::byte>& data() { return mBytes; }
 
-private:
+  private:
     std::vector<std::byte> mBytes;
 };
 

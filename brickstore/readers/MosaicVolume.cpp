@@ -20,7 +20,7 @@ std::string tilesText(const std::array<std::uint64_t, 3>& tiles) {
 }
 
 class MosaicVolume final : public VolumeSource {
-public:
+  public:
     MosaicVolume(std::function<std::unique_ptr<VolumeSource>()> open,
                  const std::array<std::uint64_t, 3>& tiles)
         : mOpen(std::move(open)), mTiles(tiles) {
@@ -45,7 +45,7 @@ public:
 
     const VolumeInfo& info() const override { return mInfo; }
 
-private:
+  private:
     void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         const std::uint64_t sourceSliceBytes = mSourceInfo.sliceBytes();
         const std::uint64_t batchLimit =

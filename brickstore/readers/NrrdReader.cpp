@@ -18,7 +18,6 @@
 #include <new>
 #include <vector>
 
-
 namespace bc::brickstore {
 
 namespace {

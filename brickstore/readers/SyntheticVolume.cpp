@@ -24,7 +24,7 @@ std::uint64_t mix64(std::uint64_t z) {
 
 /// splitmix64: tiny, seedable, and the same sequence on every platform.
 class SplitMix64 {
-public:
+  public:
     explicit SplitMix64(std::uint64_t seed) : mState(seed) {}
     std::uint64_t next() { return mix64(mState += 0x9e3779b97f4a7c15ull); }
     /// Uniform in [lo, hi).
@@ -32,7 +32,7 @@ public:
         return lo + (hi - lo) * double(next() >> 11) * 0x1.0p-53;
     }
 
-private:
+  private:
     std::uint64_t mState;
 };
 
@@ -57,10 +57,10 @@ Vec3 normalize(const Vec3& a) {
 
 /// Common info and slice loop; subclasses paint one slice at a time.
 class SyntheticVolume : public VolumeSource {
-public:
+  public:
     const VolumeInfo& info() const override { return mInfo; }
 
-protected:
+  protected:
     SyntheticVolume(const std::string& kind, VoxelType type,
                     const std::array<std::uint64_t, 3>& dims, std::uint64_t seed) {
         mInfo.dims = dims;
@@ -75,7 +75,7 @@ protected:
 
     VolumeInfo mInfo;
 
-private:
+  private:
     void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         for (std::uint64_t i = 0; i < count; ++i)
             paintSlice(nextSlice() + i, out.data() + i * mInfo.sliceBytes());
@@ -86,11 +86,11 @@ private:
 // Checker
 
 class CheckerVolume final : public SyntheticVolume {
-public:
+  public:
     CheckerVolume(const std::array<std::uint64_t, 3>& dims, std::uint64_t seed)
         : SyntheticVolume("checker", VoxelType::U8, dims, seed) {}
 
-private:
+  private:
     void paintSlice(std::uint64_t z, std::byte* out) const override {
         const std::uint64_t dx = mInfo.dims[0], dy = mInfo.dims[1], p = kCheckerPeriodVoxels;
         for (std::uint64_t y = 0; y < dy; ++y) {
@@ -116,7 +116,7 @@ struct Ellipsoid {
 constexpr double kCsfScale = 0.91; ///< the inner table of the skull, as a fraction of the outer
 
 class PhantomVolume final : public SyntheticVolume {
-public:
+  public:
     PhantomVolume(const std::array<std::uint64_t, 3>& dims, std::uint64_t seed)
         : SyntheticVolume("phantom", VoxelType::U16, dims, seed), mSeed(seed) {
         const Vec3 skull{0.72, 0.86, 0.84};
@@ -141,7 +141,7 @@ public:
         mShapes.push_back({lesionCentre, {r, r, r}, 1070}); // a small bleed
     }
 
-private:
+  private:
     static constexpr std::size_t kSkin = 0, kSkull = 1;
 
     void paintSlice(std::uint64_t z, std::byte* out) const override {
@@ -224,7 +224,7 @@ constexpr double kVesselFraction = 0.03; ///< target occupancy, before overlaps 
 constexpr double kWallFalloff = 0.4;     ///< fraction of the radius over which the lumen fades
 
 class VesselVolume final : public SyntheticVolume {
-public:
+  public:
     VesselVolume(const std::array<std::uint64_t, 3>& dims, std::uint64_t seed)
         : SyntheticVolume("vessels", VoxelType::U8, dims, seed) {
         SplitMix64 rng(seed);
@@ -235,7 +235,7 @@ public:
         binPieces();
     }
 
-private:
+  private:
     void grow(SplitMix64& rng, Vec3 start, Vec3 dir, double radius, double length, int level) {
         const double endRadius = radius * 0.92;
         for (int i = 0; i < kPiecesPerBranch; ++i) {

@@ -77,7 +77,7 @@ void storeFloat(std::byte* out, std::uint64_t index, float value) {
 }
 
 template <typename GridT> class VdbVolume final : public VolumeSource {
-public:
+  public:
     using TreeT = typename GridT::TreeType;
     using LeafT = typename TreeT::LeafNodeType;
 
@@ -90,7 +90,7 @@ public:
 
     const VolumeInfo& info() const override { return mInfo; }
 
-private:
+  private:
     void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         if (count == 0) return;
         fillBackground(out);

@@ -21,7 +21,9 @@
 
 namespace bc::render::detail {
 
-inline float lerp1(float a, float b, float t) { return a * (1.0f - t) + b * t; }
+inline float lerp1(float a, float b, float t) {
+    return a * (1.0f - t) + b * t;
+}
 
 /// Trilinear at q, clamped to the brick (the shader's fetch() with full-precision weights).
 template <class T> float fetch(const T* v, int edge, glm::vec3 q) {
@@ -41,9 +43,10 @@ template <class T> float fetch(const T* v, int edge, glm::vec3 q) {
 
 /// The gradient as six clamped fetches (the old formula, and the fallback).
 template <class T> glm::vec3 sixFetchGradient(const T* v, int edge, glm::vec3 q) {
-    return glm::vec3(fetch(v, edge, q + glm::vec3(1, 0, 0)) - fetch(v, edge, q - glm::vec3(1, 0, 0)),
-                     fetch(v, edge, q + glm::vec3(0, 1, 0)) - fetch(v, edge, q - glm::vec3(0, 1, 0)),
-                     fetch(v, edge, q + glm::vec3(0, 0, 1)) - fetch(v, edge, q - glm::vec3(0, 0, 1)));
+    return glm::vec3(
+        fetch(v, edge, q + glm::vec3(1, 0, 0)) - fetch(v, edge, q - glm::vec3(1, 0, 0)),
+        fetch(v, edge, q + glm::vec3(0, 1, 0)) - fetch(v, edge, q - glm::vec3(0, 1, 0)),
+        fetch(v, edge, q + glm::vec3(0, 0, 1)) - fetch(v, edge, q - glm::vec3(0, 0, 1)));
 }
 
 /// Whether the fused path applies at q: 1 <= q_a < edge - 2 on every axis. Then q's cell

@@ -35,7 +35,8 @@ class RayGuide {
 
     /// This frame's findings: `entered[i]` is non-zero when an unsaturated ray entered brick i
     /// of the level (resident or asked for). Bricks outside the plan become unknown.
-    void record(const BrickPlan& plan, std::uint64_t scene, const std::vector<std::uint32_t>& entered);
+    void record(const BrickPlan& plan, std::uint64_t scene,
+                const std::vector<std::uint32_t>& entered);
 
     /// Forget everything (another volume or level, or feedback switched off).
     void reset() {

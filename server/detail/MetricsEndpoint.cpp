@@ -22,33 +22,37 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
     void start() {
         mTimer.expires_after(std::chrono::milliseconds(kRequestTimeoutMs));
         mTimer.async_wait([self = shared_from_this()](const asio::error_code& ec) {
-            if (!ec && !self->mAnswered) self->answer(408, "Request Timeout", "request not complete within 2 s\n");
+            if (!ec && !self->mAnswered)
+                self->answer(408, "Request Timeout", "request not complete within 2 s\n");
         });
         read();
     }
 
   private:
     void read() {
-        mSocket.async_read_some(asio::buffer(mBuffer),
-                                [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
-                                    if (ec || self->mAnswered) return self->close();
-                                    self->mRequest.append(self->mBuffer.data(), n);
-                                    self->onBytes();
-                                });
+        mSocket.async_read_some(
+            asio::buffer(mBuffer),
+            [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
+                if (ec || self->mAnswered) return self->close();
+                self->mRequest.append(self->mBuffer.data(), n);
+                self->onBytes();
+            });
     }
 
     void onBytes() {
         const auto end = mRequest.find("\r\n\r\n");
         if (end == std::string::npos) {
             if (mRequest.size() > kMaxRequestBytes)
-                return answer(431, "Request Header Fields Too Large", "request head over 8192 bytes\n");
+                return answer(431, "Request Header Fields Too Large",
+                              "request head over 8192 bytes\n");
             return read();
         }
         const std::string line = mRequest.substr(0, mRequest.find("\r\n"));
         const auto sp1 = line.find(' '), sp2 = line.rfind(' ');
         if (sp1 == std::string::npos || sp2 == sp1 || !line.substr(sp2 + 1).starts_with("HTTP/1."))
             return answer(400, "Bad Request", "malformed request line\n");
-        const std::string method = line.substr(0, sp1), target = line.substr(sp1 + 1, sp2 - sp1 - 1);
+        const std::string method = line.substr(0, sp1),
+                          target = line.substr(sp1 + 1, sp2 - sp1 - 1);
         const std::string path = target.substr(0, target.find('?'));
         if (path != "/metrics") return answer(404, "Not Found", "only /metrics is served here\n");
         if (method != "GET" && method != "HEAD")
@@ -64,11 +68,12 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
     }
 
     void answer(int status, const char* reason, std::string body, const std::string& extra = "",
-                const char* type = "text/plain; charset=utf-8", std::size_t length = std::string::npos) {
+                const char* type = "text/plain; charset=utf-8",
+                std::size_t length = std::string::npos) {
         mAnswered = true;
         mTimer.cancel();
-        mResponse = "HTTP/1.1 " + std::to_string(status) + " " + reason + "\r\nContent-Type: " + type +
-                    "\r\nContent-Length: " +
+        mResponse = "HTTP/1.1 " + std::to_string(status) + " " + reason +
+                    "\r\nContent-Type: " + type + "\r\nContent-Length: " +
                     std::to_string(length == std::string::npos ? body.size() : length) +
                     "\r\nConnection: close\r\n" + extra + "\r\n" + body;
         // The write is bounded like the read: a scraper that stops reading is cut.
@@ -76,10 +81,9 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
         mTimer.async_wait([self = shared_from_this()](const asio::error_code& ec) {
             if (!ec) self->close();
         });
-        asio::async_write(mSocket, asio::buffer(mResponse),
-                          [self = shared_from_this()](const asio::error_code&, std::size_t) {
-                              self->close();
-                          });
+        asio::async_write(
+            mSocket, asio::buffer(mResponse),
+            [self = shared_from_this()](const asio::error_code&, std::size_t) { self->close(); });
     }
 
     void close() {
@@ -105,10 +109,10 @@ MetricsEndpoint::MetricsEndpoint(asio::io_context& io, const std::string& host, 
     const std::string where = host + ":" + std::to_string(port);
     try {
         asio::ip::tcp::resolver resolver(io);
-        const auto ep = resolver.resolve(host, std::to_string(port),
-                                         asio::ip::resolver_base::numeric_service)
-                            .begin()
-                            ->endpoint();
+        const auto ep =
+            resolver.resolve(host, std::to_string(port), asio::ip::resolver_base::numeric_service)
+                .begin()
+                ->endpoint();
         mAcceptor.open(ep.protocol());
         mAcceptor.set_option(asio::socket_base::reuse_address(true));
         mAcceptor.bind(ep);
@@ -121,9 +125,13 @@ MetricsEndpoint::MetricsEndpoint(asio::io_context& io, const std::string& host, 
 
 MetricsEndpoint::~MetricsEndpoint() = default;
 
-std::uint16_t MetricsEndpoint::port() const { return mAcceptor.local_endpoint().port(); }
+std::uint16_t MetricsEndpoint::port() const {
+    return mAcceptor.local_endpoint().port();
+}
 
-void MetricsEndpoint::start() { accept(); }
+void MetricsEndpoint::start() {
+    accept();
+}
 
 void MetricsEndpoint::stop() {
     mStopped = true;

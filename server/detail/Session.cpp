@@ -18,7 +18,9 @@ using protocol::MessageType;
 
 constexpr auto kWatchdogPeriod = std::chrono::milliseconds(50);
 
-std::chrono::milliseconds ms(std::uint32_t v) { return std::chrono::milliseconds(v); }
+std::chrono::milliseconds ms(std::uint32_t v) {
+    return std::chrono::milliseconds(v);
+}
 
 /// Constant-time comparison: the time taken depends on the lengths only, never on where the
 /// first difference lies.
@@ -63,8 +65,7 @@ void Session::start() {
     mSlot = mContext.render.open(
         [weak, executor](std::vector<std::uint8_t> bytes) {
             asio::post(executor, [weak, bytes = std::move(bytes)]() mutable {
-                if (auto self = weak.lock())
-                    self->enqueue({std::move(bytes), true});
+                if (auto self = weak.lock()) self->enqueue({std::move(bytes), true});
             });
         },
         mContext.config.writeQueueFrames);
@@ -171,11 +172,13 @@ void Session::handle(protocol::Message& message, std::uint32_t request) {
                     send(protocol::Bye{protocol::ByeReason::Normal}, request);
                     closeAfterFlush("bye");
                 } else if constexpr (std::is_same_v<M, protocol::Error>) {
-                    close("client error " + std::string(protocol::errorName(std::uint16_t(m.code))) +
-                          ": " + m.message);
+                    close("client error " +
+                          std::string(protocol::errorName(std::uint16_t(m.code))) + ": " +
+                          m.message);
                 } else {
                     sendError(ErrorCode::BadState, false, t, request,
-                              std::string(protocol::typeName(t)) + " is a server-to-client message");
+                              std::string(protocol::typeName(t)) +
+                                  " is a server-to-client message");
                 }
             },
             message);
@@ -242,8 +245,7 @@ void Session::onOpenVolume(const protocol::OpenVolume& open, std::uint32_t reque
     send(protocol::VolumeOpened{volume->info}, request);
 }
 
-void Session::onSetTransferFunction(const protocol::SetTransferFunction& m,
-                                    std::uint32_t request) {
+void Session::onSetTransferFunction(const protocol::SetTransferFunction& m, std::uint32_t request) {
     const auto t = std::uint8_t(MessageType::SetTransferFunction);
     if (!mLease) {
         sendError(ErrorCode::NoVolume, false, t, request, "open a volume first");
@@ -256,7 +258,8 @@ void Session::onSetTransferFunction(const protocol::SetTransferFunction& m,
             list += (list.empty() ? "" : ", ") + name;
         sendError(ErrorCode::NotFound, false, t, request,
                   protocol::fitText("SetTransferFunction.preset: not a preset of this server; "
-                                    "presets: " + list,
+                                    "presets: " +
+                                        list,
                                     protocol::kMaxErrorMessageBytes));
         return;
     }
@@ -294,7 +297,8 @@ void Session::onRequestFrame(const protocol::RequestFrame& m, std::uint32_t requ
 void Session::onRequestStats(std::uint32_t request) {
     MetricSet metrics;
     if (mContext.collect) mContext.collect(metrics);
-    metrics.counter("session_frames_sent_total", "Frames this session was sent", double(mFramesSent));
+    metrics.counter("session_frames_sent_total", "Frames this session was sent",
+                    double(mFramesSent));
     metrics.counter("session_bytes_sent_total", "Bytes this session was sent", double(mBytesSent));
     metrics.counter("session_bytes_received_total", "Bytes this session sent",
                     double(mBytesReceived));
@@ -318,9 +322,11 @@ void Session::sendError(ErrorCode code, bool fatal, std::uint8_t type, std::uint
                         const std::string& message) {
     ++mErrorsSent;
     ++mContext.errorsSent;
-    mContext.log.info("session " + std::to_string(mId) + ": " + protocol::errorName(std::uint16_t(code)) +
-                      (fatal ? " (fatal): " : ": ") + message);
-    send(protocol::Error{code, fatal, type, protocol::fitText(message, protocol::kMaxErrorMessageBytes)},
+    mContext.log.info("session " + std::to_string(mId) + ": " +
+                      protocol::errorName(std::uint16_t(code)) + (fatal ? " (fatal): " : ": ") +
+                      message);
+    send(protocol::Error{code, fatal, type,
+                         protocol::fitText(message, protocol::kMaxErrorMessageBytes)},
          request);
     if (fatal) closeAfterFlush(std::string(protocol::errorName(std::uint16_t(code))));
 }
@@ -371,12 +377,14 @@ void Session::watchdog() {
             return self->close(self->mCloseReason + " (unsent data dropped)");
         if (self->mPhase == Phase::AwaitHello || self->mPhase == Phase::AwaitAuth) {
             if (now - self->mStarted > ms(c.handshakeTimeoutMs))
-                self->sendError(ErrorCode::Timeout, true, 0, 0, "handshake not completed in " +
-                                                                    std::to_string(c.handshakeTimeoutMs) + " ms");
+                self->sendError(ErrorCode::Timeout, true, 0, 0,
+                                "handshake not completed in " +
+                                    std::to_string(c.handshakeTimeoutMs) + " ms");
         } else if (self->mPhase == Phase::Ready) {
             if (self->mMidMessageSince && now - *self->mMidMessageSince > ms(c.readTimeoutMs))
-                self->sendError(ErrorCode::Timeout, true, 0, 0, "message incomplete after " +
-                                                                    std::to_string(c.readTimeoutMs) + " ms");
+                self->sendError(ErrorCode::Timeout, true, 0, 0,
+                                "message incomplete after " + std::to_string(c.readTimeoutMs) +
+                                    " ms");
             else if (now - self->mLastMessage > ms(c.idleTimeoutMs)) {
                 self->send(protocol::Bye{protocol::ByeReason::IdleTimeout}, 0);
                 self->closeAfterFlush("idle timeout");

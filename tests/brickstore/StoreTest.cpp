@@ -20,7 +20,8 @@ namespace {
 using test::VectorSource;
 
 template <typename T>
-std::vector<std::byte> randomVolume(const std::array<std::uint64_t, 3>& d, std::uint32_t seed, double lo, double hi) {
+std::vector<std::byte> randomVolume(const std::array<std::uint64_t, 3>& d, std::uint32_t seed,
+                                    double lo, double hi) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> dist(lo, hi);
     std::vector<T> v(d[0] * d[1] * d[2]);
@@ -29,7 +30,10 @@ std::vector<std::byte> randomVolume(const std::array<std::uint64_t, 3>& d, std::
         for (std::uint64_t y = 0; y < d[1]; ++y)
             for (std::uint64_t x = 0; x < d[0]; ++x) {
                 double r = double(x + y + z) / double(d[0] + d[1] + d[2]);
-                double val = r < 0.3 ? 0.0 : lo + (hi - lo) * 0.5 * (1 + std::sin(0.3 * x + 0.2 * y)) * 0.8 + 0.2 * dist(rng);
+                double val = r < 0.3
+                                 ? 0.0
+                                 : lo + (hi - lo) * 0.5 * (1 + std::sin(0.3 * x + 0.2 * y)) * 0.8 +
+                                       0.2 * dist(rng);
                 v[(z * d[1] + y) * d[0] + x] = static_cast<T>(std::clamp(val, lo, hi));
             }
     std::vector<std::byte> bytes(v.size() * sizeof(T));
@@ -58,7 +62,8 @@ struct Ingested {
     VolumeInfo info;
 };
 
-std::unique_ptr<Ingested> ingestVector(VolumeInfo info, std::vector<std::byte> voxels, BrickGeometry g) {
+std::unique_ptr<Ingested> ingestVector(VolumeInfo info, std::vector<std::byte> voxels,
+                                       BrickGeometry g) {
     auto r = std::make_unique<Ingested>();
     r->path = r->dir.file("v.bcs");
     r->voxels = voxels;
@@ -83,10 +88,18 @@ TEST_P(StoreRoundTrip, ExtractGivesBackTheSourceVoxelsExactly) {
     const auto& c = GetParam();
     std::vector<std::byte> v;
     switch (c.type) {
-    case VoxelType::U8: v = randomVolume<std::uint8_t>(c.dims, 1, 0, 255); break;
-    case VoxelType::U16: v = randomVolume<std::uint16_t>(c.dims, 2, 0, 4000); break;
-    case VoxelType::I16: v = randomVolume<std::int16_t>(c.dims, 3, -1000, 2000); break;
-    case VoxelType::F32: v = randomVolume<float>(c.dims, 4, -1.5, 3.25); break;
+    case VoxelType::U8:
+        v = randomVolume<std::uint8_t>(c.dims, 1, 0, 255);
+        break;
+    case VoxelType::U16:
+        v = randomVolume<std::uint16_t>(c.dims, 2, 0, 4000);
+        break;
+    case VoxelType::I16:
+        v = randomVolume<std::int16_t>(c.dims, 3, -1000, 2000);
+        break;
+    case VoxelType::F32:
+        v = randomVolume<float>(c.dims, 4, -1.5, 3.25);
+        break;
     }
     auto in = ingestVector(makeInfo(c.dims, c.type), v, c.geometry);
     auto store = BrickStore::open(in->path);
@@ -96,25 +109,27 @@ TEST_P(StoreRoundTrip, ExtractGivesBackTheSourceVoxelsExactly) {
     EXPECT_TRUE(readLevel(*store, 0) == v);
     EXPECT_TRUE(store->verify(2).empty());
     std::uint64_t total = 0;
-    for (auto c2 : store->info().histogram) total += c2;
+    for (auto c2 : store->info().histogram)
+        total += c2;
     EXPECT_EQ(total, c.dims[0] * c.dims[1] * c.dims[2]);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    TypesAndBrickSizes, StoreRoundTrip,
-    ::testing::Values(RoundTripCase{VoxelType::U8, {70, 45, 33}, {16, 2, 4}},
-                      RoundTripCase{VoxelType::U8, {70, 45, 33}, {32, 1, 8}},
-                      RoundTripCase{VoxelType::U16, {40, 64, 17}, {16, 2, 8}},
-                      RoundTripCase{VoxelType::I16, {33, 20, 50}, {8, 2, 3}},
-                      RoundTripCase{VoxelType::F32, {25, 31, 29}, {16, 2, 8}},
-                      RoundTripCase{VoxelType::U8, {5, 3, 2}, {8, 2, 8}},
-                      RoundTripCase{VoxelType::U8, {1, 1, 1}, {4, 0, 1}}),
-    [](const auto& info) {
-        const auto& c = info.param;
-        return std::string(voxelTypeName(c.type)) + "_" + std::to_string(c.dims[0]) + "x" +
-               std::to_string(c.dims[1]) + "x" + std::to_string(c.dims[2]) + "_brick" +
-               std::to_string(c.geometry.brickVoxels) + "_apron" + std::to_string(c.geometry.apronVoxels);
-    });
+INSTANTIATE_TEST_SUITE_P(TypesAndBrickSizes, StoreRoundTrip,
+                         ::testing::Values(RoundTripCase{VoxelType::U8, {70, 45, 33}, {16, 2, 4}},
+                                           RoundTripCase{VoxelType::U8, {70, 45, 33}, {32, 1, 8}},
+                                           RoundTripCase{VoxelType::U16, {40, 64, 17}, {16, 2, 8}},
+                                           RoundTripCase{VoxelType::I16, {33, 20, 50}, {8, 2, 3}},
+                                           RoundTripCase{VoxelType::F32, {25, 31, 29}, {16, 2, 8}},
+                                           RoundTripCase{VoxelType::U8, {5, 3, 2}, {8, 2, 8}},
+                                           RoundTripCase{VoxelType::U8, {1, 1, 1}, {4, 0, 1}}),
+                         [](const auto& info) {
+                             const auto& c = info.param;
+                             return std::string(voxelTypeName(c.type)) + "_" +
+                                    std::to_string(c.dims[0]) + "x" + std::to_string(c.dims[1]) +
+                                    "x" + std::to_string(c.dims[2]) + "_brick" +
+                                    std::to_string(c.geometry.brickVoxels) + "_apron" +
+                                    std::to_string(c.geometry.apronVoxels);
+                         });
 
 TEST(StoreTest, ApronsHoldNeighbourVoxelsAndClampedCopiesAtTheBorder) {
     std::array<std::uint64_t, 3> d{37, 29, 23};
@@ -144,7 +159,8 @@ TEST(StoreTest, ApronsHoldNeighbourVoxelsAndClampedCopiesAtTheBorder) {
                             std::uint16_t s;
                             std::memcpy(&s, brick.data() + 2 * ((k * e + j) * e + i), 2);
                             ASSERT_EQ(s, at(bx * b - a + i, by * b - a + j, bz * b - a + k))
-                                << "brick " << bx << "," << by << "," << bz << " voxel " << i << "," << j << "," << k;
+                                << "brick " << bx << "," << by << "," << bz << " voxel " << i << ","
+                                << j << "," << k;
                         }
             }
 }
@@ -157,7 +173,8 @@ TEST(StoreTest, LeafRangesCoverExactlyTheVoxelsTheirSamplesRead) {
     auto store = BrickStore::open(in->path);
     const auto& layout = store->layout();
     std::vector<std::byte> brick(store->brickBytes());
-    const std::int64_t e = layout.storedEdge(), n = layout.leavesPerAxis(), L = g.leafVoxels, A = g.apronVoxels;
+    const std::int64_t e = layout.storedEdge(), n = layout.leavesPerAxis(), L = g.leafVoxels,
+                       A = g.apronVoxels;
     for (std::uint64_t idx = 0; idx < layout.levels()[0].brickCount(); ++idx) {
         BrickKey key = layout.keyOf(idx);
         store->readBrick(key, brick);
@@ -175,9 +192,13 @@ TEST(StoreTest, LeafRangesCoverExactlyTheVoxelsTheirSamplesRead) {
                 for (std::int64_t lx = 0; lx < n; ++lx) {
                     // Payload voxels of the leaf, widened by the apron reach, in stored coords.
                     float mn = 1e9f, mx = -1e9f;
-                    for (std::int64_t z = lz * L; z < std::min<std::int64_t>((lz + 1) * L, g.brickVoxels) + 2 * A; ++z)
-                        for (std::int64_t y = ly * L; y < std::min<std::int64_t>((ly + 1) * L, g.brickVoxels) + 2 * A; ++y)
-                            for (std::int64_t x = lx * L; x < std::min<std::int64_t>((lx + 1) * L, g.brickVoxels) + 2 * A; ++x) {
+                    for (std::int64_t z = lz * L;
+                         z < std::min<std::int64_t>((lz + 1) * L, g.brickVoxels) + 2 * A; ++z)
+                        for (std::int64_t y = ly * L;
+                             y < std::min<std::int64_t>((ly + 1) * L, g.brickVoxels) + 2 * A; ++y)
+                            for (std::int64_t x = lx * L;
+                                 x < std::min<std::int64_t>((lx + 1) * L, g.brickVoxels) + 2 * A;
+                                 ++x) {
                                 float s = float(std::uint8_t(brick[(z * e + y) * e + x]));
                                 mn = std::min(mn, s);
                                 mx = std::max(mx, s);
@@ -194,7 +215,7 @@ TEST(StoreTest, PyramidLevelsAreRoundedTwoByTwoByTwoMeans) {
     auto v = randomVolume<std::uint16_t>(d, 11, 0, 60000);
     auto in = ingestVector(makeInfo(d, VoxelType::U16), v, {8, 1, 4});
     auto store = BrickStore::open(in->path);
-    ASSERT_EQ(store->layout().levels().size(), 3u);  // 21 -> 11 -> 6 (fits in 8)
+    ASSERT_EQ(store->layout().levels().size(), 3u); // 21 -> 11 -> 6 (fits in 8)
     auto l1 = readLevel(*store, 1);
     const std::array<std::uint64_t, 3> d1{11, 9, 6};
     ASSERT_EQ(store->layout().levels()[1].dims, d1);
@@ -208,7 +229,8 @@ TEST(StoreTest, PyramidLevelsAreRoundedTwoByTwoByTwoMeans) {
         for (std::uint64_t y = 0; y < d1[1]; ++y)
             for (std::uint64_t x = 0; x < d1[0]; ++x) {
                 std::uint64_t sum = 0;
-                for (int k = 0; k < 8; ++k) sum += src(2 * x + (k & 1), 2 * y + ((k >> 1) & 1), 2 * z + (k >> 2));
+                for (int k = 0; k < 8; ++k)
+                    sum += src(2 * x + (k & 1), 2 * y + ((k >> 1) & 1), 2 * z + (k >> 2));
                 std::uint16_t got;
                 std::memcpy(&got, l1.data() + 2 * ((z * d1[1] + y) * d1[0] + x), 2);
                 ASSERT_EQ(got, (sum + 4) / 8) << x << "," << y << "," << z;
@@ -220,7 +242,8 @@ TEST(StoreTest, PyramidLevelsAreRoundedTwoByTwoByTwoMeans) {
 TEST(StoreTest, ConstantBricksAreNotStoredAndReadBackAsTheirValue) {
     std::array<std::uint64_t, 3> d{64, 64, 64};
     std::vector<std::byte> v(d[0] * d[1] * d[2], std::byte{0});
-    for (std::uint64_t z = 36; z < 44; ++z) v[(z * d[1] + 40) * d[0] + 40] = std::byte{200};
+    for (std::uint64_t z = 36; z < 44; ++z)
+        v[(z * d[1] + 40) * d[0] + 40] = std::byte{200};
     auto in = ingestVector(makeInfo(d, VoxelType::U8), v, {16, 2, 8});
     auto store = BrickStore::open(in->path);
     std::uint64_t stored = 0;
@@ -245,7 +268,8 @@ std::pair<BrickKey, std::uint64_t> firstStoredBrick(const BrickStore& store) {
 
 TEST(StoreTest, OneFlippedBitIsNamedAndEveryOtherBrickStillReads) {
     std::array<std::uint64_t, 3> d{48, 48, 48};
-    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 5, 0, 255), {16, 2, 8});
+    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 5, 0, 255),
+                           {16, 2, 8});
     auto [victim, offset] = firstStoredBrick(*BrickStore::open(in->path));
     {
         std::fstream f(in->path, std::ios::in | std::ios::out | std::ios::binary);
@@ -256,7 +280,7 @@ TEST(StoreTest, OneFlippedBitIsNamedAndEveryOtherBrickStillReads) {
         f.seekp(std::streamoff(offset + 10));
         f.write(&c, 1);
     }
-    auto store = BrickStore::open(in->path);  // the index is intact: opening succeeds
+    auto store = BrickStore::open(in->path); // the index is intact: opening succeeds
     std::vector<std::byte> buf(store->brickBytes());
     try {
         store->readBrick(victim, buf);
@@ -280,11 +304,14 @@ TEST(StoreTest, OneFlippedBitIsNamedAndEveryOtherBrickStillReads) {
 
 TEST(StoreTest, TruncatedStoreIsRejectedOnOpen) {
     std::array<std::uint64_t, 3> d{32, 32, 32};
-    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 6, 0, 255), {16, 2, 8});
+    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 6, 0, 255),
+                           {16, 2, 8});
     auto full = std::filesystem::file_size(in->path);
-    for (std::uint64_t keep : {full - 1, full / 2, std::uint64_t(5000), std::uint64_t(100), std::uint64_t(0)}) {
+    for (std::uint64_t keep :
+         {full - 1, full / 2, std::uint64_t(5000), std::uint64_t(100), std::uint64_t(0)}) {
         std::string cut = in->dir.file("cut.bcs");
-        std::filesystem::copy_file(in->path, cut, std::filesystem::copy_options::overwrite_existing);
+        std::filesystem::copy_file(in->path, cut,
+                                   std::filesystem::copy_options::overwrite_existing);
         std::filesystem::resize_file(cut, keep);
         try {
             BrickStore::open(cut);
@@ -297,9 +324,11 @@ TEST(StoreTest, TruncatedStoreIsRejectedOnOpen) {
 
 TEST(StoreTest, CorruptIndexFieldsAreRejectedOnOpen) {
     std::array<std::uint64_t, 3> d{32, 32, 32};
-    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 6, 0, 255), {16, 2, 8});
+    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 6, 0, 255),
+                           {16, 2, 8});
     auto bytes = test::readFile(in->path);
-    for (std::size_t at : {std::size_t(20), std::size_t(4090), bytes.size() - 30, bytes.size() - 200}) {
+    for (std::size_t at :
+         {std::size_t(20), std::size_t(4090), bytes.size() - 30, bytes.size() - 200}) {
         auto copy = bytes;
         copy[at] ^= 0x40;
         std::string bad = in->dir.file("bad.bcs");
@@ -310,11 +339,12 @@ TEST(StoreTest, CorruptIndexFieldsAreRejectedOnOpen) {
 
 TEST(StoreTest, FailedIngestLeavesTheExistingStoreUntouched) {
     std::array<std::uint64_t, 3> d{32, 32, 32};
-    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 6, 0, 255), {16, 2, 8});
+    auto in = ingestVector(makeInfo(d, VoxelType::U8), randomVolume<std::uint8_t>(d, 6, 0, 255),
+                           {16, 2, 8});
     auto before = test::readFile(in->path);
     // A source whose data runs out halfway fails the ingest.
     class FailingSource final : public VolumeSource {
-    public:
+      public:
         FailingSource() { mInfo.dims = {32, 32, 32}; }
         const VolumeInfo& info() const override { return mInfo; }
         void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
@@ -340,11 +370,12 @@ TEST(StoreTest, IngestKilledMidwayLeavesNoValidLookingStore) {
     ASSERT_GE(child, 0);
     if (child == 0) {
         class SlowSource final : public VolumeSource {
-        public:
+          public:
             SlowSource() { mInfo.dims = {128, 128, 4096}; }
             const VolumeInfo& info() const override { return mInfo; }
             void readNextSlices(std::uint64_t, std::span<std::byte> out) override {
-                for (auto& b : out) b = std::byte(mBytesPainted++ * 2654435761u >> 24);
+                for (auto& b : out)
+                    b = std::byte(mBytesPainted++ * 2654435761u >> 24);
                 ::usleep(2000);
             }
             VolumeInfo mInfo;
@@ -385,7 +416,7 @@ TEST(StoreTest, BadGeometryAndVolumeInfoAreRejectedBeforeAnythingIsWritten) {
     std::array<std::uint64_t, 3> d{8, 8, 8};
     VectorSource src(makeInfo(d, VoxelType::U8), std::vector<std::byte>(512));
     IngestConfig config;
-    config.geometry = {64, 64, 8};  // apron as large as the brick
+    config.geometry = {64, 64, 8}; // apron as large as the brick
     EXPECT_THROW(ingest(src, dir.file("a.bcs"), config), std::invalid_argument);
     auto info = makeInfo({8, 0, 8}, VoxelType::U8);
     VectorSource zero(info, {});

@@ -38,12 +38,12 @@ inline std::vector<std::byte> readAllSlices(brickstore::VolumeSource& source,
 /// A volume held in memory, served as a slice stream, forwards only like a file reader (the
 /// test double for every reader).
 class VectorSource final : public brickstore::VolumeSource {
-public:
+  public:
     VectorSource(brickstore::VolumeInfo info, std::vector<std::byte> voxels)
         : mInfo(std::move(info)), mVoxels(std::move(voxels)) {}
     const brickstore::VolumeInfo& info() const override { return mInfo; }
 
-private:
+  private:
     void readNextSlices(std::uint64_t, std::span<std::byte> out) override {
         if (out.empty()) return; // memcpy wants non-null pointers even for 0 bytes
         std::memcpy(out.data(), mVoxels.data() + nextSlice() * mInfo.sliceBytes(), out.size());

@@ -39,7 +39,8 @@ TEST(BrickPool, SlotGridHoldsNearlyEverySlotTheBudgetPays) {
                 ASSERT_LE(side, perAxis);
             }
             if (n >= 100 && n * 8 <= perAxis * perAxis * perAxis) {
-                EXPECT_GE(double(count), 0.95 * double(n)) << n << " slots, " << perAxis << " a side";
+                EXPECT_GE(double(count), 0.95 * double(n))
+                    << n << " slots, " << perAxis << " a side";
             }
         }
     const auto g = BrickPool::slotGridFor(2796, 102); // 16^3 u16 bricks on llvmpipe: was 1530
@@ -51,11 +52,11 @@ TEST(BrickPool, CountsHitsUploadsEvictionsAndRefetchesOfAScriptedPath) {
     ASSERT_EQ(f.pool.capacity(), 4u);
     // One brick a frame, so that recency is strict (bricks of one frame are equally recent).
     for (std::uint64_t k : {0, 1, 2, 3})
-        f.frame({k});  // 4 uploads; least recent first: 0 1 2 3
-    f.frame({4});      // evicts 0
-    f.frame({0});      // re-fetch, evicts 1
-    f.frame({1, 2});   // 1 re-fetched (evicts 2), then 2 re-fetched (evicts 3)
-    f.frame({4});      // a hit
+        f.frame({k}); // 4 uploads; least recent first: 0 1 2 3
+    f.frame({4});     // evicts 0
+    f.frame({0});     // re-fetch, evicts 1
+    f.frame({1, 2});  // 1 re-fetched (evicts 2), then 2 re-fetched (evicts 3)
+    f.frame({4});     // a hit
     const auto& s = f.pool.stats();
     EXPECT_EQ(s.uploads, 8u);
     EXPECT_EQ(s.hits, 1u);

@@ -33,8 +33,10 @@ template <class T> RandomBrick<T> randomBrick(int edge, std::mt19937& rng) {
     b.guard = std::size_t(2) * edge * edge;
     const std::size_t n = std::size_t(edge) * edge * edge;
     T sentinel;
-    if constexpr (std::is_floating_point_v<T>) sentinel = std::numeric_limits<T>::quiet_NaN();
-    else sentinel = std::numeric_limits<T>::max();
+    if constexpr (std::is_floating_point_v<T>)
+        sentinel = std::numeric_limits<T>::quiet_NaN();
+    else
+        sentinel = std::numeric_limits<T>::max();
     b.storage.assign(n + 2 * b.guard, sentinel);
     for (std::size_t i = 0; i < n; ++i) {
         T x;
@@ -47,7 +49,8 @@ template <class T> RandomBrick<T> randomBrick(int edge, std::mt19937& rng) {
         }
         b.storage[b.guard + i] = x;
     }
-    const auto [mn, mx] = std::minmax_element(b.storage.begin() + b.guard, b.storage.end() - b.guard);
+    const auto [mn, mx] =
+        std::minmax_element(b.storage.begin() + b.guard, b.storage.end() - b.guard);
     b.lo = double(*mn);
     b.hi = double(*mx);
     return b;
@@ -170,10 +173,18 @@ template <class T> void checkType(const char* name, std::uint32_t seed) {
     EXPECT_LE(worst, 1e-5);
 }
 
-TEST(CpuSampling, FusedGradientMatchesSixFetchesU8) { checkType<std::uint8_t>("u8", 1); }
-TEST(CpuSampling, FusedGradientMatchesSixFetchesU16) { checkType<std::uint16_t>("u16", 2); }
-TEST(CpuSampling, FusedGradientMatchesSixFetchesI16) { checkType<std::int16_t>("i16", 3); }
-TEST(CpuSampling, FusedGradientMatchesSixFetchesF32) { checkType<float>("f32", 4); }
+TEST(CpuSampling, FusedGradientMatchesSixFetchesU8) {
+    checkType<std::uint8_t>("u8", 1);
+}
+TEST(CpuSampling, FusedGradientMatchesSixFetchesU16) {
+    checkType<std::uint16_t>("u16", 2);
+}
+TEST(CpuSampling, FusedGradientMatchesSixFetchesI16) {
+    checkType<std::int16_t>("i16", 3);
+}
+TEST(CpuSampling, FusedGradientMatchesSixFetchesF32) {
+    checkType<float>("f32", 4);
+}
 
 // Where the fused path stops: 1 <= q < edge - 2 on every axis.
 TEST(CpuSampling, FusedRangeEndsWhereAFetchWouldClampOrReadOutside) {

@@ -29,7 +29,9 @@ class DaemonBadInput : public ::testing::Test {
         delete sDaemon;
         delete sDir;
     }
-    void SetUp() override { mWitness = std::make_unique<client::Client>(sDaemon->clientConfig(kToken)); }
+    void SetUp() override {
+        mWitness = std::make_unique<client::Client>(sDaemon->clientConfig(kToken));
+    }
     /// The witness, connected before the offender, still gets a frame.
     void TearDown() override {
         const auto v = mWitness->openVolume("phantom");
@@ -104,7 +106,8 @@ TEST_F(DaemonBadInput, PayloadSizeWrongForItsTypeIsBadPayload) {
         std::vector<std::uint8_t> b(options.begin(), options.end() + std::min(delta, 0));
         if (delta > 0) b.push_back(0);
         const std::uint32_t length = std::uint32_t(b.size() - protocol::kHeaderBytes);
-        for (int i = 0; i < 4; ++i) b[8 + i] = std::uint8_t(length >> (8 * i));
+        for (int i = 0; i < 4; ++i)
+            b[8 + i] = std::uint8_t(length >> (8 * i));
         c->send(b);
         expectError(*c, ErrorCode::BadPayload, false, "wrong payload size");
     }
@@ -137,7 +140,8 @@ TEST_F(DaemonBadInput, NanOrInfiniteCameraIsRefused) {
     auto c = ready();
     protocol::SetCamera cam;
     cam.eye = {100, 0, 0};
-    for (double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    for (double bad :
+         {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
         auto bytes = protocol::encode(cam, 6);
         std::memcpy(bytes.data() + protocol::kHeaderBytes + 4, &bad, 8); // eye[0]
         c->send(bytes);
@@ -151,7 +155,8 @@ TEST_F(DaemonBadInput, ViewportZeroOrHugeIsRefused) {
     for (std::uint16_t edge : {std::uint16_t(0), std::uint16_t(65535)}) {
         protocol::RenderOptions o = smallCpuFrames();
         auto bytes = protocol::encode(protocol::SetRenderOptions{o}, 8);
-        for (int i = 0; i < 4; ++i) bytes[protocol::kHeaderBytes + i] = std::uint8_t(edge >> (8 * (i % 2)));
+        for (int i = 0; i < 4; ++i)
+            bytes[protocol::kHeaderBytes + i] = std::uint8_t(edge >> (8 * (i % 2)));
         c->send(bytes);
         expectError(*c, ErrorCode::OutOfRange, false, "viewport");
     }
@@ -181,7 +186,8 @@ TEST_F(DaemonBadInput, NothingIsRevealedBeforeAuthAndAWrongTokenIsFatal) {
     none.send(protocol::ListVolumes{}, 2);
     auto m = none.next();
     ASSERT_TRUE(m);
-    ASSERT_TRUE(std::holds_alternative<protocol::Error>(*m)) << "a reply other than Error before Auth";
+    ASSERT_TRUE(std::holds_alternative<protocol::Error>(*m))
+        << "a reply other than Error before Auth";
     EXPECT_EQ(std::get<protocol::Error>(*m).code, ErrorCode::NotAuthenticated);
     EXPECT_TRUE(none.closedByPeer());
     for (std::string wrong : {"correct horse battery stapl", "correct horse battery staple!"}) {

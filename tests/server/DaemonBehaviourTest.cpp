@@ -1,14 +1,10 @@
 // What the daemon does beyond answering: camera updates coalesce, adaptive quality sends
 // interactive frames while the camera moves and one refined frame when it rests, sessions
-// share a volume's cache with fair budget shares, a trickling client is cut, and SIGTERM
-// drains a real brickcastd process with clients attached.
+// share a volume's cache with fair budget shares, and a trickling client is cut. (SIGTERM
+// draining a real brickcastd process: tests/tools/DaemonProcessTest.cpp.)
 #include "ServerTestSupport.h"
 
 #include "server/Catalog.h"
-
-#include <csignal>
-#include <fstream>
-#include <sys/wait.h>
 
 namespace bc::server::test {
 namespace {
@@ -37,13 +33,16 @@ TEST_F(DaemonBehaviour, CameraUpdatesCoalesceAndTheFrameAnswersTheLatest) {
     const auto v = c.openVolume("small");
     c.setRenderOptions(smallCpuFrames(200)); // slow enough that cameras pile up behind a frame
     c.requestFrame(protocol::FrameMode::ContinuousOn);
-    for (std::uint32_t i = 1; i <= 40; ++i) c.setCamera(orbitCamera(v, 3.0 * i, i));
+    for (std::uint32_t i = 1; i <= 40; ++i)
+        c.setCamera(orbitCamera(v, 3.0 * i, i));
     std::vector<std::uint32_t> answered;
-    while (answered.empty() || answered.back() != 40) answered.push_back(c.nextFrame().header.cameraId);
+    while (answered.empty() || answered.back() != 40)
+        answered.push_back(c.nextFrame().header.cameraId);
     c.requestFrame(protocol::FrameMode::ContinuousOff);
     std::printf("[coalesce] 40 cameras answered by %zu frames\n", answered.size());
     EXPECT_LT(answered.size(), 40u) << "every camera was drawn: nothing coalesced";
-    EXPECT_TRUE(std::is_sorted(answered.begin(), answered.end())) << "an older view after a newer one";
+    EXPECT_TRUE(std::is_sorted(answered.begin(), answered.end()))
+        << "an older view after a newer one";
 }
 
 TEST_F(DaemonBehaviour, MovingCameraGetsInteractiveFramesThenOneRefinedFrameAtRest) {
@@ -57,7 +56,8 @@ TEST_F(DaemonBehaviour, MovingCameraGetsInteractiveFramesThenOneRefinedFrameAtRe
     for (std::uint32_t i = 1; i <= 5; ++i) { // one camera a frame, faster than the rest interval
         c.setCamera(orbitCamera(v, 10.0 * i, i));
         auto f = c.nextFrame();
-        while (f.header.cameraId != i) f = c.nextFrame();
+        while (f.header.cameraId != i)
+            f = c.nextFrame();
         interactive += !f.header.refined;
     }
     const auto rest = c.nextFrame(); // nothing sent: the refined frame follows rest_ms later
@@ -83,7 +83,8 @@ TEST_F(DaemonBehaviour, SessionsOnOneVolumeShareItsCacheAndBudgetsFollowTheSessi
         return -1.0;
     };
     const auto s = b.stats();
-    EXPECT_GT(counter(s, "host_cache_hits_total{volume=\"small\"}"), 0) << "the second session loaded its own bricks";
+    EXPECT_GT(counter(s, "host_cache_hits_total{volume=\"small\"}"), 0)
+        << "the second session loaded its own bricks";
     // Budgets: a catalog of two volumes, three leases on one and one on the other.
     Log quiet(true);
     DaemonConfig config = generatedConfig(*sDir, {{"small", 32}, {"other", 24}});
@@ -112,55 +113,12 @@ TEST_F(DaemonBehaviour, AClientThatTricklesBytesIsTimedOut) {
         reply = c.next(100);
     }
     if (!reply) reply = c.next(10000);
-    ASSERT_TRUE(reply) << "a message trickled for " << (bytes.size() - 1) * 100 << " ms was not cut";
+    ASSERT_TRUE(reply) << "a message trickled for " << (bytes.size() - 1) * 100
+                       << " ms was not cut";
     auto* e = std::get_if<protocol::Error>(&*reply);
     ASSERT_TRUE(e);
     EXPECT_EQ(e->code, protocol::ErrorCode::Timeout);
     EXPECT_TRUE(c.closedByPeer());
-}
-
-TEST(DaemonProcess, SigtermDrainsAttachedClientsAndExitsCleanly) {
-    TempDir dir;
-    const std::string config = dir.file("brickcastd.toml"), port = dir.file("port");
-    std::ofstream(config) << "[server]\nlisten = \"127.0.0.1:0\"\nstore_dir = \"" << dir.path().string()
-                          << "\"\n[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [32, 32, 32]\n";
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-        ::execl(BC_BRICKCASTD_EXE, BC_BRICKCASTD_EXE, "--config", config.c_str(), "--port-file",
-                port.c_str(), "--quiet", nullptr);
-        std::_Exit(127);
-    }
-    for (int i = 0; i < 300 && !std::filesystem::exists(port); ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    ASSERT_TRUE(std::filesystem::exists(port)) << "brickcastd did not start";
-    client::ClientConfig cc;
-    std::ifstream(port) >> cc.port;
-    client::Client a(cc), b(cc);
-    const auto v = a.openVolume("p");
-    a.setRenderOptions(smallCpuFrames(32));
-    a.setCamera(orbitCamera(v, 0, 1));
-    a.requestFrame();
-    a.nextFrame();
-    ASSERT_EQ(::kill(pid, SIGTERM), 0);
-    for (auto* c : {&a, &b}) {
-        bool bye = false;
-        try {
-            for (;;) {
-                auto m = c->nextMessage();
-                if (auto* x = std::get_if<protocol::Bye>(&m)) {
-                    bye = x->reason == protocol::ByeReason::ShuttingDown;
-                    break;
-                }
-            }
-        } catch (const client::ClientError&) {
-        }
-        EXPECT_TRUE(bye) << "no Bye (shutting down) before the close";
-    }
-    int status = 0;
-    for (int i = 0; i < 100 && ::waitpid(pid, &status, WNOHANG) == 0; ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    ASSERT_TRUE(WIFEXITED(status)) << "brickcastd still running 5 s after SIGTERM";
-    EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 
 } // namespace

@@ -15,7 +15,8 @@ namespace {
 
 TEST(Metrics, HistogramCountsBucketsAndEstimatesQuantilesLikePrometheus) {
     Histogram h({1, 2, 5, 10});
-    for (double v : {0.5, 1.0, 1.5, 3.0, 4.0, 7.0, 20.0}) h.observe(v);
+    for (double v : {0.5, 1.0, 1.5, 3.0, 4.0, 7.0, 20.0})
+        h.observe(v);
     h.observe(std::nan(""));
     EXPECT_EQ(h.count(), 7u);
     EXPECT_DOUBLE_EQ(h.sum(), 37.0);

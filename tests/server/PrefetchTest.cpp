@@ -30,7 +30,8 @@ Flight fly(const std::string& storePath, bool prefetch) {
     e.name = "p";
     e.store = storePath;
     c.volumes.push_back(e);
-    c.gpuBudgetBytes = 8ull << 20; // ~1000 slots of 20^3 u16: more than a view, less than the volume
+    c.gpuBudgetBytes =
+        8ull << 20; // ~1000 slots of 20^3 u16: more than a view, less than the volume
     c.prefetch = prefetch;
     TestDaemon d(c);
     client::Client cl(d.clientConfig());
@@ -67,13 +68,15 @@ TEST(Prefetch, UploadsTheNextViewsBricksAheadAndChangesNoFrame) {
     // Frames 0 and 1 upload the same either way (a cold pool; no motion to extrapolate yet).
     auto bytesFrom = [](const Flight& f, std::size_t first) {
         std::uint64_t b = 0;
-        for (std::size_t i = first; i < f.frames.size(); ++i) b += f.frames[i].header.bytesUploaded;
+        for (std::size_t i = first; i < f.frames.size(); ++i)
+            b += f.frames[i].header.bytesUploaded;
         return double(b);
     };
     constexpr double kSlotBytes = 20.0 * 20 * 20 * 2; // 16^3 bricks, 2-voxel apron, u16
     EXPECT_EQ(bytesFrom(off, 0), off.frameUploads * kSlotBytes) << "the counter is the frames' sum";
     EXPECT_EQ(bytesFrom(on, 0), on.frameUploads * kSlotBytes);
-    EXPECT_LT(bytesFrom(on, 2), 0.5 * bytesFrom(off, 2)) << "prefetch did not get ahead of the frames";
+    EXPECT_LT(bytesFrom(on, 2), 0.5 * bytesFrom(off, 2))
+        << "prefetch did not get ahead of the frames";
     ASSERT_EQ(on.frames.size(), off.frames.size());
     for (std::size_t i = 0; i < on.frames.size(); ++i)
         std::printf("[prefetch] frame %zu: %u bricks, uploaded %llu B off, %llu B on\n", i,
@@ -83,7 +86,8 @@ TEST(Prefetch, UploadsTheNextViewsBricksAheadAndChangesNoFrame) {
     for (std::size_t i = 0; i < on.frames.size(); ++i) {
         int worst = 0;
         for (std::size_t k = 0; k < on.frames[i].rgba.size(); ++k)
-            worst = std::max(worst, std::abs(int(on.frames[i].rgba[k]) - int(off.frames[i].rgba[k])));
+            worst =
+                std::max(worst, std::abs(int(on.frames[i].rgba[k]) - int(off.frames[i].rgba[k])));
         EXPECT_LE(worst, 2) << "frame " << i; // the skipping invariant's bound (pool slots differ)
     }
 }

@@ -17,8 +17,8 @@
 #include <memory>
 #include <netinet/in.h>
 #include <optional>
-#include <sstream>
 #include <poll.h>
+#include <sstream>
 #include <sys/socket.h>
 #include <thread>
 #include <unistd.h>
@@ -71,11 +71,13 @@ inline DaemonConfig generatedConfig(const TempDir& dir,
 
 /// Header bytes of PROTOCOL.md, any field as given (bad input tests).
 inline std::vector<std::uint8_t> rawHeader(std::uint8_t type, std::uint32_t length,
-                                           std::uint32_t request = 1, std::uint32_t magic = 0x54534342,
+                                           std::uint32_t request = 1,
+                                           std::uint32_t magic = 0x54534342,
                                            std::uint8_t version = 1, std::uint16_t flags = 0) {
     std::vector<std::uint8_t> b;
     auto put = [&](std::uint64_t v, int bytes) {
-        for (int i = 0; i < bytes; ++i) b.push_back(std::uint8_t(v >> (8 * i)));
+        for (int i = 0; i < bytes; ++i)
+            b.push_back(std::uint8_t(v >> (8 * i)));
     };
     put(magic, 4);
     put(version, 1);

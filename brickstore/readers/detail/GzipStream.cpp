@@ -1,8 +1,8 @@
 // The gzip stream of detail/GzipStream.h: gzip members (or one zlib stream) inflated on the
 // fly over any ByteStream, with zlib's error codes translated in one place (zlibCheck).
+#include "brickstore/readers/detail/GzipStream.h"
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
-#include "brickstore/readers/detail/GzipStream.h"
 #include "brickstore/readers/detail/RawStream.h"
 
 #include <algorithm>

@@ -1,9 +1,9 @@
 // The byte streams of detail/RawStream.h: a plain file, a zstd stream, and the slice source
 // over raw voxels. Everything reads forwards in bounded chunks: a 100 GB input costs one
 // zstd input buffer and the caller's slice buffer, never the volume.
+#include "brickstore/readers/detail/RawStream.h"
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
-#include "brickstore/readers/detail/RawStream.h"
 
 #include <algorithm>
 #include <array>

@@ -1,0 +1,125 @@
+// `brickcast render`: end to end through the command line, bad input named, no usable EGL a
+// clear error (never a crash).
+#include "render/Image.h"
+#include "tests/render/RenderTestSupport.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <fstream>
+#include <sys/wait.h>
+
+namespace bc::render {
+namespace {
+
+struct Output {
+    int exitCode = -1;
+    std::string text; ///< stdout and stderr together
+};
+
+Output brickcast(const std::string& args, const std::string& env = "") {
+    const std::string cmd = env + " " + std::string(BC_BRICKCAST_EXE) + " " + args + " 2>&1";
+    Output out;
+    FILE* p = ::popen(cmd.c_str(), "r");
+    if (!p) return out;
+    std::array<char, 4096> buf{};
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;)
+        out.text.append(buf.data(), n);
+    const int status = ::pclose(p);
+    out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return out;
+}
+
+bool contains(const std::string& text, const std::string& part) {
+    return text.find(part) != std::string::npos;
+}
+
+class RenderCli : public ::testing::Test {
+  protected:
+    void SetUp() override {
+        store = dir.file("phantom.bcs");
+        auto r = brickcast("ingest synth:phantom --dims 64,64,48 --brick 16 -o " + store);
+        ASSERT_EQ(r.exitCode, 0) << r.text;
+    }
+    test::TempDir dir;
+    std::string store;
+};
+
+TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
+    const std::string gpu = dir.file("gpu.png"), ref = dir.file("ref.png"),
+                      stats = dir.file("s.json");
+    auto a = brickcast("render " + store + " -o " + gpu +
+                       " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --stats " + stats);
+    ASSERT_EQ(a.exitCode, 0) << a.text;
+    auto b = brickcast("render " + store + " -o " + ref +
+                       " --size 96,64 --tf ct-bone --orbit 40,25 --reference");
+    ASSERT_EQ(b.exitCode, 0) << b.text;
+    const Image ga = readPng(gpu), rb = readPng(ref);
+    EXPECT_EQ(ga.width, 96u);
+    EXPECT_EQ(ga.height, 64u);
+    EXPECT_LE(compareImages(ga, rb).maxAbs, 1.0 / 255.0 + 1e-6);
+    std::ifstream f(stats);
+    const auto j = nlohmann::json::parse(f);
+    EXPECT_GT(j.at("samples").get<double>(), 0.0);
+    EXPECT_EQ(j.at("level").get<int>(), 0);
+    EXPECT_EQ(j.at("batches").get<int>(), 1);
+    auto c = brickcast("compare " + gpu + " " + ref);
+    EXPECT_EQ(c.exitCode, 0) << c.text;
+}
+
+// --repeat: one renderer draws the view again and again; the last (warm) image is the first's.
+TEST_F(RenderCli, RepeatDrawsWarmFramesOfTheSameImage) {
+    for (const std::string renderer : {"cpu", "gpu"}) {
+        const std::string one = dir.file(renderer + "1.png"), three = dir.file(renderer + "3.png"),
+                          stats = dir.file(renderer + ".json");
+        const std::string args = " --size 64,48 --tf ct-bone --orbit 40,25 --renderer " + renderer;
+        auto a = brickcast("render " + store + " -o " + one + args);
+        ASSERT_EQ(a.exitCode, 0) << a.text;
+        auto b =
+            brickcast("render " + store + " -o " + three + args + " --repeat 3 --stats " + stats);
+        ASSERT_EQ(b.exitCode, 0) << b.text;
+        EXPECT_TRUE(contains(b.text, "3 frames: first")) << b.text;
+        EXPECT_LE(compareImages(readPng(one), readPng(three)).maxAbs, 1.0 / 255.0) << renderer;
+        std::ifstream f(stats);
+        const auto j = nlohmann::json::parse(f);
+        EXPECT_EQ(j.at("frameMs").size(), 3u);
+        EXPECT_EQ(j.at("bricksUploaded").get<int>(), 0) << renderer << ": the last frame is warm";
+    }
+    auto bad = brickcast("render " + store + " -o " + dir.file("x.png") + " --repeat 0");
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_TRUE(contains(bad.text, "--repeat")) << bad.text;
+}
+
+TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
+    const std::string out = dir.file("x.png");
+    auto size = brickcast("render " + store + " -o " + out + " --size 0,64");
+    EXPECT_NE(size.exitCode, 0);
+    EXPECT_TRUE(contains(size.text, "--size")) << size.text;
+    auto eye = brickcast("render " + store + " -o " + out + " --eye 1,2,nan --target 0,0,0");
+    EXPECT_NE(eye.exitCode, 0);
+    EXPECT_TRUE(contains(eye.text, "--eye")) << eye.text;
+    const std::string tf = dir.file("bad.json");
+    test::writeFile(tf, std::string(R"({"points":[{"value":1,"rgba":[1,1,1,2]}]})"));
+    auto bad = brickcast("render " + store + " -o " + out + " --tf " + tf);
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_TRUE(contains(bad.text, "bad.json") && contains(bad.text, "points[0].rgba[3]"))
+        << bad.text;
+    auto preset = brickcast("render " + store + " -o " + out + " --tf no-such-preset");
+    EXPECT_NE(preset.exitCode, 0);
+    EXPECT_TRUE(contains(preset.text, "ct-bone")) << "lists the presets: " << preset.text;
+    auto skip = brickcast("render " + store + " -o " + out + " --skip sometimes");
+    EXPECT_NE(skip.exitCode, 0);
+    EXPECT_TRUE(contains(skip.text, "sometimes")) << skip.text;
+    EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// GLVND with no vendor library: EGL offers no display at all.
+TEST_F(RenderCli, NoUsableEglIsAClearErrorNotACrash) {
+    auto r = brickcast("render " + store + " -o " + dir.file("x.png"),
+                       "__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent.json EGL_PLATFORM=surfaceless");
+    EXPECT_EQ(r.exitCode, 1) << r.text;
+    EXPECT_TRUE(contains(r.text, "no usable EGL")) << r.text;
+}
+
+} // namespace
+} // namespace bc::render

@@ -1,0 +1,310 @@
+// brickcast render STORE -o OUT.png: one frame on the GPU raycaster (or the CPU reference).
+#include "brickstore/BrickCache.h"
+#include "brickstore/BrickStore.h"
+#include "render/BrickPlan.h"
+#include "render/Camera.h"
+#include "render/CpuRaycaster.h"
+#include "render/EglContext.h"
+#include "render/GpuSplatter.h"
+#include "render/HybridSplatter.h"
+#include "render/Image.h"
+#include "render/Raycaster.h"
+#include "render/ReferenceRenderer.h"
+#include "render/TransferFunction.h"
+#include "tools/Parse.h"
+#include "tools/TransferFunctionFile.h"
+#include "tools/brickcast/Commands.h"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <memory>
+#include <thread>
+#include <vector>
+
+namespace bc::cli {
+namespace {
+
+struct RenderCliOptions {
+    std::string store, output, size = "256,256", tf = "ct-skin", orbit, eye, target, up,
+                               ert = "0.99", skip = "all", statsPath, renderer = "gpu";
+    double fov = 30.0, step = 1.0, octreeRatio = 1.0;
+    std::uint32_t octreeLevelLimit = 32;
+    bool ortho = false, noShading = false, reference = false, interactive = false;
+    std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
+    std::int32_t level = 0;
+    std::uint32_t repeat = 1;
+};
+
+glm::dvec3 vec3Of(const std::string& text, const std::string& what) {
+    const auto v = tools::parseNumbers(text, what, 3, 3);
+    return {v[0], v[1], v[2]};
+}
+
+render::Camera cameraOf(const RenderCliOptions& o, const render::Box& box) {
+    render::Camera c;
+    if (!o.eye.empty() || !o.target.empty()) {
+        if (o.eye.empty() || o.target.empty())
+            throw std::invalid_argument("--eye and --target go together");
+        c.eye = vec3Of(o.eye, "--eye");
+        c.target = vec3Of(o.target, "--target");
+        c.up = o.up.empty() ? glm::dvec3(0, 0, 1) : vec3Of(o.up, "--up");
+        c.fovYDeg = o.fov;
+        c.orthoHeight = 2.0 * box.radius();
+    } else {
+        const auto v = tools::parseNumbers(o.orbit.empty() ? "30,20" : o.orbit, "--orbit", 2, 3);
+        c = render::Camera::orbit(box, v[0], v[1], v.size() > 2 ? v[2] : 1.0, o.fov);
+        if (!o.up.empty()) c.up = vec3Of(o.up, "--up"); // e.g. 0,0,-1 for scans stored head-down
+    }
+    c.orthographic = o.ortho;
+    c.validate();
+    return c;
+}
+
+render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
+    render::RenderOptions r;
+    const auto wh = tools::parseNumbers(o.size, "--size", 2, 2);
+    if (wh[0] < 1 || wh[1] < 1 || wh[0] > 16384 || wh[1] > 16384 || wh[0] != std::floor(wh[0]) ||
+        wh[1] != std::floor(wh[1]))
+        throw std::invalid_argument("--size: '" + o.size + "' must be two integers in 1..16384");
+    r.width = std::uint32_t(wh[0]);
+    r.height = std::uint32_t(wh[1]);
+    r.stepVoxels = o.step;
+    r.earlyTermination = o.ert != "off";
+    if (r.earlyTermination) r.ertThreshold = tools::parseNumbers(o.ert, "--ert", 1, 1)[0];
+    r.skip = render::parseSkipMode(o.skip);
+    r.shading = !o.noShading;
+    r.level = o.level;
+    r.interactive = o.interactive;
+    r.octree.ratioThreshold = o.octreeRatio;
+    r.octree.levelLimit = o.octreeLevelLimit;
+    r.validate();
+    return r;
+}
+
+nlohmann::json statsJson(const render::FrameStats& s, const std::string& renderer,
+                         const render::RenderOptions& o) {
+    const double pixels = double(o.width) * o.height;
+    return {{"renderer", renderer},
+            {"width", o.width},
+            {"height", o.height},
+            {"level", s.level},
+            {"samples", s.samples},
+            {"samplesPerPixel", double(s.samples) / pixels},
+            {"bricksTotal", s.bricksTotal},
+            {"bricksCulled", s.bricksCulled},
+            {"bricksSkipped", s.bricksSkipped},
+            {"bricksVisited", s.bricksVisited},
+            {"bricksConstant", s.bricksConstant},
+            {"bricksUploaded", s.bricksUploaded},
+            {"bytesUploaded", s.bytesUploaded},
+            {"batches", s.batches},
+            {"bricksEntered", s.bricksEntered},
+            {"bricksDeferred", s.bricksDeferred},
+            {"bricksRequested", s.bricksRequested},
+            {"resumePasses", s.resumePasses},
+            {"guidedFallback", s.guidedFallback},
+            {"octreeLeaps", s.octreeLeaps},
+            {"octreeBricksRebuilt", s.octreeBricksRebuilt},
+            {"octreeRebuildMs", s.octreeRebuildMs},
+            {"occlusionUsed", s.occlusionUsed},
+            {"occlusionReason", s.occlusionReason},
+            {"occlusionFrustums", s.occlusionFrustums},
+            {"occlusionTriangles", s.occlusionTriangles},
+            {"occlusionBuildMs", s.occlusionBuildMs},
+            {"samplesSavedByStart", s.samplesSavedByStart},
+            {"uploadMs", s.uploadMs},
+            {"renderMs", s.renderMs},
+            {"readbackMs", s.readbackMs},
+            {"totalMs", s.totalMs}};
+}
+
+void runRender(const RenderCliOptions& o) {
+    auto store = brickstore::BrickStore::open(o.store);
+    const render::RenderOptions options = renderOptionsOf(o);
+    const auto tf =
+        tools::loadTransferFunction(o.tf, render::VolumeValueStats::fromStore(store->info()));
+    const render::Camera camera = cameraOf(o, render::LevelGeometry::of(*store, 0).box);
+    render::FrameStats stats;
+    render::Image image;
+    std::string renderer;
+    if (o.renderer != "gpu" && o.renderer != "cpu" && o.renderer != "splat" &&
+        o.renderer != "splat-gpu")
+        throw std::invalid_argument("--renderer: '" + o.renderer +
+                                    "' is not gpu, cpu, splat or splat-gpu");
+    // One renderer draws the view --repeat times: the later frames are warm (host cache, GPU
+    // pool, octrees and, for the GPU raycaster, occlusion frustums of the same view).
+    std::unique_ptr<render::EglContext> context;
+    std::unique_ptr<brickstore::BrickCache> cache;
+    std::function<render::Image(render::FrameStats&)> draw;
+    std::function<std::string()> describe;
+    if (o.reference) {
+        const auto level = std::min<std::uint32_t>(
+            std::uint32_t(o.level), std::uint32_t(store->layout().levels().size() - 1));
+        auto volume = std::make_shared<render::ReferenceVolume>(*store, level);
+        draw = [&, volume](render::FrameStats& s) {
+            return render::renderReference(*store, *volume, tf, camera, options, s);
+        };
+        describe = [] { return std::string("CPU reference (double)"); };
+    } else {
+        if (o.renderer == "gpu" || o.renderer == "splat-gpu")
+            context = std::make_unique<render::EglContext>();
+        cache = std::make_unique<brickstore::BrickCache>(
+            *store, brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
+        if (o.renderer == "splat") {
+            auto splatter = std::make_shared<render::HybridSplatter>();
+            draw = [&, splatter](render::FrameStats& s) {
+                return splatter->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [splatter] {
+                const auto& f = splatter->lastFrame();
+                return "hybrid splatter (CPU, " + std::to_string(f.points) + " points, " +
+                       std::to_string(f.splats) + " splats, " + std::to_string(f.culled) +
+                       " culled)";
+            };
+        } else if (o.renderer == "splat-gpu") {
+            auto splatter = std::make_shared<render::GpuSplatter>();
+            draw = [&, splatter](render::FrameStats& s) {
+                return splatter->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [&, splatter] {
+                const auto& f = splatter->lastFrame();
+                return "hybrid splatter (" + context->renderer() + ", " + std::to_string(f.points) +
+                       " points, " + std::to_string(f.splats) + " splats)";
+            };
+        } else if (o.renderer == "cpu") {
+            auto raycaster = std::make_shared<render::CpuRaycaster>();
+            draw = [&, raycaster](render::FrameStats& s) {
+                return raycaster->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [] {
+                return "CPU raycaster (float, " +
+                       std::to_string(std::thread::hardware_concurrency()) + " threads)";
+            };
+        } else {
+            auto raycaster =
+                std::make_shared<render::Raycaster>(render::RaycasterConfig{o.gpuBudgetMb << 20});
+            draw = [&, raycaster](render::FrameStats& s) {
+                return raycaster->render(*store, *cache, tf, camera, options, s);
+            };
+            describe = [&] { return context->renderer() + " via EGL " + context->platform(); };
+        }
+    }
+    std::vector<double> frameMs;
+    for (std::uint32_t i = 0; i < o.repeat; ++i) {
+        image = draw(stats);
+        frameMs.push_back(stats.totalMs);
+    }
+    renderer = describe();
+    render::writePng(o.output, image);
+    std::printf(
+        "%s: %ux%u, level %u, %.1f ms (upload %.1f, render %.1f, readback %.1f), %.1f "
+        "samples/pixel, "
+        "bricks %llu visited / %llu skipped / %llu culled, %llu uploaded (%s), %u batch(es) [%s]\n",
+        o.output.c_str(), options.width, options.height, stats.level, stats.totalMs, stats.uploadMs,
+        stats.renderMs, stats.readbackMs,
+        double(stats.samples) / (double(options.width) * options.height),
+        (unsigned long long)stats.bricksVisited, (unsigned long long)stats.bricksSkipped,
+        (unsigned long long)stats.bricksCulled, (unsigned long long)stats.bricksUploaded,
+        tools::formatBytes(double(stats.bytesUploaded)).c_str(), stats.batches, renderer.c_str());
+    if (o.repeat > 1) {
+        std::vector<double> warm(frameMs.begin() + 1, frameMs.end());
+        std::sort(warm.begin(), warm.end());
+        std::printf("%u frames: first %.1f ms, warm median %.1f ms (min %.1f, max %.1f)\n",
+                    o.repeat, frameMs.front(), warm[warm.size() / 2], warm.front(), warm.back());
+    }
+    if (!o.statsPath.empty()) {
+        auto j = statsJson(stats, renderer, options);
+        j["frameMs"] = frameMs; // every frame's totalMs; the other fields are the last frame's
+        std::ofstream f(o.statsPath);
+        f << j.dump(2) << "\n";
+        if (!f) throw std::runtime_error(o.statsPath + ": cannot write the stats");
+    }
+}
+
+} // namespace
+
+void renderStoreToPng(const std::string& storePath, const std::string& output,
+                      const std::string& tfName, const std::string& orbit, const std::string& size,
+                      bool reference) {
+    RenderCliOptions o;
+    o.store = storePath;
+    o.output = output;
+    o.tf = tfName;
+    o.orbit = orbit;
+    o.size = size;
+    o.reference = reference;
+    runRender(o);
+}
+
+void addRenderCommand(CLI::App& app) {
+    auto o = std::make_shared<RenderCliOptions>();
+    auto* cmd = app.add_subcommand(
+        "render",
+        "Render one frame of a store to PNG (GPU or CPU raycaster, or the CPU reference)");
+    cmd->add_option("STORE", o->store, "Store file")->required();
+    cmd->add_option("-o,--output", o->output, "PNG to write")->required();
+    cmd->add_option("--size", o->size, "Image W,H")->capture_default_str();
+    cmd->add_option(
+           "--tf", o->tf,
+           "Transfer function: a JSON file or a preset (" +
+               [] {
+                   std::string s;
+                   for (const auto& n : render::TransferFunction::presetNames())
+                       s += (s.empty() ? "" : ", ") + n;
+                   return s;
+               }() +
+               ")")
+        ->capture_default_str();
+    auto* orbit =
+        cmd->add_option("--orbit", o->orbit, "AZ,EL[,DIST] around the volume (default 30,20,1)");
+    auto* eye = cmd->add_option("--eye", o->eye, "Camera position X,Y,Z (mm)")->excludes(orbit);
+    cmd->add_option("--target", o->target, "Point looked at X,Y,Z (mm)")
+        ->excludes(orbit)
+        ->needs(eye);
+    cmd->add_option("--up", o->up, "Up vector X,Y,Z (default +z)");
+    auto* fov = cmd->add_option("--fov", o->fov, "Vertical field of view in degrees")
+                    ->capture_default_str();
+    cmd->add_flag("--ortho", o->ortho, "Orthographic projection")->excludes(fov);
+    cmd->add_option("--step", o->step, "Sample distance in voxels of the smallest spacing")
+        ->capture_default_str();
+    cmd->add_option("--ert", o->ert, "Early ray termination threshold, or 'off'")
+        ->capture_default_str();
+    cmd->add_option("--skip", o->skip,
+                    "Empty-space skipping: none, bricks (first stage), all (+ per-brick octrees)")
+        ->capture_default_str();
+    cmd->add_option("--octree-ratio", o->octreeRatio,
+                    "Draw an octree node whole once this share of its leaves is non-empty")
+        ->capture_default_str();
+    cmd->add_option("--octree-level-limit", o->octreeLevelLimit,
+                    "Deepest octree level descended (0 = the brick)")
+        ->capture_default_str();
+    cmd->add_flag("--no-shading", o->noShading, "No gradient shading");
+    cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")
+        ->capture_default_str();
+    cmd->add_option("--host-budget-mb", o->hostBudgetMb, "Host brick cache budget")
+        ->capture_default_str();
+    cmd->add_option("--level", o->level, "Pyramid level (0 = full resolution)")
+        ->capture_default_str();
+    cmd->add_flag("--interactive", o->interactive,
+                  "Draw a coarser level when the view exceeds the GPU budget");
+    cmd->add_option("--renderer", o->renderer,
+                    "gpu (EGL raycaster), cpu (the CPU raycaster, fastest without a GPU), splat "
+                    "(hybrid forward splatting, CPU) or splat-gpu (the same, drawn by OpenGL)")
+        ->capture_default_str();
+    cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
+    cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");
+    cmd->add_option("--repeat", o->repeat,
+                    "Draw the view this many times with one renderer (later frames warm); the "
+                    "image and stats are the last frame's, frameMs lists every frame's time")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 10000));
+    cmd->callback([o] { runRender(*o); });
+}
+
+} // namespace bc::cli
