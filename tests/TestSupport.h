@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -10,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include <sys/wait.h>
 #include <unistd.h>
 
 namespace bc::test {
@@ -74,6 +76,26 @@ inline void writeFile(const std::string& path, const std::string& text) {
 inline std::vector<std::uint8_t> readFile(const std::string& path) {
     std::ifstream f(path, std::ios::binary);
     return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(f), {});
+}
+
+/// What a command printed (stdout and stderr together) and its exit status (-1 when it did
+/// not exit normally).
+struct CommandOutput {
+    int exitCode = -1;
+    std::string text;
+};
+
+/// Runs `commandLine` through the shell with stderr joined to stdout.
+inline CommandOutput runCommand(const std::string& commandLine) {
+    CommandOutput out;
+    FILE* p = ::popen((commandLine + " 2>&1").c_str(), "r");
+    if (!p) return out;
+    char buf[4096];
+    for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, p)) > 0;)
+        out.text.append(buf, n);
+    const int status = ::pclose(p);
+    out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return out;
 }
 
 } // namespace bc::test

@@ -10,22 +10,10 @@
 namespace bc::bench {
 namespace {
 
-struct Output {
-    int exitCode = -1;
-    std::string text; ///< stdout and stderr together
-};
+using Output = bc::test::CommandOutput;
 
 Output run(const std::string& exe, const std::string& args) {
-    const std::string cmd = exe + " " + args + " 2>&1";
-    Output out;
-    FILE* p = ::popen(cmd.c_str(), "r");
-    if (!p) return out;
-    std::array<char, 4096> buf{};
-    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;)
-        out.text.append(buf.data(), n);
-    const int status = ::pclose(p);
-    out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return out;
+    return bc::test::runCommand(exe + " " + args);
 }
 Output benchRender(const std::string& args) {
     return run(BC_BENCH_RENDER_EXE, args);

@@ -116,7 +116,9 @@ TEST(TransferFunctionTest, PresetsAreLookedUpByNameOnlyAndUnknownNamesAreNotEcho
             EXPECT_EQ(e.field(), "name");
             const std::string what = e.what();
             EXPECT_NE(what.find("ct-bone, ct-skin, mr, smoke, vessels"), std::string::npos) << what;
-            if (!bad.empty()) EXPECT_EQ(what.find(bad), std::string::npos) << what;
+            if (!bad.empty()) {
+                EXPECT_EQ(what.find(bad), std::string::npos) << what;
+            }
         }
     }
 }

@@ -10,13 +10,8 @@ namespace {
 
 /// Runs a command; its exit status and everything it printed.
 std::pair<int, std::string> run(const std::string& command) {
-    std::string out;
-    FILE* p = ::popen((command + " 2>&1").c_str(), "r");
-    char buf[4096];
-    while (std::size_t n = std::fread(buf, 1, sizeof buf, p))
-        out.append(buf, n);
-    const int status = ::pclose(p);
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+    auto out = bc::test::runCommand(command);
+    return {out.exitCode, std::move(out.text)};
 }
 
 TEST(ClientCli, ListsFliesACameraFileSavesPngsAndPrintsLatency) {

@@ -12,22 +12,10 @@
 namespace bc::render {
 namespace {
 
-struct Output {
-    int exitCode = -1;
-    std::string text; ///< stdout and stderr together
-};
+using Output = bc::test::CommandOutput;
 
 Output brickcast(const std::string& args, const std::string& env = "") {
-    const std::string cmd = env + " " + std::string(BC_BRICKCAST_EXE) + " " + args + " 2>&1";
-    Output out;
-    FILE* p = ::popen(cmd.c_str(), "r");
-    if (!p) return out;
-    std::array<char, 4096> buf{};
-    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;)
-        out.text.append(buf.data(), n);
-    const int status = ::pclose(p);
-    out.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return out;
+    return bc::test::runCommand(env + " " + std::string(BC_BRICKCAST_EXE) + " " + args);
 }
 
 bool contains(const std::string& text, const std::string& part) {
