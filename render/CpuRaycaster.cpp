@@ -236,26 +236,28 @@ template <class T> Rgba marchRay(const Frame& f, float sx, float sy, RayCount& n
     return acc;
 }
 
-template <class T> void renderTiles(const Frame& f, Image& image, RayCount& total) {
+template <class T>
+void renderTiles(const Frame& f, const PixelRect& region, Image& image, RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0};
-    const auto w = image.width, h = image.height;
-    tbb::parallel_for(tbb::blocked_range2d<std::uint32_t>(0, h, 8, 0, w, 8),
-                      [&](const tbb::blocked_range2d<std::uint32_t>& r) {
-                          RayCount n;
-                          for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
-                              for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
-                                  const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
-                                  const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
-                                  const Rgba c = marchRay<T>(f, sx, sy, n);
-                                  float* px = image.pixel(x, y);
-                                  px[0] = std::clamp(c.r, 0.0f, 1.0f);
-                                  px[1] = std::clamp(c.g, 0.0f, 1.0f);
-                                  px[2] = std::clamp(c.b, 0.0f, 1.0f);
-                                  px[3] = std::clamp(c.a, 0.0f, 1.0f);
-                              }
-                          samples += n.samples;
-                          leaps += n.leaps;
-                      });
+    const auto x0 = region.x, y0 = region.y;
+    tbb::parallel_for(
+        tbb::blocked_range2d<std::uint32_t>(y0, y0 + region.height, 8, x0, x0 + region.width, 8),
+        [&](const tbb::blocked_range2d<std::uint32_t>& r) {
+            RayCount n;
+            for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
+                for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
+                    const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
+                    const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
+                    const Rgba c = marchRay<T>(f, sx, sy, n);
+                    float* px = image.pixel(x - x0, y - y0);
+                    px[0] = std::clamp(c.r, 0.0f, 1.0f);
+                    px[1] = std::clamp(c.g, 0.0f, 1.0f);
+                    px[2] = std::clamp(c.b, 0.0f, 1.0f);
+                    px[3] = std::clamp(c.a, 0.0f, 1.0f);
+                }
+            samples += n.samples;
+            leaps += n.leaps;
+        });
     total.samples = samples;
     total.leaps = leaps;
 }
@@ -297,7 +299,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
                            FrameStats& stats) {
     const auto frameStart = Clock::now();
     options.validate();
-    checkView(view, options);
+    checkView(view, options, true);
     stats = FrameStats{};
     const brickstore::BrickStore& store = scene.store;
     brickstore::BrickCache& cache = scene.cache;
@@ -344,20 +346,21 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         f.leafAxis = int(occupancy->leavesPerAxis());
         f.leaf = float(occupancy->leafVoxels());
     }
-    Image image(options.width, options.height);
+    const PixelRect region = options.drawn();
+    Image image(region.width, region.height);
     RayCount count;
     switch (store.info().volume.type) {
     case brickstore::VoxelType::U8:
-        renderTiles<std::uint8_t>(f, image, count);
+        renderTiles<std::uint8_t>(f, region, image, count);
         break;
     case brickstore::VoxelType::U16:
-        renderTiles<std::uint16_t>(f, image, count);
+        renderTiles<std::uint16_t>(f, region, image, count);
         break;
     case brickstore::VoxelType::I16:
-        renderTiles<std::int16_t>(f, image, count);
+        renderTiles<std::int16_t>(f, region, image, count);
         break;
     case brickstore::VoxelType::F32:
-        renderTiles<float>(f, image, count);
+        renderTiles<float>(f, region, image, count);
         break;
     }
     stats.renderMs = msSince(renderStart);

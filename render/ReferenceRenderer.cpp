@@ -144,19 +144,29 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
     const RayContext context{volume, table, geometry, options,
                              0.5 / span * geometry.minSpacing() / geometry.spacing};
 
-    Image image(options.width, options.height);
-    std::atomic<std::uint32_t> nextRow{0};
+    // Runs of pixels of the region in row order, shared out one at a time: a region of a few
+    // pixels (a slice of a frame at a tiny step) still keeps every core busy.
+    const PixelRect region = options.drawn();
+    Image image(region.width, region.height);
+    constexpr std::uint32_t kRunPixels = 16;
+    const std::uint32_t runsPerRow = (region.width + kRunPixels - 1) / kRunPixels;
+    const std::uint64_t runs = std::uint64_t(runsPerRow) * region.height;
+    std::atomic<std::uint64_t> nextRun{0};
     std::atomic<std::uint64_t> samples{0}, oracle{0};
     auto worker = [&] {
         std::uint64_t mine = 0, mineOracle = 0;
-        for (std::uint32_t y; (y = nextRow++) < options.height;)
-            for (std::uint32_t x = 0; x < options.width; ++x) {
+        for (std::uint64_t run; (run = nextRun++) < runs;) {
+            const std::uint32_t y = region.y + std::uint32_t(run / runsPerRow);
+            const std::uint32_t x0 = region.x + std::uint32_t(run % runsPerRow) * kRunPixels;
+            const std::uint32_t x1 = std::min(x0 + kRunPixels, region.x + region.width);
+            for (std::uint32_t x = x0; x < x1; ++x) {
                 const auto acc = marchRay(context, view.ray(x, y, options.width, options.height),
                                           mine, mineOracle);
-                float* px = image.pixel(x, y);
+                float* px = image.pixel(x - region.x, y - region.y);
                 for (int i = 0; i < 4; ++i)
                     px[i] = float(std::clamp(acc[i], 0.0, 1.0));
             }
+        }
         samples += mine;
         oracle += mineOracle;
     };
@@ -184,7 +194,7 @@ ReferenceRenderer::~ReferenceRenderer() = default;
 Image ReferenceRenderer::render(const Scene& scene, const View& view, const RenderOptions& options,
                                 FrameStats& stats) {
     options.validate();
-    checkView(view, options);
+    checkView(view, options, true);
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     const auto& dims = scene.store.layout().levels()[level].dims;

@@ -35,6 +35,12 @@ void RenderOptions::validate() const {
     if (!(ertThreshold > 0.0 && ertThreshold <= 1.0))
         throw std::invalid_argument("ert: threshold must lie in (0, 1]");
     if (level < 0) throw std::invalid_argument("level: must not be negative");
+    if (!region.whole() && (region.height == 0 || region.x >= width || region.y >= height ||
+                            region.width > width - region.x || region.height > height - region.y))
+        throw std::invalid_argument(
+            "region: " + std::to_string(region.width) + "x" + std::to_string(region.height) +
+            " at " + std::to_string(region.x) + "," + std::to_string(region.y) + " is not inside " +
+            std::to_string(width) + "x" + std::to_string(height));
     octree.validate();
     occlusion.validate();
 }

@@ -31,9 +31,21 @@ struct OcclusionConfig {
     void validate() const;
 };
 
+/// A rectangle of an image's pixels (row 0 at the top); width 0 means the whole image.
+struct PixelRect {
+    std::uint32_t x = 0, y = 0, width = 0, height = 0;
+    bool whole() const { return width == 0; }
+    std::uint64_t pixels() const { return std::uint64_t(width) * height; }
+    bool operator==(const PixelRect&) const = default;
+};
+
 struct RenderOptions {
     std::uint32_t width = 256;
     std::uint32_t height = 256;
+    /// Only these pixels are drawn, each exactly as in the whole frame, and the image returned
+    /// is the region's size. Renderers whose kind says `regions` honour it; the others refuse
+    /// a region that is not the whole image. How the daemon draws a long frame in slices.
+    PixelRect region;
     double stepVoxels = 1.0; ///< sample distance in units of the smallest spacing
     bool earlyTermination = true;
     double ertThreshold = 0.99; ///< stop a ray once its opacity reaches this
@@ -57,6 +69,8 @@ struct RenderOptions {
 
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;
+    /// The pixels to draw: `region`, or the whole image when it is empty.
+    PixelRect drawn() const { return region.whole() ? PixelRect{0, 0, width, height} : region; }
 };
 
 /// Shading constants (headlight Blinn-Phong; the light sits at the eye).

@@ -31,12 +31,14 @@ FrameClassification classifyFrame(const Scene& scene, std::uint32_t level,
     return f;
 }
 
-void Renderer::checkView(const View& view, const RenderOptions& options) {
+void Renderer::checkView(const View& view, const RenderOptions& options, bool drawsRegions) {
     if (view.width != options.width || view.height != options.height)
         throw std::invalid_argument("the view is " + std::to_string(view.width) + "x" +
                                     std::to_string(view.height) + ", the options ask for " +
                                     std::to_string(options.width) + "x" +
                                     std::to_string(options.height));
+    if (!drawsRegions && !options.region.whole())
+        throw std::invalid_argument("region: this renderer draws whole images only");
 }
 
 } // namespace bc::render

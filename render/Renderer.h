@@ -85,9 +85,10 @@ class Renderer {
     /// Its GPU residency, for renderers that keep bricks on the GPU; nullptr otherwise.
     virtual GpuResidency* gpuResidency() { return nullptr; }
 
-  protected:
-    /// @throw std::invalid_argument when `view` is not the options' size.
-    static void checkView(const View& view, const RenderOptions& options);
+    /// @throw std::invalid_argument when `view` is not the options' size, or when the options
+    /// ask for a region of the image from a renderer that draws whole images only.
+    static void checkView(const View& view, const RenderOptions& options,
+                          bool drawsRegions = false);
 
   private:
     std::unique_ptr<ClassificationCache> mOwnClassifications;

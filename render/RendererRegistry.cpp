@@ -13,16 +13,27 @@ namespace bc::render {
 const RendererRegistry& RendererRegistry::builtin() {
     static const RendererRegistry registry = [] {
         RendererRegistry r;
-        r.add({"gpu", "GPU raycaster (OpenGL 4.5)", true, false,
-               [] { return std::make_unique<Raycaster>(); }});
-        r.add({"cpu", "CPU raycaster", false, false,
-               [] { return std::make_unique<CpuRaycaster>(); }});
-        r.add({"reference", "CPU reference raycaster (double precision, no skipping)", false, true,
-               [] { return std::make_unique<ReferenceRenderer>(); }});
-        r.add({"splat", "hybrid forward splatter (CPU)", false, false,
-               [] { return std::make_unique<HybridSplatter>(); }});
-        r.add({"splat-gpu", "hybrid forward splatter (OpenGL 4.5)", true, false,
-               [] { return std::make_unique<GpuSplatter>(); }});
+        r.add({.name = "gpu",
+               .description = "GPU raycaster (OpenGL 4.5)",
+               .needsGl = true,
+               .create = [] { return std::make_unique<Raycaster>(); }});
+        r.add({.name = "cpu", .description = "CPU raycaster", .regions = true, .create = [] {
+                   return std::make_unique<CpuRaycaster>();
+               }});
+        r.add({.name = "reference",
+               .description = "CPU reference raycaster (double precision, no skipping)",
+               .sharedPerVolume = true,
+               .regions = true,
+               .create = [] { return std::make_unique<ReferenceRenderer>(); }});
+        r.add({.name = "splat",
+               .description = "hybrid forward splatter (CPU)",
+               .objectOrder = true,
+               .create = [] { return std::make_unique<HybridSplatter>(); }});
+        r.add({.name = "splat-gpu",
+               .description = "hybrid forward splatter (OpenGL 4.5)",
+               .needsGl = true,
+               .objectOrder = true,
+               .create = [] { return std::make_unique<GpuSplatter>(); }});
         return r;
     }();
     return registry;

@@ -17,8 +17,13 @@ namespace bc::server {
 struct Daemon::Impl {
     Impl(DaemonConfig c, Log& l, bool handleSignals)
         : config(std::move(c)), log(l), catalog(config, log),
-          render(RenderServiceConfig{config.gpuBudgetBytes, config.restMs, config.prefetch,
-                                     config.hostBudgetBytes / 8},
+          render(RenderServiceConfig{.gpuBudgetBytes = config.gpuBudgetBytes,
+                                     .restMs = config.restMs,
+                                     .prefetch = config.prefetch,
+                                     .classificationBudgetBytes = config.hostBudgetBytes / 8,
+                                     .maxFrameSamples = config.maxFrameSamples,
+                                     .maxUnslicedSamples = config.maxUnslicedSamples,
+                                     .sliceMs = config.sliceMs},
                  catalog, log),
           acceptor(io), signals(io),
           drainTimer(io), context{config, catalog, render, log, capabilities(), {}, {}, 0} {
@@ -82,13 +87,19 @@ struct Daemon::Impl {
         catalog.collect(m);
         m.gauge("sessions", "Client sessions open", double(sessions.size()));
         std::size_t queued = 0, deepest = 0;
+        std::uint64_t bytes = 0, largest = 0;
         for (const auto& [id, s] : sessions) {
             queued += s->queued();
             deepest = std::max(deepest, s->queued());
+            bytes += s->queuedBytes();
+            largest = std::max(largest, s->queuedBytes());
         }
         m.gauge("write_queue_messages", "Messages waiting in the sessions' write queues",
                 double(queued));
         m.gauge("write_queue_messages_max", "The longest session write queue", double(deepest));
+        m.gauge("write_queue_bytes", "Bytes waiting in the sessions' write queues", double(bytes));
+        m.gauge("write_queue_bytes_max", "The largest session write queue, in bytes",
+                double(largest));
         m.counter("connections_accepted_total", "Client connections accepted", double(accepted));
         m.counter("connections_refused_total", "Client connections refused (Busy)",
                   double(refused));

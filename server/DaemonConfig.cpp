@@ -66,6 +66,21 @@ gpu_mb = 512
 rest_ms = 150
 # Encoded frames queued per session (1..16); a slow reader gets the newest, older are dropped.
 write_queue = 2
+# ... and at most this many MiB of them (1..4096): a session that does not read holds no more
+# (one frame larger than this still goes out, alone).
+write_queue_mb = 16
+# A frame's cost is its pixels times the samples of its longest ray (the level's diagonal over
+# the step), or for the splatters the level's voxels. A request over this many Gi samples
+# (1..65536) is answered OutOfRange naming this key: 64 is about an hour of the CPU reference
+# renderer on two cores.
+max_frame_gsamples = 64
+# The same for the renderers that draw whole frames only (gpu, splat, splat-gpu), which cannot
+# be sliced (1..65536).
+max_unsliced_gsamples = 4
+# The CPU raycasters draw a frame that would take longer than this in slices of about this
+# long (10..10000 ms); sessions take turns between slices, and a frame whose session has gone
+# or whose camera has moved on is dropped at the next slice.
+slice_ms = 50
 # While the render thread is idle, upload the bricks of each GPU session's next view (its
 # camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick
 # of its last frame.
@@ -346,9 +361,19 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
             c.gpuBudgetBytes = std::uint64_t(*mb) << 20;
     }
     if (const toml::table* t = section(root, "frames")) {
-        checkKeys(*t, "frames.", {"rest_ms", "write_queue", "prefetch"});
-        assign(c.restMs, integer(*t, "frames.", "rest_ms", 0, 60000));
-        assign(c.writeQueueFrames, integer(*t, "frames.", "write_queue", 1, 16));
+        const std::string p = "frames.";
+        checkKeys(*t, p,
+                  {"rest_ms", "write_queue", "write_queue_mb", "max_frame_gsamples",
+                   "max_unsliced_gsamples", "slice_ms", "prefetch"});
+        assign(c.restMs, integer(*t, p, "rest_ms", 0, 60000));
+        assign(c.writeQueueFrames, integer(*t, p, "write_queue", 1, 16));
+        if (auto mb = integer(*t, p, "write_queue_mb", 1, 4096))
+            c.writeQueueBytes = std::uint64_t(*mb) << 20;
+        if (auto g = integer(*t, p, "max_frame_gsamples", 1, 65536))
+            c.maxFrameSamples = std::uint64_t(*g) << 30;
+        if (auto g = integer(*t, p, "max_unsliced_gsamples", 1, 65536))
+            c.maxUnslicedSamples = std::uint64_t(*g) << 30;
+        assign(c.sliceMs, integer(*t, p, "slice_ms", 10, 10000));
         if (auto b = boolean(*t, "frames.", "prefetch")) c.prefetch = *b;
     }
 }

@@ -44,8 +44,12 @@ struct DaemonConfig {
     std::uint32_t writeTimeoutMs = 10000;
     std::uint64_t hostBudgetBytes = 1024ull << 20;
     std::uint64_t gpuBudgetBytes = 512ull << 20;
-    std::uint32_t restMs = 150;         ///< camera at rest this long -> a refined frame
-    std::uint32_t writeQueueFrames = 2; ///< per session; older frames are dropped
+    std::uint32_t restMs = 150;                    ///< camera at rest this long -> a refined frame
+    std::uint32_t writeQueueFrames = 2;            ///< per session; older frames are dropped
+    std::uint64_t writeQueueBytes = 16ull << 20;   ///< per session (one larger frame still goes)
+    std::uint64_t maxFrameSamples = 64ull << 30;   ///< a frame's cost cap (RenderServiceConfig)
+    std::uint64_t maxUnslicedSamples = 4ull << 30; ///< for renderers that cannot slice
+    std::uint32_t sliceMs = 50;                    ///< target length of one slice of a long frame
     bool prefetch = true; ///< bricks of each GPU session's predicted next view, while idle
     std::string storeDir; ///< where generated volumes are ingested
     std::vector<CatalogEntry> volumes;

@@ -1,5 +1,6 @@
 #include "server/RenderService.h"
 
+#include "render/BrickPlan.h"
 #include "render/BrickPool.h"
 #include "render/Classification.h"
 #include "render/EglContext.h"
@@ -10,8 +11,12 @@
 #include "server/Metrics.h"
 #include "server/ViewRequest.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <map>
+
+#include <glm/geometric.hpp>
 
 namespace bc::server {
 
@@ -25,8 +30,10 @@ double msSince(Clock::time_point t) {
 
 // ---- RenderSlot: the network side ----------------------------------------------------------
 
-RenderSlot::RenderSlot(RenderService& service, Deliver deliver, std::uint32_t queueFrames)
-    : mService(service), mDeliver(std::move(deliver)), mQueueFrames(queueFrames) {}
+RenderSlot::RenderSlot(RenderService& service, Deliver deliver, std::uint32_t queueFrames,
+                       std::uint64_t queueBytes)
+    : mService(service), mDeliver(std::move(deliver)), mQueueFrames(queueFrames),
+      mQueueBytes(queueBytes) {}
 
 void RenderSlot::setVolume(std::shared_ptr<Volume> volume) {
     {
@@ -90,10 +97,11 @@ void RenderSlot::request(protocol::FrameMode mode, std::uint32_t requestId) {
     changed();
 }
 
-void RenderSlot::frameDone() {
+void RenderSlot::frameDone(std::uint64_t bytes) {
     {
         std::lock_guard lock(mMutex);
         if (mInFlight > 0) --mInFlight;
+        mBytesInFlight -= std::min(bytes, mBytesInFlight);
     }
     changed();
 }
@@ -120,7 +128,8 @@ void RenderSlot::markChanged() {
 std::optional<Clock::time_point> RenderSlot::readyAt(std::uint32_t restMs) const {
     std::lock_guard lock(mMutex);
     if (mClosed || !mState.volume || !mState.camera || !mState.tf) return std::nullopt;
-    if (mInFlight >= mQueueFrames) return std::nullopt; // frameDone() wakes us
+    // frameDone() wakes us; one frame larger than the byte limit still goes, alone
+    if (mInFlight >= mQueueFrames || mBytesInFlight >= mQueueBytes) return std::nullopt;
     if (mOnce || (mContinuous && mDirty)) return Clock::time_point::min();
     if (mContinuous && mNeedsRefine) return mLastCamera + std::chrono::milliseconds(restMs);
     return std::nullopt;
@@ -134,6 +143,7 @@ RenderSlot::Job RenderSlot::take(Clock::time_point now, std::uint32_t restMs) {
     const bool resting = now - mLastCamera >= std::chrono::milliseconds(restMs);
     job.refined = quality == protocol::Quality::Refined ||
                   (quality == protocol::Quality::Adaptive && (resting || !mContinuous));
+    job.requested = mOnce;
     job.requestId = mOnce ? mOnceRequest : 0;
     job.queuedAt = mChangedAt;
     mNeedsRefine = !job.refined && quality == protocol::Quality::Adaptive;
@@ -142,6 +152,21 @@ RenderSlot::Job RenderSlot::take(Clock::time_point now, std::uint32_t restMs) {
     if (mResetDelta) mEncoder.resetDelta();
     mResetDelta = false;
     return job;
+}
+
+bool RenderSlot::superseded() const {
+    std::lock_guard lock(mMutex);
+    return mClosed || mDirty || mOnce;
+}
+
+bool RenderSlot::closed() const {
+    std::lock_guard lock(mMutex);
+    return mClosed;
+}
+
+void RenderSlot::delivering(std::uint64_t bytes) {
+    std::lock_guard lock(mMutex);
+    mBytesInFlight += bytes;
 }
 
 // ---- RenderService -------------------------------------------------------------------------
@@ -156,11 +181,42 @@ struct VolumeRenderers {
     RendererMap shared;
 };
 
+/// A frame being drawn (render thread only): what its first turn resolved, the image so far and
+/// where the next slice starts. A frame that fits one slice lives for one turn.
+struct FrameDrawing {
+    RenderSlot::Job job;
+    const render::RendererKind* kind = nullptr;
+    render::RenderOptions options; ///< the whole frame's (region: whole)
+    render::View view;
+    std::uint64_t costPerPixel = 0; ///< estimated samples of one ray (the longest)
+    std::uint64_t cost = 0;         ///< of the whole frame
+    bool sliced = false;
+    render::Image image;         ///< the whole frame, filled slice by slice
+    std::uint64_t nextPixel = 0; ///< row-major cursor
+    // Slices are sized by each pixel's samples: its ray's length inside the level's box over the
+    // step (plus one for the ray), so rows that miss the volume are not taken for dense ones.
+    render::Box box;
+    double stepMm = 1;
+    std::vector<double> rowCost; ///< per row, computed as the cursor reaches it (< 0: not yet)
+    std::uint32_t slices = 0;
+    double slicesMs = 0; ///< drawing them
+    render::FrameStats stats;
+    const render::BrickPool* pool = nullptr;
+    Clock::time_point start;
+
+    /// A refined frame drawn because an adaptive session's camera came to rest.
+    bool refinement() const {
+        return !job.requested && job.refined &&
+               job.state.options.quality == protocol::Quality::Adaptive;
+    }
+};
+
 /// A session's own renderers, by name: each keeps what is the session's (its previous frame's
 /// occlusion frustums and ray feedback); bricks come from the volume's shared pool and
 /// classifications from the service's cache.
 struct SessionRenderers {
     std::weak_ptr<RenderSlot> slot;
+    std::unique_ptr<FrameDrawing> drawing; ///< the frame in progress, if any
     RendererMap own;
     /// The GPU renderer's last two views and what to prefetch for the next (see runPrefetch).
     std::optional<render::Camera> lastCamera, previousCamera;
@@ -181,19 +237,30 @@ struct RenderService::Renderers {
     std::map<const RenderSlot*, SessionRenderers> sessions;
 
     /// Renderers of closed sessions and pools of volumes nobody views go (GL objects, on
-    /// this thread).
-    /// `retired` is told the name of each volume whose pool goes.
-    void prune(const std::function<void(const std::string&)>& retired) {
-        std::erase_if(sessions, [](const auto& e) { return e.second.slot.expired(); });
+    /// this thread). `retired` is told the name of each volume whose pool goes. Returns the
+    /// frames in progress that went with their sessions.
+    std::uint32_t prune(const std::function<void(const std::string&)>& retired) {
+        std::uint32_t dropped = 0;
+        std::erase_if(sessions, [&](const auto& e) {
+            if (!e.second.slot.expired()) return false;
+            dropped += e.second.drawing != nullptr;
+            return true;
+        });
         std::erase_if(volumes, [&](const auto& e) {
             if (e.first->sessions.load() != 0) return false;
+            for (const auto& [key, s] : sessions) // a frame in progress keeps its renderers
+                if (s.drawing && s.drawing->job.state.volume.get() == e.first) return false;
             if (e.second.pool) retired(e.first->name);
             return true;
         });
+        return dropped;
     }
     SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
         auto& s = sessions[slot.get()];
-        if (s.slot.lock() != slot) s = SessionRenderers{slot, {}, {}, {}, {}}; // a reused address
+        if (s.slot.lock() != slot) { // a reused address
+            s = SessionRenderers{};
+            s.slot = slot;
+        }
         return s;
     }
 };
@@ -229,6 +296,7 @@ std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume&
 struct RenderService::Counters {
     std::map<std::string, double> frames; ///< per renderer
     double refined = 0, errors = 0, renderMs = 0, encodeMs = 0, bytes = 0, samples = 0;
+    double refused = 0, cancelled = 0, slices = 0;
     Histogram latencyMs{Histogram::series125(1, 10000)};
     Histogram renderMsHist{Histogram::series125(1, 10000)};
     Histogram uploadMs{Histogram::series125(0.1, 10000)};
@@ -293,8 +361,9 @@ RenderService::~RenderService() {
 }
 
 std::shared_ptr<RenderSlot> RenderService::open(RenderSlot::Deliver deliver,
-                                                std::uint32_t queueFrames) {
-    auto slot = std::make_shared<RenderSlot>(*this, std::move(deliver), queueFrames);
+                                                std::uint32_t queueFrames,
+                                                std::uint64_t queueBytes) {
+    auto slot = std::make_shared<RenderSlot>(*this, std::move(deliver), queueFrames, queueBytes);
     std::lock_guard lock(mMutex);
     mSlots.push_back(slot);
     return slot;
@@ -324,6 +393,15 @@ void RenderService::collect(MetricSet& m) {
     m.counter("frames_refined_total", "Full-quality frames after the camera came to rest",
               c.refined);
     m.counter("render_errors_total", "Frames that failed (sent as RenderFailed)", c.errors);
+    m.counter("frames_refused_total",
+              "Frames over the cost cap (frames.max_frame_gsamples), answered OutOfRange",
+              c.refused);
+    m.counter("frames_cancelled_total",
+              "Frames dropped before they were complete: their session had gone or asked for "
+              "something newer",
+              c.cancelled);
+    m.counter("frame_slices_total", "Slices drawn of frames too long to draw in one turn",
+              c.slices);
     m.counter("render_ms_total", "Milliseconds spent drawing frames", c.renderMs);
     m.counter("encode_ms_total", "Milliseconds spent encoding frames", c.encodeMs);
     m.counter("frame_bytes_total", "Encoded frame message bytes", c.bytes);
@@ -499,6 +577,12 @@ void RenderService::run() {
     mStartedCv.notify_all();
     std::unique_lock lock(mMutex);
     while (!mStop) {
+        // Sessions gone go first (their frames in progress with them), before any wait.
+        lock.unlock();
+        const std::uint32_t dropped =
+            mRenderers->prune([this](const std::string& volume) { retirePool(volume); });
+        lock.lock();
+        mCounters->cancelled += dropped;
         bool prefetchDue = false;
         for (const auto& [key, s] : mRenderers->sessions)
             prefetchDue |= s.prefetch.has_value();
@@ -511,14 +595,20 @@ void RenderService::run() {
             }
             continue;
         }
-        auto job = slot->take(Clock::now(), mConfig.restMs);
+        std::optional<RenderSlot::Job> job;
+        if (!drawing(slot.get())) job = slot->take(Clock::now(), mConfig.restMs);
         lock.unlock();
-        mRenderers->prune([this](const std::string& volume) { retirePool(volume); });
-        draw(slot, std::move(job));
+        turn(slot, std::move(job));
         lock.lock();
     }
     lock.unlock();
     mRenderers.reset(); // GL objects go before the context, on this thread
+}
+
+bool RenderService::drawing(const RenderSlot* slot) const {
+    const auto it = mRenderers->sessions.find(slot);
+    return it != mRenderers->sessions.end() && it->second.drawing &&
+           it->second.slot.lock().get() == slot;
 }
 
 std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex>& lock,
@@ -530,7 +620,8 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
         const std::size_t k = (mNextSlot + i) % mSlots.size();
         auto slot = mSlots[k].lock();
         if (!slot) continue;
-        const auto at = slot->readyAt(mConfig.restMs);
+        // A frame in progress is always due: its next slice is this session's turn.
+        const auto at = drawing(slot.get()) ? std::optional(now) : slot->readyAt(mConfig.restMs);
         if (at && *at <= now) {
             mNextSlot = k + 1;
             return slot;
@@ -545,86 +636,267 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
     return nullptr;
 }
 
-void RenderService::draw(const std::shared_ptr<RenderSlot>& slotPtr, RenderSlot::Job job) {
+namespace {
+
+/// A frame over its cost cap: answered OutOfRange, not RenderFailed.
+struct FrameRefused : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+/// Cost units per millisecond assumed of a renderer before it has drawn anything: low, so a
+/// first frame that turns out heavy is sliced rather than drawn whole.
+constexpr double kFirstCostPerMs = 20000.0;
+
+/// Estimated cost of pixel (x, y): its ray's samples inside the box, plus one for the ray.
+double pixelCost(const FrameDrawing& d, std::uint32_t x, std::uint32_t y) {
+    const render::Ray ray = d.view.basis.ray(x, y, d.options.width, d.options.height);
+    const auto [t0, t1] = render::intersectBox(ray, d.box);
+    return 1.0 + std::max(0.0, (t1 - std::max(t0, 0.0)) / d.stepMm);
+}
+
+double rowCost(FrameDrawing& d, std::uint32_t y) {
+    if (d.rowCost[y] < 0) {
+        double sum = 0;
+        for (std::uint32_t x = 0; x < d.options.width; ++x)
+            sum += pixelCost(d, x, y);
+        d.rowCost[y] = sum;
+    }
+    return d.rowCost[y];
+}
+
+/// The next slice of about `budget` cost units (at least one pixel): whole rows from the cursor
+/// when it is at a row's start and its row fits, else a run of the cursor's row. Returns the
+/// slice and (in `cost`) its estimated cost.
+render::PixelRect nextSlice(FrameDrawing& d, double budget, double& cost) {
+    const std::uint32_t w = d.options.width, h = d.options.height;
+    const auto x = std::uint32_t(d.nextPixel % w), y = std::uint32_t(d.nextPixel / w);
+    cost = 0;
+    if (x == 0 && rowCost(d, y) <= budget) {
+        std::uint32_t rows = 0;
+        while (y + rows < h && cost + rowCost(d, y + rows) <= budget)
+            cost += rowCost(d, y + rows++);
+        return {0, y, w, rows};
+    }
+    std::uint32_t n = 0;
+    while (x + n < w && (n == 0 || cost + pixelCost(d, x + n, y) <= budget))
+        cost += pixelCost(d, x + n++, y);
+    return {x, y, n, 1};
+}
+
+void paste(render::Image& frame, const render::Image& part, const render::PixelRect& at) {
+    for (std::uint32_t y = 0; y < part.height; ++y)
+        std::copy_n(part.pixel(0, y), std::size_t(part.width) * 4, frame.pixel(at.x, at.y + y));
+}
+
+/// What the next slice adds to the frame's statistics (the plan is the whole view's, the same
+/// every slice; samples and times add up).
+void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool first) {
+    if (first) {
+        total = slice;
+        return;
+    }
+    total.samples += slice.samples;
+    total.oracleSamples += slice.oracleSamples;
+    total.octreeLeaps += slice.octreeLeaps;
+    total.uploadMs += slice.uploadMs;
+    total.renderMs += slice.renderMs;
+    total.totalMs += slice.totalMs;
+}
+
+std::string giga(std::uint64_t samples) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.3g", double(samples) / double(1ull << 30));
+    return text;
+}
+
+} // namespace
+
+void RenderService::prepare(FrameDrawing& d) {
+    const auto& s = d.job.state;
+    const auto& o = s.options;
+    d.start = Clock::now();
+    d.options = toRenderOptions(o, !d.job.refined);
+    d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
+    // The decoder validated the camera (the same rules as Camera::validate).
+    d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
+    const std::string_view name = rendererName(o.renderer);
+    d.kind = render::RendererRegistry::builtin().find(name);
+    if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
+    if (d.kind->needsGl && !mRenderers->context)
+        throw std::runtime_error("this server has no OpenGL 4.5 context");
+
+    // Cost: an upper bound of the samples (every ray as long as the level's diagonal), or the
+    // voxels a splatter projects.
+    const brickstore::BrickStore& store = *s.volume->store;
+    const auto levels = std::uint32_t(store.layout().levels().size());
+    const auto level = std::min<std::uint32_t>(std::uint32_t(d.options.level), levels - 1);
+    const render::LevelGeometry g = render::LevelGeometry::of(store, level);
+    const std::uint64_t pixels = std::uint64_t(d.options.width) * d.options.height;
+    const double diagonal = glm::length(g.box.size());
+    d.costPerPixel = std::uint64_t(std::ceil(diagonal / (d.options.stepVoxels * g.minSpacing())));
+    const double voxels = double(g.dims[0]) * double(g.dims[1]) * double(g.dims[2]);
+    const double cost =
+        d.kind->objectOrder ? voxels + double(pixels) : double(pixels) * double(d.costPerPixel);
+    const bool sliceable = d.kind->regions;
+    const std::uint64_t cap = sliceable ? mConfig.maxFrameSamples : mConfig.maxUnslicedSamples;
+    if (cost > double(cap))
+        throw FrameRefused(
+            "frame cost " + giga(std::uint64_t(std::min(cost, 1e19))) + " Gi samples (" +
+            std::to_string(d.options.width) + "x" + std::to_string(d.options.height) + " pixels, " +
+            std::to_string(d.costPerPixel) + " samples per ray, " + std::string(name) +
+            ") is over the server's cap of " + giga(cap) + " Gi samples (" +
+            (sliceable ? "frames.max_frame_gsamples" : "frames.max_unsliced_gsamples") + ")");
+    d.cost = std::uint64_t(cost);
+
+    const auto rate = mCostPerMs.find(name);
+    const double perMs = rate == mCostPerMs.end() ? kFirstCostPerMs : rate->second;
+    d.sliced = sliceable && cost / perMs > 1.5 * mConfig.sliceMs;
+    if (d.sliced) {
+        d.image = render::Image(d.options.width, d.options.height);
+        d.box = g.box;
+        d.stepMm = d.options.stepVoxels * g.minSpacing();
+        d.rowCost.assign(d.options.height, -1.0);
+    }
+}
+
+render::Renderer& RenderService::rendererFor(const std::shared_ptr<RenderSlot>& slot,
+                                             FrameDrawing& d) {
+    const auto& s = d.job.state;
+    auto& v = mRenderers->volumes[s.volume.get()];
+    auto& mine = mRenderers->of(slot);
+    RendererMap& owner = d.kind->sharedPerVolume ? v.shared : mine.own;
+    auto it = owner.find(d.kind->name);
+    if (it == owner.end()) it = owner.emplace(d.kind->name, d.kind->create()).first;
+    render::Renderer& renderer = *it->second;
+    if (render::GpuResidency* gpu = renderer.gpuResidency()) {
+        // the volume's bricks on the GPU are shared by its sessions
+        const render::BrickPool* before = v.pool.get();
+        auto& shared =
+            sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes));
+        if (before && shared.get() != before) retirePool(s.volume->name);
+        gpu->setSharedPool(shared);
+        d.pool = shared.get();
+    }
+    return renderer;
+}
+
+bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d) {
+    const auto& s = d.job.state;
+    const render::Scene scene{*s.volume->store, *s.volume->cache, *s.tf, *mClassifications};
+    render::Renderer& renderer = rendererFor(slot, d);
+    const auto start = Clock::now();
+    // Speeds measured, per renderer: whole frames against their upper-bound cost (whether to
+    // slice), slices against their pixels' estimated samples (how large a slice is).
+    auto calibrate = [&](std::map<std::string, double, std::less<>>& rates, double cost) {
+        const double perMs = cost / std::max(msSince(start), 0.01);
+        auto [it, fresh] = rates.try_emplace(d.kind->name, perMs);
+        if (!fresh) it->second = 0.5 * (it->second + perMs);
+    };
+    if (!d.sliced) {
+        d.image = renderer.render(scene, d.view, d.options, d.stats);
+        calibrate(mCostPerMs, double(d.cost));
+        if (render::GpuResidency* gpu = renderer.gpuResidency()) {
+            auto& mine = mRenderers->of(slot);
+            mine.previousCamera = mine.lastCamera;
+            mine.lastCamera = d.view.camera;
+            mine.prefetch.reset();
+            if (mConfig.prefetch && mine.previousCamera && gpu->pool())
+                mine.prefetch = SessionRenderers::Prefetch{
+                    &renderer, s.volume,
+                    s.tf,      render::predictNext(*mine.previousCamera, d.view.camera),
+                    d.options, residentBricks(d.stats)};
+        }
+        return true;
+    }
+    const auto rate = mSliceCostPerMs.find(d.kind->name);
+    const double perMs = rate == mSliceCostPerMs.end() ? kFirstCostPerMs : rate->second;
+    double cost = 0;
+    render::RenderOptions options = d.options;
+    options.region = nextSlice(d, mConfig.sliceMs * perMs, cost);
+    render::FrameStats stats;
+    const render::Image part = renderer.render(scene, d.view, options, stats);
+    paste(d.image, part, options.region);
+    accumulate(d.stats, stats, d.slices == 0);
+    calibrate(mSliceCostPerMs, cost);
+    ++d.slices;
+    d.slicesMs += msSince(start);
+    d.nextPixel += options.region.pixels();
+    {
+        std::lock_guard lock(mMutex);
+        mCounters->slices += 1;
+    }
+    if (d.nextPixel < std::uint64_t(d.options.width) * d.options.height) return false;
+    // The whole frame's speed too, so that a frame like it is sliced only when it must be.
+    const double perMsWhole = double(d.cost) / std::max(d.slicesMs, 0.01);
+    auto [it, fresh] = mCostPerMs.try_emplace(d.kind->name, perMsWhole);
+    if (!fresh) it->second = 0.5 * (it->second + perMsWhole);
+    return true;
+}
+
+void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
+                         std::optional<RenderSlot::Job> job) {
     RenderSlot& slot = *slotPtr;
+    auto& mine = mRenderers->of(slotPtr);
+    if (job) {
+        mine.drawing = std::make_unique<FrameDrawing>();
+        mine.drawing->job = std::move(*job);
+    } else if (slot.closed() || (mine.drawing->refinement() && slot.superseded())) {
+        // Nobody waits for it, or it refines a view the camera has left (interactive frames
+        // follow). Other frames complete: a client that keeps moving its camera while its
+        // frames take longer than its camera updates still sees every other view drawn, and a
+        // requested frame is owed its answer.
+        mine.drawing.reset();
+        slot.frameDone(0);
+        std::lock_guard lock(mMutex);
+        mCounters->cancelled += 1;
+        return;
+    }
+    FrameDrawing& d = *mine.drawing;
+    const std::string volume = d.job.state.volume->name;
+    const std::uint32_t requestId = d.job.requestId;
     std::vector<std::uint8_t> bytes;
     try {
+        if (job) prepare(d);
+        if (!drawSlice(slotPtr, d)) return; // more slices: the other sessions' turn
         FrameRecord rec;
-        const render::BrickPool* pool = nullptr;
-        const protocol::Frame frame = render(slotPtr, job, *mRenderers, rec, pool);
-        protocol::encode(frame, job.requestId, bytes);
-        record(rec, double(bytes.size()), job.state.volume->name, pool);
+        const protocol::Frame frame = finish(slot, d, rec);
+        protocol::encode(frame, requestId, bytes);
+        record(rec, double(bytes.size()), volume, d.pool);
         std::lock_guard lock(mMutex);
         mCounters->refined += frame.header.refined;
         mCounters->samples += double(frame.header.samples);
     } catch (const std::exception& e) {
-        protocol::Error error{protocol::ErrorCode::RenderFailed, false,
-                              std::uint8_t(protocol::MessageType::RequestFrame),
+        const bool refused = dynamic_cast<const FrameRefused*>(&e) != nullptr;
+        protocol::Error error{refused ? protocol::ErrorCode::OutOfRange
+                                      : protocol::ErrorCode::RenderFailed,
+                              false, std::uint8_t(protocol::MessageType::RequestFrame),
                               protocol::fitText(e.what(), protocol::kMaxErrorMessageBytes)};
         bytes.clear();
-        protocol::encode(error, job.requestId, bytes);
-        mLog.error("render: " + job.state.volume->name + ": " + e.what());
+        protocol::encode(error, requestId, bytes);
+        mLog.error("render: " + volume + ": " + e.what());
         std::lock_guard lock(mMutex);
-        mCounters->errors += 1;
+        (refused ? mCounters->refused : mCounters->errors) += 1;
     }
+    mine.drawing.reset();
+    slot.delivering(bytes.size());
     std::unique_lock lock(slot.mMutex);
     auto deliver = slot.mDeliver;
     lock.unlock();
     if (deliver)
         deliver(std::move(bytes));
     else
-        slot.frameDone();
+        slot.frameDone(bytes.size());
 }
 
-protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr,
-                                      RenderSlot::Job& job, Renderers& r, FrameRecord& rec,
-                                      const render::BrickPool*& pool) {
-    RenderSlot& slot = *slotPtr;
-    const auto& s = job.state;
-    const auto start = Clock::now();
+protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRecord& rec) {
+    const auto& s = d.job.state;
     const auto& o = s.options;
-    render::RenderOptions options = toRenderOptions(o, !job.refined);
-    options.shading = shadingFor(o, s.tfMessage, *s.tf);
-    // The decoder validated the camera (the same rules as Camera::validate).
-    const render::View view =
-        render::View::ofDecoded(toCamera(*s.camera), options.width, options.height);
-    const render::Scene scene{*s.volume->store, *s.volume->cache, *s.tf, *mClassifications};
-    const std::string_view name = rendererName(o.renderer);
-    const render::RendererKind* kind = render::RendererRegistry::builtin().find(name);
-    if (!kind) throw std::runtime_error("no renderer " + std::string(name));
-    if (kind->needsGl && !r.context)
-        throw std::runtime_error("this server has no OpenGL 4.5 context");
-    auto& v = r.volumes[s.volume.get()];
-    auto& mine = r.of(slotPtr);
-    RendererMap& owner = kind->sharedPerVolume ? v.shared : mine.own;
-    auto it = owner.find(name);
-    if (it == owner.end()) it = owner.emplace(std::string(name), kind->create()).first;
-    render::Renderer& renderer = *it->second;
-    render::GpuResidency* gpu = renderer.gpuResidency();
-    if (gpu) { // the volume's bricks on the GPU are shared by its sessions
-        const render::BrickPool* before = v.pool.get();
-        auto& shared =
-            sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes));
-        if (before && shared.get() != before) retirePool(s.volume->name);
-        gpu->setSharedPool(shared);
-        pool = shared.get();
-    }
-    render::FrameStats stats;
-    render::Image image = renderer.render(scene, view, options, stats);
-    if (gpu) {
-        mine.previousCamera = mine.lastCamera;
-        mine.lastCamera = view.camera;
-        mine.prefetch.reset();
-        if (mConfig.prefetch && mine.previousCamera)
-            mine.prefetch = SessionRenderers::Prefetch{
-                &renderer, s.volume,
-                s.tf,      render::predictNext(*mine.previousCamera, view.camera),
-                options,   residentBricks(stats)};
-    }
-    if (!job.refined) image = interactiveUpscale(image, o.width, o.height);
+    const render::FrameStats& stats = d.stats;
+    render::Image image = std::move(d.image);
+    if (!d.job.refined) image = interactiveUpscale(image, o.width, o.height);
     const auto rgba8 = render::toRgba8(image);
     protocol::Frame frame;
-    frame.header.renderMs = float(msSince(start));
+    frame.header.renderMs = float(msSince(d.start));
     auto encoded = slot.mEncoder.encode(rgba8, o.width, o.height, o.codec, o.codecQuality);
     auto& h = frame.header;
     h.frameId = slot.mNextFrameId++;
@@ -633,9 +905,9 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     h.height = o.height;
     h.codec = o.codec;
     h.level = std::uint8_t(stats.level);
-    h.refined = job.refined;
+    h.refined = d.job.refined;
     h.keyframe = encoded.keyframe;
-    h.queueMs = float(std::chrono::duration<double, std::milli>(start - job.queuedAt).count());
+    h.queueMs = float(std::chrono::duration<double, std::milli>(d.start - d.job.queuedAt).count());
     h.encodeMs = float(encoded.encodeMs);
     h.samples = stats.samples;
     h.bricksDrawn = std::uint32_t(stats.bricksVisited);
@@ -643,11 +915,11 @@ protocol::Frame RenderService::render(const std::shared_ptr<RenderSlot>& slotPtr
     h.bytesUploaded = stats.bytesUploaded;
     h.occlusionUsed = stats.occlusionUsed;
     frame.image = std::move(encoded.bytes);
-    rec.renderer = rendererName(o.renderer);
+    rec.renderer = d.kind->name;
     rec.renderMs = h.renderMs;
     rec.encodeMs = h.encodeMs;
     rec.uploadMs = stats.uploadMs;
-    rec.latencyMs = msSince(job.queuedAt);
+    rec.latencyMs = msSince(d.job.queuedAt);
     rec.bricks = double(residentBricks(stats));
     rec.bricksDeferred = double(stats.bricksDeferred);
     rec.bricksRequested = double(stats.bricksRequested);

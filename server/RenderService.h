@@ -1,9 +1,17 @@
 #pragma once
 // The render thread: it owns the GL context and every renderer, and draws for the sessions in
 // turn. A session writes what it wants into its RenderSlot (camera updates coalesce: the
-// latest wins) and the thread takes the newest state of a slot whose write queue has room, so
-// a slow reader never makes frames pile up: it gets the newest view when it catches up.
-// Network threads never wait for it: slots are a mutex and a condition variable away.
+// latest wins) and the thread takes the newest state of a slot whose write queue has room (in
+// frames and in bytes), so a slow reader never makes frames pile up: it gets the newest view
+// when it catches up. Network threads never wait for it: slots are a mutex and a condition
+// variable away.
+//
+// Fairness: every frame's cost (pixels x samples per ray, an upper bound) is checked against a
+// cap before it is drawn; a frame of a renderer that draws regions (the CPU raycasters) and
+// would take longer than a slice is drawn in slices of about RenderServiceConfig::sliceMs, and
+// the sessions take turns between slices, so a heavy frame costs every other session at most
+// one slice per turn. A frame whose session has gone, or whose camera has been superseded, is
+// dropped at its next slice; stopping the service stops within one slice.
 #include "protocol/FrameCodec.h"
 #include "protocol/Messages.h"
 #include "render/TransferFunction.h"
@@ -12,6 +20,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -22,6 +31,7 @@
 namespace bc::render {
 class BrickPool;
 class ClassificationCache;
+class Renderer;
 } // namespace bc::render
 
 namespace bc::server {
@@ -41,7 +51,10 @@ class RenderSlot {
     /// Receives each encoded message (a Frame or an Error) on the render thread; it must not
     /// block (the session posts it to its own thread).
     using Deliver = std::function<void(std::vector<std::uint8_t> message)>;
-    RenderSlot(RenderService& service, Deliver deliver, std::uint32_t queueFrames);
+    /// At most `queueFrames` frames and (beyond the first) `queueBytes` bytes delivered and not
+    /// yet written.
+    RenderSlot(RenderService& service, Deliver deliver, std::uint32_t queueFrames,
+               std::uint64_t queueBytes);
 
     void setVolume(std::shared_ptr<Volume> volume);
     void setCamera(const protocol::SetCamera& camera);
@@ -50,13 +63,14 @@ class RenderSlot {
     /// New options; the next delta frame is a keyframe (how a client asks for one).
     void setOptions(const protocol::RenderOptions& options);
     void request(protocol::FrameMode mode, std::uint32_t requestId);
-    /// A frame this slot delivered has been written (or dropped): room for the next.
-    void frameDone();
+    /// A frame this slot delivered (`bytes` long) has been written or dropped: room for the next.
+    void frameDone(std::uint64_t bytes);
     /// The session is gone: the render thread forgets the slot.
     void close();
 
   private:
     friend class RenderService;
+    friend struct FrameDrawing;
     struct State {
         std::shared_ptr<Volume> volume;
         std::optional<protocol::SetCamera> camera;
@@ -68,23 +82,32 @@ class RenderSlot {
     struct Job {
         State state;
         bool refined = true;
+        bool requested = false; ///< a RequestFrame(Once): owed an answer, never superseded
         std::uint32_t requestId = 0;
         Clock::time_point queuedAt{}; ///< the oldest change this frame answers
     };
     /// When the slot can next be drawn (nullopt: not until something changes).
     std::optional<Clock::time_point> readyAt(std::uint32_t restMs) const;
     Job take(Clock::time_point now, std::uint32_t restMs);
+    /// Whether what a continuous frame in progress answers has changed (a newer camera,
+    /// transfer function, options or volume, or a request), or the session has gone.
+    bool superseded() const;
+    bool closed() const;
+    /// `bytes` are on their way to the session (render thread, before delivering).
+    void delivering(std::uint64_t bytes);
     void changed();
     void markChanged(); ///< with mMutex held
 
     RenderService& mService;
     Deliver mDeliver;
     std::uint32_t mQueueFrames;
+    std::uint64_t mQueueBytes;
     mutable std::mutex mMutex;
     State mState;
     bool mClosed = false, mContinuous = false, mDirty = false, mNeedsRefine = false;
     bool mOnce = false, mResetDelta = false;
     std::uint32_t mOnceRequest = 0, mInFlight = 0;
+    std::uint64_t mBytesInFlight = 0; ///< delivered, not yet written
     Clock::time_point mLastCamera{}, mChangedAt{};
     // render thread only
     protocol::FrameEncoder mEncoder;
@@ -98,20 +121,29 @@ struct RenderServiceConfig {
     /// Classifications (TF tables and octrees) kept once no session uses them: an eighth of
     /// the host budget by default (Daemon).
     std::uint64_t classificationBudgetBytes = 128ull << 20;
+    /// Cost caps (samples: pixels x samples of the longest ray, or the splatters' voxels):
+    /// a frame over its cap is refused with OutOfRange. Renderers that draw regions are sliced
+    /// and take `maxFrameSamples`; the others draw whole frames and take `maxUnslicedSamples`.
+    std::uint64_t maxFrameSamples = 64ull << 30;
+    std::uint64_t maxUnslicedSamples = 4ull << 30;
+    std::uint32_t sliceMs = 50; ///< target length of one slice of a long frame
 };
+
+struct FrameDrawing;
 
 class RenderService {
   public:
     /// Starts the render thread (it creates the GL context; without one, GPU requests fail
     /// with RenderFailed and the CPU renderers still serve).
     RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log);
-    /// Stops and joins the thread; frames not yet drawn are not drawn.
+    /// Stops and joins the thread (within about one slice); frames not yet drawn are not drawn.
     ~RenderService();
     RenderService(const RenderService&) = delete;
     RenderService& operator=(const RenderService&) = delete;
 
     /// A slot for a new session.
-    std::shared_ptr<RenderSlot> open(RenderSlot::Deliver deliver, std::uint32_t queueFrames);
+    std::shared_ptr<RenderSlot> open(RenderSlot::Deliver deliver, std::uint32_t queueFrames,
+                                     std::uint64_t queueBytes);
     /// Whether the GL context came up (waits for the thread's start-up).
     bool gpuAvailable();
     /// Frames (per renderer), errors, time and bytes; per-frame histograms of latency
@@ -137,9 +169,17 @@ class RenderService {
     /// Uploads the predicted next view's missing bricks of every GPU session (render thread,
     /// when no frame is due).
     void runPrefetch();
-    void draw(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job job);
-    protocol::Frame render(const std::shared_ptr<RenderSlot>& slot, RenderSlot::Job& job,
-                           Renderers& r, FrameRecord& record, const render::BrickPool*& pool);
+    /// One turn of `slot`: starts `job` when given, else goes on with the frame in progress;
+    /// draws one slice (or the whole frame) and delivers the frame once it is complete.
+    void turn(const std::shared_ptr<RenderSlot>& slot, std::optional<RenderSlot::Job> job);
+    /// Resolves the frame's options and view, checks its cost and decides on slices.
+    void prepare(FrameDrawing& d);
+    /// Draws the next slice; true when the frame is complete.
+    bool drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
+    render::Renderer& rendererFor(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
+    protocol::Frame finish(RenderSlot& slot, FrameDrawing& d, FrameRecord& record);
+    /// Whether `slot` has a frame in progress (render thread).
+    bool drawing(const RenderSlot* slot) const;
     void record(const FrameRecord& f, double bytes, const std::string& volume,
                 const render::BrickPool* pool);
     void retirePool(const std::string& volume); ///< its pool is replaced or freed
@@ -154,6 +194,11 @@ class RenderService {
     bool mStop = false, mStarted = false, mGpu = false;
     std::condition_variable mStartedCv;
     std::unique_ptr<Renderers> mRenderers; // render thread only
+    /// Measured speed of each renderer in cost units (upper bounds of samples) per millisecond,
+    /// from the whole frames it drew: whether a frame is sliced (render thread only).
+    std::map<std::string, double, std::less<>> mCostPerMs;
+    /// The same against each slice's pixels' estimated samples (sizes slices).
+    std::map<std::string, double, std::less<>> mSliceCostPerMs;
     /// Shared by every session and renderer (thread-safe).
     std::unique_ptr<render::ClassificationCache> mClassifications;
 

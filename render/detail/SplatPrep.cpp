@@ -166,8 +166,7 @@ Frame frameOf(const HybridSplatterConfig& config, const LevelGeometry& g, const 
 SplatScene sceneOf(const Scene& scene, const View& view, const RenderOptions& options,
                    FrameStats& stats) {
     options.validate();
-    if (view.width != options.width || view.height != options.height)
-        throw std::invalid_argument("the view's size is not the options' size");
+    Renderer::checkView(view, options);
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     return {level, LevelGeometry::of(scene.store, level),

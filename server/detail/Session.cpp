@@ -68,7 +68,7 @@ void Session::start() {
                 if (auto self = weak.lock()) self->enqueue({std::move(bytes), true});
             });
         },
-        mContext.config.writeQueueFrames);
+        mContext.config.writeQueueFrames, mContext.config.writeQueueBytes);
     read();
     watchdog();
 }
@@ -333,9 +333,10 @@ void Session::sendError(ErrorCode code, bool fatal, std::uint8_t type, std::uint
 
 void Session::enqueue(Outgoing out) {
     if (mPhase == Phase::Closed) {
-        if (out.fromRenderer && mSlot) mSlot->frameDone();
+        if (out.fromRenderer && mSlot) mSlot->frameDone(out.bytes.size());
         return;
     }
+    mQueueBytes += out.bytes.size();
     mQueue.push_back(std::move(out));
     if (!mWriting) write();
 }
@@ -353,7 +354,9 @@ void Session::write() {
                           if (self->mPhase == Phase::Closed) return;
                           Outgoing done = std::move(self->mQueue.front());
                           self->mQueue.pop_front();
-                          if (done.fromRenderer) self->mSlot->frameDone(), ++self->mFramesSent;
+                          self->mQueueBytes -= done.bytes.size();
+                          if (done.fromRenderer)
+                              self->mSlot->frameDone(done.bytes.size()), ++self->mFramesSent;
                           if (ec) {
                               self->close("write: " + ec.message());
                               return;

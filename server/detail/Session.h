@@ -52,6 +52,8 @@ class Session : public std::enable_shared_from_this<Session> {
     std::uint64_t id() const { return mId; }
     /// Messages waiting in the write queue (the one being written included).
     std::size_t queued() const { return mQueue.size(); }
+    /// Bytes in the write queue (the message being written included).
+    std::uint64_t queuedBytes() const { return mQueueBytes; }
 
   private:
     enum class Phase { AwaitHello, AwaitAuth, Ready, Closing, Closed };
@@ -91,6 +93,7 @@ class Session : public std::enable_shared_from_this<Session> {
     protocol::Decoder mDecoder;
     std::array<std::uint8_t, 64 * 1024> mReadBuffer{};
     std::deque<Outgoing> mQueue;
+    std::uint64_t mQueueBytes = 0;
     bool mWriting = false;
     std::shared_ptr<RenderSlot> mSlot;
     VolumeLease mLease;

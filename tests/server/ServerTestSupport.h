@@ -47,7 +47,7 @@ struct TestDaemon {
         c.timeoutMs = 60000;
         return c;
     }
-    Log log{true};
+    Log log{std::getenv("BC_TEST_DAEMON_LOG") == nullptr};
     std::unique_ptr<Daemon> daemon;
     std::uint16_t port = 0;
     std::thread thread;

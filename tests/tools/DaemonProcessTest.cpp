@@ -1,5 +1,6 @@
 // SIGTERM drains a real brickcastd process with clients attached: each gets Bye (shutting
-// down) before the close, and the daemon exits 0.
+// down) before the close, and the daemon exits 0, also in the middle of the heaviest frame
+// the protocol allows.
 #include "tests/server/ServerTestSupport.h"
 
 #include <csignal>
@@ -51,6 +52,61 @@ TEST(DaemonProcess, SigtermDrainsAttachedClientsAndExitsCleanly) {
     for (int i = 0; i < 100 && ::waitpid(pid, &status, WNOHANG) == 0; ++i)
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     ASSERT_TRUE(WIFEXITED(status)) << "brickcastd still running 5 s after SIGTERM";
+    EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+TEST(DaemonProcess, SigtermDuringTheHeaviestFrameExitsWithinFiveSeconds) {
+    TempDir dir;
+    const std::string raw = bc::test::dataPath("stanford_cthead_256x256x113_uint16.raw");
+    if (!std::filesystem::exists(raw)) return bc::test::missingData("scan cthead");
+    const std::string store = dir.file("cthead.bcs");
+    const auto ingest = bc::test::runCommand(std::string(BC_BRICKCAST_EXE) + " ingest " + raw +
+                                             " --spacing 1,1,2 -o " + store);
+    ASSERT_EQ(ingest.exitCode, 0) << ingest.text;
+    const std::string config = dir.file("brickcastd.toml"), port = dir.file("port");
+    // The cap is raised so that the frame is drawn (the default refuses it).
+    std::ofstream(config) << "[server]\nlisten = \"127.0.0.1:0\"\n[frames]\n"
+                          << "max_frame_gsamples = 65536\n[[volume]]\nname = \"cthead\"\n"
+                          << "store = \"" << store << "\"\n";
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        ::execl(BC_BRICKCASTD_EXE, BC_BRICKCASTD_EXE, "--config", config.c_str(), "--port-file",
+                port.c_str(), "--quiet", nullptr);
+        std::_Exit(127);
+    }
+    for (int i = 0; i < 300 && !std::filesystem::exists(port); ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    ASSERT_TRUE(std::filesystem::exists(port)) << "brickcastd did not start";
+    client::ClientConfig cc;
+    std::ifstream(port) >> cc.port;
+    client::Client c(cc);
+    const auto v = c.openVolume("cthead");
+    protocol::RenderOptions o;
+    o.width = o.height = 4096;
+    o.stepVoxels = 0.0101f; // the smallest step the renderers take is 0.01
+    o.renderer = protocol::Renderer::Reference;
+    o.quality = protocol::Quality::Refined;
+    c.setRenderOptions(o);
+    c.setCamera(orbitCamera(v, 30, 1));
+    c.requestFrame();
+    std::this_thread::sleep_for(std::chrono::seconds(2)); // well into the frame
+    const auto start = std::chrono::steady_clock::now();
+    ASSERT_EQ(::kill(pid, SIGTERM), 0);
+    int status = 0;
+    bool exited = false;
+    for (int i = 0; i < 200 && !exited; ++i) {
+        exited = ::waitpid(pid, &status, WNOHANG) == pid;
+        if (!exited) std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    }
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    if (!exited) {
+        ::kill(pid, SIGKILL);
+        ::waitpid(pid, &status, 0);
+        FAIL() << "brickcastd still running 5 s after SIGTERM";
+    }
+    std::printf("[sigterm] brickcastd exited %.0f ms after SIGTERM, mid-frame\n", ms);
+    ASSERT_TRUE(WIFEXITED(status));
     EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 

@@ -1,0 +1,203 @@
+// No client can stall the others: a frame over the cost cap is refused naming the cap; a long
+// frame is drawn in slices with the other sessions served between them, and dropped at its next
+// slice once its session has gone; a session that never reads holds at most its write queue's
+// bytes. (SIGTERM during a long frame: tests/tools/DaemonProcessTest.cpp.)
+#include "ServerTestSupport.h"
+
+#include "../render/RenderTestSupport.h"
+#include "render/CpuRaycaster.h"
+#include "render/TransferFunction.h"
+#include "render/View.h"
+#include "server/ViewRequest.h"
+
+#include <algorithm>
+#include <chrono>
+
+namespace bc::server::test {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msBetween(Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+/// A daemon serving cthead (the real scan), ingested once for the suite.
+class FairScheduling : public ::testing::Test {
+  protected:
+    static void SetUpTestSuite() {
+        if (auto spec = bc::test::realScan("cthead"))
+            sStore = bc::test::ingestSpec(*spec, {32, 2, 8}).release();
+    }
+    static void TearDownTestSuite() {
+        delete sStore;
+        sStore = nullptr;
+    }
+    static DaemonConfig config() {
+        DaemonConfig c;
+        c.source = "<test>";
+        CatalogEntry e;
+        e.name = "cthead";
+        e.store = sStore->store->path();
+        c.volumes.push_back(e);
+        return c;
+    }
+    /// The heaviest frame of the reference renderer: 4096^2 at (about) the smallest step, 0.01.
+    static protocol::RenderOptions heaviestReference() {
+        protocol::RenderOptions o;
+        o.width = o.height = 4096;
+        o.stepVoxels = 0.0101f; // the smallest step the renderers take is 0.01
+        o.renderer = protocol::Renderer::Reference;
+        o.quality = protocol::Quality::Refined;
+        o.codec = protocol::Codec::Zstd;
+        return o;
+    }
+    static double counter(client::Client& c, const std::string& name) {
+        for (const auto& [k, v] : c.stats())
+            if (k == name) return v;
+        return -1;
+    }
+    static bc::test::TestStore* sStore;
+};
+bc::test::TestStore* FairScheduling::sStore = nullptr;
+
+TEST_F(FairScheduling, AFrameOverTheCostCapIsRefusedNamingTheCap) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    TestDaemon d(config());
+    client::Client c(d.clientConfig());
+    const auto v = c.openVolume("cthead");
+    c.setRenderOptions(heaviestReference());
+    c.setCamera(orbitCamera(v, 30, 1));
+    c.requestFrame();
+    const auto start = Clock::now();
+    try {
+        c.nextFrame();
+        ADD_FAILURE() << "a frame of ~7e11 samples was drawn under the default cap";
+    } catch (const client::ServerError& e) {
+        EXPECT_EQ(e.code(), protocol::ErrorCode::OutOfRange) << e.what();
+        EXPECT_NE(std::string(e.what()).find("frames.max_frame_gsamples"), std::string::npos)
+            << e.what();
+        EXPECT_FALSE(e.fatal());
+    }
+    EXPECT_LT(msBetween(start, Clock::now()), 2000.0) << "refused only after drawing";
+    // The session goes on: a frame within the cap is drawn.
+    c.setRenderOptions(smallCpuFrames(32));
+    c.requestFrame();
+    EXPECT_EQ(c.nextFrame().header.width, 32u);
+    EXPECT_EQ(counter(c, "frames_refused_total"), 1.0);
+}
+
+TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionGoes) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    DaemonConfig c = config();
+    c.maxFrameSamples = 1ull << 50; // the default cap refuses this frame: here it is drawn
+    TestDaemon d(c);
+    client::Client light(d.clientConfig());
+    const auto v = light.openVolume("cthead");
+    light.setRenderOptions(smallCpuFrames(64));
+    {
+        client::Client heavy(d.clientConfig());
+        heavy.openVolume("cthead");
+        heavy.setRenderOptions(heaviestReference());
+        heavy.setCamera(orbitCamera(v, 30, 1));
+        heavy.requestFrame();
+        std::this_thread::sleep_for(std::chrono::milliseconds(200)); // the heavy frame starts
+        double worstGapMs = 0;
+        auto last = Clock::now();
+        std::uint32_t frames = 0;
+        for (const auto until = last + std::chrono::seconds(6); Clock::now() < until; ++frames) {
+            light.setCamera(orbitCamera(v, 5.0 * frames, frames + 1));
+            light.requestFrame();
+            light.nextFrame();
+            const auto now = Clock::now();
+            worstGapMs = std::max(worstGapMs, msBetween(last, now));
+            last = now;
+        }
+        std::printf("[fair] %u light frames in 6 s beside a 4096^2 reference frame, worst gap "
+                    "%.0f ms, %.0f slices so far\n",
+                    frames, worstGapMs, counter(light, "frame_slices_total"));
+        EXPECT_LT(worstGapMs, 3000.0) << "the heavy frame stalled the other session";
+        EXPECT_GT(counter(light, "frame_slices_total"), 10.0) << "the heavy frame was not sliced";
+    } // the heavy client disconnects mid-frame
+    double cancelled = 0;
+    for (int i = 0; i < 50 && cancelled < 1; ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        cancelled = counter(light, "frames_cancelled_total");
+    }
+    EXPECT_EQ(cancelled, 1.0) << "the frame of a session that has gone was not dropped";
+    // Nothing is left running: slices stop growing.
+    const double slices = counter(light, "frame_slices_total");
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    EXPECT_EQ(counter(light, "frame_slices_total"), slices);
+}
+
+TEST_F(FairScheduling, ASlicedFrameIsTheFrameDrawnWhole) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    DaemonConfig c = config();
+    c.sliceMs = 10; // many slices, some a part of a row
+    TestDaemon d(c);
+    client::Client client(d.clientConfig());
+    const auto v = client.openVolume("cthead");
+    protocol::RenderOptions o = smallCpuFrames(192);
+    o.stepVoxels = 0.25f;
+    o.codec = protocol::Codec::Raw;
+    client.setRenderOptions(o);
+    protocol::SetTransferFunction tfMessage;
+    tfMessage.kind = protocol::TfKind::Preset;
+    tfMessage.preset = "ct-bone";
+    client.setTransferFunction(tfMessage);
+    const auto camera = orbitCamera(v, 40, 1);
+    client.setCamera(camera);
+    client.requestFrame();
+    const auto frame = client.nextFrame();
+    const double slices = counter(client, "frame_slices_total");
+    std::printf("[fair] 192^2 CPU frame at step 0.25 in %.0f slices\n", slices);
+    EXPECT_GT(slices, 2.0) << "the frame was not sliced: raise its cost";
+
+    // The same frame in one call, as the renderer draws it for any caller.
+    const auto tf = toTransferFunction(tfMessage, sStore->stats, {});
+    render::RenderOptions options = toRenderOptions(o, false);
+    options.shading = shadingFor(o, tfMessage, *tf);
+    render::CpuRaycaster whole;
+    render::FrameStats stats;
+    const auto image =
+        whole.render(*sStore->store, *sStore->cache, *tf, toCamera(camera), options, stats);
+    EXPECT_EQ(frame.rgba, render::toRgba8(image)) << "slices changed pixels";
+}
+
+TEST_F(FairScheduling, ASessionThatNeverReadsHoldsAtMostItsQueueBytes) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    DaemonConfig c = config();
+    c.writeQueueFrames = 16;
+    c.writeQueueBytes = 4ull << 20;
+    c.writeTimeoutMs = 60000; // the queue bound, not the write deadline, is under test
+    TestDaemon d(c);
+    RawConnection stuck(d.port, 4096);
+    stuck.handshake("");
+    stuck.send(protocol::OpenVolume{"cthead"}, 3);
+    protocol::RenderOptions o = smallCpuFrames(1024); // 4 MiB a frame, raw
+    o.codec = protocol::Codec::Raw;
+    o.stepVoxels = 4;
+    stuck.send(protocol::SetRenderOptions{o}, 4);
+    stuck.send(protocol::RequestFrame{protocol::FrameMode::ContinuousOn}, 5);
+    client::Client light(d.clientConfig());
+    const auto v = light.openVolume("cthead");
+    light.setRenderOptions(smallCpuFrames(48));
+    double largest = 0;
+    for (std::uint32_t i = 1; i <= 40; ++i) { // the stuck client's camera keeps moving
+        stuck.send(orbitCamera(v, 9.0 * i, i), 5 + i);
+        light.setCamera(orbitCamera(v, 9.0 * i, i));
+        light.requestFrame();
+        light.nextFrame();
+        largest = std::max(largest, counter(light, "write_queue_bytes_max"));
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    std::printf("[fair] largest write queue of a client that never reads: %.1f MiB\n",
+                largest / double(1 << 20));
+    EXPECT_GT(largest, 4.0 * (1 << 20)) << "the stuck client was never sent a frame";
+    // The byte limit, plus the one frame that may go over it, plus small control messages.
+    EXPECT_LE(largest, 8.0 * (1 << 20) + 65536);
+}
+
+} // namespace
+} // namespace bc::server::test
