@@ -311,7 +311,10 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     // One builder per level, each feeding the next; jobs go to the shared queue.
     const auto nLevels = static_cast<std::uint32_t>(layout.levels().size());
     std::vector<std::unique_ptr<detail::LevelBuilder>> levels(nLevels);
-    auto sink = [&](detail::BrickJob&& job) { queue.push(std::move(job)); };
+    auto sink = [&](detail::BrickJob&& job) {
+        throwIfCancelled(config); // between bricks too: a row of wide bricks takes a while
+        queue.push(std::move(job));
+    };
     for (std::uint32_t l = nLevels; l-- > 0;)
         levels[l] = std::make_unique<detail::LevelBuilder>(
             layout, l, info.type, sink, l + 1 < nLevels ? levels[l + 1].get() : nullptr);
