@@ -7,6 +7,7 @@
 #include "brickstore/detail/StoreFormat.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -231,13 +232,14 @@ void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestStat
     }
 }
 
-/// Refuses an ingest whose buffers would exceed the memory budget, before any is allocated.
-void checkMemoryBudget(const VolumeInfo& info, const IngestConfig& config,
-                       const std::string& inputName) {
+/// Refuses an ingest whose buffers would exceed the memory budget, before any is allocated;
+/// returns the estimate and the budget.
+std::array<std::uint64_t, 2> checkMemoryBudget(const VolumeInfo& info, const IngestConfig& config,
+                                               const std::string& inputName) {
     const std::uint64_t budget =
         config.memoryBudgetBytes ? config.memoryBudgetBytes : defaultIngestMemoryBudgetBytes();
     const std::uint64_t need = ingestMemoryBytes(info, config);
-    if (need <= budget) return;
+    if (need <= budget) return {need, budget};
     throw FormatError(inputName, "dims",
                       dimsText(info.dims) + " " + std::string(voxelTypeName(info.type)) +
                           " needs " + bytesText(double(need)) +
@@ -294,7 +296,7 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
                                                              : info.description;
     validateVolumeInfo(info, inputName);
     StoreLayout layout(info.dims, config.geometry); // throws std::invalid_argument
-    checkMemoryBudget(info, config, inputName);
+    const auto [memoryBytes, memoryBudgetBytes] = checkMemoryBudget(info, config, inputName);
     const std::uint32_t bins =
         std::clamp<std::uint32_t>(config.histogramBins, 1, detail::kMaxHistogramBins);
     const unsigned threads =
@@ -374,6 +376,8 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     report.uncompressedBrickBytes = s.uncompressedBytes;
     report.constantBrickBytes = report.constantBricks * brickBytes;
     report.fileBytes = h.fileBytes;
+    report.memoryBytes = memoryBytes;
+    report.memoryBudgetBytes = memoryBudgetBytes;
     report.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     return report;
 }

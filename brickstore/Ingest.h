@@ -64,6 +64,8 @@ struct IngestReport {
     std::uint64_t constantBricks = 0;         ///< not stored: every voxel (apron too) one value
     std::uint64_t storedBytes = 0;            ///< compressed payloads plus leaf tables
     std::uint64_t leafTableBytes = 0;         ///< the leaf tables alone (thin volumes: most)
+    std::uint64_t memoryBytes = 0;            ///< ingestMemoryBytes: the estimated peak
+    std::uint64_t memoryBudgetBytes = 0;      ///< the budget it was checked against
     std::uint64_t uncompressedBrickBytes = 0; ///< stored bricks before compression
     std::uint64_t constantBrickBytes = 0;     ///< bytes the constant bricks would have taken
     std::uint64_t fileBytes = 0;

@@ -163,6 +163,9 @@ void runIngest(const IngestOptions& o) {
                     ? double(report.uncompressedBrickBytes) / double(report.storedBytes)
                     : 0.0,
                 tools::formatBytes(double(report.constantBrickBytes)).c_str());
+    std::printf("  memory: %s estimated for the buffers, budget %s\n",
+                tools::formatBytes(double(report.memoryBytes)).c_str(),
+                tools::formatBytes(double(report.memoryBudgetBytes)).c_str());
     // A thin volume fills each stored brick with few voxels but a whole leaf table.
     if (report.leafTableBytes * 2 > report.storedBytes)
         std::printf("  note: %s of the store are leaf tables (a fixed table per stored brick, "
