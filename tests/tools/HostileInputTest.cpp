@@ -222,6 +222,22 @@ TEST(HostileInput, IngestOverTheMemoryBudgetFailsNamingTheBudget) {
     EXPECT_TRUE(contains(r.out.text, "--memory-budget-mb")) << r.out.text;
 }
 
+// A budget set above what the process may really allocate (300 MB of address space): the
+// allocation fails, and the user is told what ran out, on which input, and what to change.
+TEST(HostileInput, OutOfMemoryIsExplainedWithTheInputAndStore) {
+    bc::test::TempDir dir;
+    const std::string store = dir.file("out.bcs");
+    auto out = bc::test::runCommand(
+        "prlimit --as=300000000 -- " + std::string(BC_BRICKCAST_EXE) +
+        " ingest synth:phantom --dims 2048,2048,160 --memory-budget-mb 4000 --threads 1 -o " +
+        store);
+    EXPECT_EQ(out.exitCode, 1) << out.text;
+    EXPECT_TRUE(contains(out.text, "out of memory while ingesting synth:phantom (2048x2048x160)"))
+        << out.text;
+    EXPECT_TRUE(contains(out.text, store)) << out.text;
+    EXPECT_FALSE(fs::exists(store));
+}
+
 TEST(HostileInput, DicomSliceWithShortPixelDataFails) {
     if (!bc::test::haveData(kPancreas)) return bc::test::missingData(kPancreas);
     bc::test::TempDir dir;
