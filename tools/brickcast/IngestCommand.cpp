@@ -28,14 +28,18 @@ struct IngestOptions {
 };
 
 // SIGINT/SIGTERM during an ingest: the handler only sets these; the ingest loop polls the
-// flag, stops, removes its partial file, and runIngest then dies of the same signal.
+// flag, stops, removes its partial file, and runIngest then dies of the same signal. Before
+// the ingest has a partial file (opening the input, a long DICOM header scan) there is
+// nothing to remove: the process dies at once.
 std::atomic<bool> gCancel{false};
+std::atomic<bool> gIngesting{false};
 volatile std::sig_atomic_t gSignal = 0;
 static_assert(std::atomic<bool>::is_always_lock_free);
 
 extern "C" void onTerminate(int signal) {
     gSignal = signal;
     gCancel.store(true);
+    if (!gIngesting.load()) std::raise(signal); // SA_RESETHAND: the default action now
 }
 
 /// Installs onTerminate for SIGINT and SIGTERM while it lives (one-shot: a second signal
@@ -124,6 +128,7 @@ brickstore::IngestReport ingestInput(brickstore::VolumeSource& source, const Ing
                      path.c_str());
     };
     ProgressLine line(!o.quiet);
+    gIngesting.store(true); // from here a signal only sets gCancel (see onTerminate)
     try {
         auto report = brickstore::ingest(
             source, o.output, config, [&](const brickstore::IngestProgress& p) { line.update(p); });
