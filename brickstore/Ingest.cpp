@@ -7,14 +7,20 @@
 #include "brickstore/detail/StoreFormat.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <exception>
+#include <limits>
 #include <mutex>
 #include <optional>
 #include <thread>
 #include <zstd.h>
+
+#include <sys/resource.h>
+#include <unistd.h>
 
 namespace bc::brickstore {
 namespace {
@@ -180,15 +186,31 @@ std::vector<std::uint64_t> buildHistogram(IngestState& s, std::uint32_t bins, do
     return total;
 }
 
+/// Bytes of source slices read at a time (at least one slice).
+constexpr std::uint64_t kStagingBytes = 8ull << 20;
+
+/// Slices per staging slab.
+std::uint64_t stagingSlices(const VolumeInfo& info) {
+    const std::uint64_t chunk = std::max<std::uint64_t>(1, kStagingBytes / info.sliceBytes());
+    return std::min(chunk, info.dims[2]);
+}
+
+void throwIfCancelled(const IngestConfig& config) {
+    if (config.cancel && config.cancel->load())
+        throw IngestCancelled("ingest cancelled; the partial store was removed");
+}
+
 /// Reads every slice of the source into the level chain, reporting progress.
 void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestState& s,
+                  const IngestConfig& config,
                   const std::function<void(const IngestProgress&)>& progress,
                   Clock::time_point start) {
     const VolumeInfo& info = source.info();
     const std::uint64_t sliceBytes = info.sliceBytes();
-    const std::uint64_t chunk = std::max<std::uint64_t>(1, (8ull << 20) / sliceBytes);
-    std::vector<std::byte> staging(std::min(chunk, info.dims[2]) * sliceBytes);
+    const std::uint64_t chunk = stagingSlices(info);
+    std::vector<std::byte> staging(chunk * sliceBytes);
     for (std::uint64_t z = 0; z < info.dims[2];) {
+        throwIfCancelled(config);
         std::uint64_t n = std::min(chunk, info.dims[2] - z);
         source.readSlices(n, std::span(staging).first(n * sliceBytes));
         for (std::uint64_t i = 0; i < n; ++i)
@@ -210,20 +232,80 @@ void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestStat
     }
 }
 
+/// Refuses an ingest whose buffers would exceed the memory budget, before any is allocated;
+/// returns the estimate and the budget.
+std::array<std::uint64_t, 2> checkMemoryBudget(const VolumeInfo& info, const IngestConfig& config,
+                                               const std::string& inputName) {
+    const std::uint64_t budget =
+        config.memoryBudgetBytes ? config.memoryBudgetBytes : defaultIngestMemoryBudgetBytes();
+    const std::uint64_t need = ingestMemoryBytes(info, config);
+    if (need <= budget) return {need, budget};
+    throw FormatError(inputName, "dims",
+                      dimsText(info.dims) + " " + std::string(voxelTypeName(info.type)) +
+                          " needs " + bytesText(double(need)) +
+                          " of slab buffers and bricks in flight, over the ingest memory budget "
+                          "of " +
+                          bytesText(double(budget)) + " (--memory-budget-mb)");
+}
+
 } // namespace
+
+std::uint64_t defaultIngestMemoryBudgetBytes() {
+    const long pages = ::sysconf(_SC_PHYS_PAGES), pageBytes = ::sysconf(_SC_PAGESIZE);
+    std::uint64_t budget = pages > 0 && pageBytes > 0
+                               ? std::uint64_t(pages) * std::uint64_t(pageBytes) / 2
+                               : std::uint64_t(4) << 30;
+    rlimit limit{};
+    if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+        budget = std::min<std::uint64_t>(budget, limit.rlim_cur / 2);
+    return std::max<std::uint64_t>(budget, std::uint64_t(64) << 20);
+}
+
+std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& config) {
+    const StoreLayout layout(info.dims, config.geometry);
+    const double vb = double(voxelBytes(info.type)), edge = layout.storedEdge();
+    const double slice = double(info.dims[0]) * double(info.dims[1]) * vb;
+    // Slab rings of every level, the half-resolution slice each feeds the next, the staging
+    // slab, and one slice for the reader's own decoding (DICOM, mosaic).
+    double slabs = double(stagingSlices(info)) * slice + slice;
+    const auto& levels = layout.levels();
+    for (std::size_t l = 0; l < levels.size(); ++l) {
+        const double dx = double(levels[l].dims[0]), dy = double(levels[l].dims[1]);
+        slabs += edge * dx * dy * vb;
+        if (l + 1 < levels.size()) slabs += std::ceil(dx / 2) * std::ceil(dy / 2) * vb;
+    }
+    // Bricks queued, being compressed (with a compression buffer each) and being cut; the
+    // histogram pass holds a brick and a frame per worker.
+    const double threads =
+        config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
+    const double queue = config.queueBricks ? config.queueBricks : 4 * threads;
+    const double brick = double(layout.storedVoxels()) * vb;
+    const double bricks = (queue + 2 * threads + 1) * brick;
+    // The records and the index encoded from them.
+    const double index = 2.0 * double(layout.brickCount()) * double(sizeof(BrickRecord));
+    const double total = slabs + bricks + index;
+    return total >= 1.8e19 ? std::numeric_limits<std::uint64_t>::max() : std::uint64_t(total);
+}
 
 IngestReport ingest(VolumeSource& source, const std::string& storePath, const IngestConfig& config,
                     const std::function<void(const IngestProgress&)>& progress) {
     const auto start = Clock::now();
     const VolumeInfo& info = source.info();
-    validateVolumeInfo(info, info.description.empty() ? storePath : info.description);
+    const std::string inputName = !config.inputName.empty()  ? config.inputName
+                                  : info.description.empty() ? storePath
+                                                             : info.description;
+    validateVolumeInfo(info, inputName);
     StoreLayout layout(info.dims, config.geometry); // throws std::invalid_argument
+    const auto [memoryBytes, memoryBudgetBytes] = checkMemoryBudget(info, config, inputName);
     const std::uint32_t bins =
         std::clamp<std::uint32_t>(config.histogramBins, 1, detail::kMaxHistogramBins);
     const unsigned threads =
         config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
 
     detail::StoreFile file(storePath);
+    if (config.staleFileRemoved)
+        for (const std::string& stale : file.removedStalePartials())
+            config.staleFileRemoved(stale);
     IngestState s{layout, info.type, config.zstdLevel, file, {}, {}, {}, {}, {}};
     s.records.resize(layout.brickCount());
     JobQueue queue(config.queueBricks ? config.queueBricks : 4 * threads);
@@ -231,7 +313,10 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     // One builder per level, each feeding the next; jobs go to the shared queue.
     const auto nLevels = static_cast<std::uint32_t>(layout.levels().size());
     std::vector<std::unique_ptr<detail::LevelBuilder>> levels(nLevels);
-    auto sink = [&](detail::BrickJob&& job) { queue.push(std::move(job)); };
+    auto sink = [&](detail::BrickJob&& job) {
+        throwIfCancelled(config); // between bricks too: a row of wide bricks takes a while
+        queue.push(std::move(job));
+    };
     for (std::uint32_t l = nLevels; l-- > 0;)
         levels[l] = std::make_unique<detail::LevelBuilder>(
             layout, l, info.type, sink, l + 1 < nLevels ? levels[l + 1].get() : nullptr);
@@ -240,7 +325,7 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
         for (unsigned t = 0; t < threads; ++t)
             workers.emplace_back([&] { workerLoop(s, queue); });
         try {
-            streamSlices(source, *levels[0], s, progress, start);
+            streamSlices(source, *levels[0], s, config, progress, start);
             queue.finish();
         } catch (...) {
             s.fail(std::current_exception());
@@ -255,7 +340,9 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
         lo = std::min<double>(lo, s.records[i].range.min);
         hi = std::max<double>(hi, s.records[i].range.max);
     }
+    throwIfCancelled(config);
     auto histogram = buildHistogram(s, bins, lo, hi, threads);
+    throwIfCancelled(config);
 
     detail::StoreHeader h;
     h.volume = info;
@@ -269,6 +356,7 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
         if (!r.stored()) continue;
         ++h.storedBricks;
         h.storedBytes += r.compressedBytes + r.leafBytes;
+        report.leafTableBytes += r.leafBytes;
     }
     auto index = detail::encodeIndex(layout, s.records, histogram, info.description);
     h.indexOffset = file.end();
@@ -288,6 +376,8 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     report.uncompressedBrickBytes = s.uncompressedBytes;
     report.constantBrickBytes = report.constantBricks * brickBytes;
     report.fileBytes = h.fileBytes;
+    report.memoryBytes = memoryBytes;
+    report.memoryBudgetBytes = memoryBudgetBytes;
     report.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     return report;
 }

@@ -5,8 +5,10 @@
 #include "brickstore/StoreLayout.h"
 #include "brickstore/VolumeSource.h"
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
+#include <stdexcept>
 #include <string>
 
 namespace bc::brickstore {
@@ -17,7 +19,35 @@ struct IngestConfig {
     int zstdLevel = 3;
     std::uint32_t histogramBins = 256;
     std::uint32_t queueBricks = 0; ///< bricks in flight; 0 = 4 per worker
+    /// Most bytes ingest may allocate (slab buffers of every level, bricks in flight, the
+    /// brick index); checked before anything is allocated. 0 = defaultIngestMemoryBudgetBytes().
+    std::uint64_t memoryBudgetBytes = 0;
+    /// Named in errors about the input (the path given on the command line); empty = the
+    /// source's description.
+    std::string inputName;
+    /// Polled between slabs of slices and before the store is committed: once true, ingest
+    /// stops, removes its partial file and throws IngestCancelled. May be set from a signal
+    /// handler (lock-free). Null = never cancelled.
+    const std::atomic<bool>* cancel = nullptr;
+    /// Told each stale partial file (of an ingest killed earlier) that was removed. May be empty.
+    std::function<void(const std::string&)> staleFileRemoved;
 };
+
+/// Thrown by ingest when IngestConfig::cancel was set; the partial file is already gone.
+class IngestCancelled : public std::runtime_error {
+  public:
+    using std::runtime_error::runtime_error;
+};
+
+/// Half of physical memory, and at most half of the process's address-space limit
+/// (RLIMIT_AS) where one is set; at least 64 MiB.
+std::uint64_t defaultIngestMemoryBudgetBytes();
+
+/// What an ingest of `info` with `config` will allocate at its peak, in bytes: the slab ring
+/// of B + 2A slices and the half-resolution slice of every pyramid level, the staging slabs,
+/// the reader's slice, the bricks queued and being compressed, and the brick index.
+/// @throw std::invalid_argument on a geometry outside the accepted ranges.
+std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& config);
 
 struct IngestProgress {
     std::uint64_t bricksDone = 0;
@@ -33,6 +63,9 @@ struct IngestReport {
     std::uint64_t storedBricks = 0;
     std::uint64_t constantBricks = 0;         ///< not stored: every voxel (apron too) one value
     std::uint64_t storedBytes = 0;            ///< compressed payloads plus leaf tables
+    std::uint64_t leafTableBytes = 0;         ///< the leaf tables alone (thin volumes: most)
+    std::uint64_t memoryBytes = 0;            ///< ingestMemoryBytes: the estimated peak
+    std::uint64_t memoryBudgetBytes = 0;      ///< the budget it was checked against
     std::uint64_t uncompressedBrickBytes = 0; ///< stored bricks before compression
     std::uint64_t constantBrickBytes = 0;     ///< bytes the constant bricks would have taken
     std::uint64_t fileBytes = 0;
@@ -42,7 +75,8 @@ struct IngestReport {
 /// Ingests `source` into a new store at `storePath`. An existing file there is replaced only
 /// when the new store is complete; on any failure it is left untouched and no partial store
 /// remains. `progress` (may be empty) is called from the ingesting thread.
-/// @throw FormatError from the source, StoreIoError on write failures.
+/// @throw FormatError from the source, or naming the input's dims when the ingest would need
+/// more memory than config.memoryBudgetBytes; StoreIoError on write failures; IngestCancelled.
 IngestReport ingest(VolumeSource& source, const std::string& storePath, const IngestConfig& config,
                     const std::function<void(const IngestProgress&)>& progress = {});
 

@@ -3,6 +3,7 @@
 #include "brickstore/Error.h"
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 
@@ -19,26 +20,62 @@ bool checkedVolumeBytes(const std::array<std::uint64_t, 3>& dims, std::size_t by
     return true;
 }
 
-void validateVolumeInfo(const VolumeInfo& info, const std::string& file) {
-    static const char* kAxis[3] = {"x", "y", "z"};
+std::string dimsText(const std::array<std::uint64_t, 3>& dims) {
+    return std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]);
+}
+
+std::string bytesText(double bytes) {
+    static const char* kUnits[] = {"bytes", "kB", "MB", "GB", "TB", "PB", "EB"};
+    int unit = 0;
+    while (bytes >= 1000.0 && unit < 6) {
+        bytes /= 1000.0;
+        ++unit;
+    }
+    char text[32];
+    std::snprintf(text, sizeof text, unit == 0 ? "%.0f %s" : "%.1f %s", bytes, kUnits[unit]);
+    return text;
+}
+
+namespace {
+
+const char* kAxis[3] = {"x", "y", "z"};
+
+/// Dims within the edge, slice and volume limits (bytes computed without overflow).
+void checkDims(const VolumeInfo& info, const std::string& file, const std::string& field) {
+    const std::string dims = dimsText(info.dims);
     for (int a = 0; a < 3; ++a) {
         if (info.dims[a] == 0)
-            throw FormatError(file, "dims", std::string("dimension ") + kAxis[a] + " is zero");
+            throw FormatError(file, field, dims + ": dimension " + kAxis[a] + " is zero");
     }
-    std::uint64_t bytes = 0;
-    if (!checkedVolumeBytes(info.dims, voxelBytes(info.type), bytes))
-        throw FormatError(file, "dims", "byte size of the volume overflows 64 bits");
     for (int a = 0; a < 3; ++a) {
         if (info.dims[a] > kMaxDimVoxels)
-            throw FormatError(file, "dims",
-                              std::string("dimension ") + kAxis[a] + " = " +
+            throw FormatError(file, field,
+                              dims + ": dimension " + kAxis[a] + " = " +
                                   std::to_string(info.dims[a]) + " exceeds the limit of " +
-                                  std::to_string(kMaxDimVoxels));
+                                  std::to_string(kMaxDimVoxels) + " voxels per edge");
     }
-    if (bytes > kMaxVolumeBytes)
-        throw FormatError(file, "dims",
-                          "volume of " + std::to_string(bytes) +
-                              " bytes exceeds the limit of 1 PiB");
+    // Each edge is at most 2^20, so the products below cannot overflow.
+    const std::uint64_t slice = info.dims[0] * info.dims[1];
+    if (slice > kMaxSliceVoxels)
+        throw FormatError(file, field,
+                          dims + ": a slice of " + std::to_string(slice) +
+                              " voxels exceeds the limit of " + std::to_string(kMaxSliceVoxels) +
+                              " voxels (32768 x 32768)");
+    const std::uint64_t voxels = slice * info.dims[2];
+    if (voxels > kMaxVolumeVoxels)
+        throw FormatError(file, field,
+                          dims + ": " + std::to_string(voxels) + " voxels exceed the limit of " +
+                              std::to_string(kMaxVolumeVoxels) + " voxels (2^42)");
+    std::uint64_t bytes = 0;
+    if (!checkedVolumeBytes(info.dims, voxelBytes(info.type), bytes) || bytes > kMaxVolumeBytes)
+        throw FormatError(file, field, dims + ": the volume's bytes exceed the limit of 1 PiB");
+}
+
+} // namespace
+
+void validateVolumeInfo(const VolumeInfo& info, const std::string& file,
+                        const std::string& dimsField) {
+    checkDims(info, file, dimsField);
     for (int a = 0; a < 3; ++a) {
         double s = info.spacingMm[a];
         if (!std::isfinite(s) || s <= 0.0)
@@ -46,6 +83,21 @@ void validateVolumeInfo(const VolumeInfo& info, const std::string& file) {
                               std::string("spacing along ") + kAxis[a] + " is " +
                                   std::to_string(s) + "; it must be finite and positive");
     }
+}
+
+void checkCompressedPayload(const VolumeInfo& info, std::uint64_t declaredBytes,
+                            std::uint64_t payloadBytes, const char* codec, std::uint64_t maxRatio,
+                            const std::string& file, const std::string& dimsField) {
+    // payloadBytes * maxRatio < declaredBytes, without overflow.
+    if (payloadBytes >= (declaredBytes + maxRatio - 1) / maxRatio) return;
+    throw FormatError(file, dimsField,
+                      dimsText(info.dims) + " " + std::string(voxelTypeName(info.type)) +
+                          " voxels need " + bytesText(double(declaredBytes)) + ", but " +
+                          bytesText(double(payloadBytes)) + " of " + codec +
+                          " data expand to at most " +
+                          bytesText(double(payloadBytes) * double(maxRatio)) + " (" + codec +
+                          " expands at most " + std::to_string(maxRatio) +
+                          ":1); the header's dims are wrong or the file is truncated");
 }
 
 void VolumeSource::readSlices(std::uint64_t count, std::span<std::byte> out) {

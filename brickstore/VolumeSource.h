@@ -28,14 +28,36 @@ struct VolumeInfo {
     std::uint64_t sliceBytes() const { return dims[0] * dims[1] * voxelBytes(type); }
 };
 
-/// Largest edge accepted on any axis, and largest volume in bytes: no reader allocates from
-/// a size beyond these, whatever a header promises.
-constexpr std::uint64_t kMaxDimVoxels = 1ull << 20;
-constexpr std::uint64_t kMaxVolumeBytes = 1ull << 50;
+/// Input limits: the one place they live. No reader allocates from a size a file declares
+/// before these, the file-size checks of its reader and ingest's memory budget (Ingest.h) have
+/// passed. README.md "Limits" and `brickcast ingest --help` list them.
+constexpr std::uint64_t kMaxDimVoxels = 1ull << 20;    ///< any one edge
+constexpr std::uint64_t kMaxSliceVoxels = 1ull << 30;  ///< x*y of a slice (32768 x 32768)
+constexpr std::uint64_t kMaxVolumeVoxels = 1ull << 42; ///< x*y*z (about 4.4 T voxels)
+constexpr std::uint64_t kMaxVolumeBytes = 1ull << 50;  ///< x*y*z*voxel bytes (1 PiB)
+/// Largest expansion of the compressed inputs: deflate (gzip) at most 1032:1; zstd at most one
+/// 128 KiB block from a 4-byte RLE block, 32768:1. A payload that would have to expand more
+/// to fill the declared dims cannot hold them.
+constexpr std::uint64_t kMaxGzipRatio = 1032;
+constexpr std::uint64_t kMaxZstdRatio = 32768;
 
 /// Checks dims (non-zero, byte size without 64-bit overflow, within the limits above) and
-/// spacing (finite, positive). @throw FormatError naming `file` and the field at fault.
-void validateVolumeInfo(const VolumeInfo& info, const std::string& file);
+/// spacing (finite, positive). `dimsField` names the header field the dims came from
+/// ("dim[1..3]", "Rows/Columns"). @throw FormatError naming `file` and the field at fault.
+void validateVolumeInfo(const VolumeInfo& info, const std::string& file,
+                        const std::string& dimsField = "dims");
+
+/// Checks that `payloadBytes` of `codec` data ("gzip", "zstd") can expand to the
+/// `declaredBytes` the header promises, given the codec's largest ratio `maxRatio`.
+/// @throw FormatError(file, dimsField) saying both sizes and the ratio.
+void checkCompressedPayload(const VolumeInfo& info, std::uint64_t declaredBytes,
+                            std::uint64_t payloadBytes, const char* codec, std::uint64_t maxRatio,
+                            const std::string& file, const std::string& dimsField = "dims");
+
+/// "32767x32767x32767": dims as messages write them.
+std::string dimsText(const std::array<std::uint64_t, 3>& dims);
+/// "70.4 GB": a byte count as messages write it (decimal units).
+std::string bytesText(double bytes);
 
 /// Sets `out` to dims[0]*dims[1]*dims[2]*bytesPerVoxel; false (out untouched) on 64-bit overflow.
 bool checkedVolumeBytes(const std::array<std::uint64_t, 3>& dims, std::size_t bytesPerVoxel,

@@ -9,12 +9,15 @@
 
 #include <cstdio>
 #include <exception>
+#include <new>
+#include <string>
 
 namespace bc::tools {
 
 /// Parses `argv` with `app` (running what it selects); returns the process's exit status.
 /// Bad options print CLI11's message; failures print "<program>: bad input: ...",
-/// "<program>: corrupt store: ..." or "<program>: ..." and return 1.
+/// "<program>: corrupt store: ..." or "<program>: ..." and return 1; std::bad_alloc that no
+/// command explained prints the command line it happened in.
 inline int runCommandLine(CLI::App& app, int argc, char** argv, const char* program) {
     try {
         app.parse(argc, argv);
@@ -28,6 +31,14 @@ inline int runCommandLine(CLI::App& app, int argc, char** argv, const char* prog
         return 1;
     } catch (const render::RenderInputError& e) {
         std::fprintf(stderr, "%s: bad input: %s\n", program, e.what());
+        return 1;
+    } catch (const std::bad_alloc&) {
+        // A command that can say more (which file, which stage) catches it itself.
+        std::string line;
+        for (int i = 1; i < argc; ++i)
+            line += std::string(" ") + argv[i];
+        std::fprintf(stderr, "%s: out of memory (std::bad_alloc) while running:%s\n", program,
+                     line.c_str());
         return 1;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "%s: %s\n", program, e.what());

@@ -17,8 +17,9 @@ std::string errnoText() {
     return std::strerror(errno);
 }
 
-/// Removes `target.partial.PID` files whose ingest process no longer exists.
-void removeStalePartials(const std::filesystem::path& target) {
+/// Removes `target.partial.PID` files whose ingest process no longer exists; returns them.
+std::vector<std::string> removeStalePartials(const std::filesystem::path& target) {
+    std::vector<std::string> removed;
     std::error_code ec;
     auto folder = target.has_parent_path() ? target.parent_path() : std::filesystem::path(".");
     std::string prefix = target.filename().string() + ".partial.";
@@ -28,9 +29,11 @@ void removeStalePartials(const std::filesystem::path& target) {
         char* end = nullptr;
         long pid = std::strtol(name.c_str() + prefix.size(), &end, 10);
         if (pid <= 0 || *end != '\0') continue;
-        if (::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH)
-            std::filesystem::remove(entry.path(), ec);
+        if (::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH &&
+            std::filesystem::remove(entry.path(), ec))
+            removed.push_back(entry.path().string());
     }
+    return removed;
 }
 
 void syncFolder(const std::filesystem::path& target) {
@@ -48,7 +51,7 @@ StoreFile::StoreFile(const std::string& target) : mTarget(target), mEnd(kHeaderB
     std::error_code ec;
     if (std::filesystem::is_directory(t, ec))
         throw StoreIoError(target + ": is a folder; give the store's file name");
-    removeStalePartials(t);
+    mRemovedStale = removeStalePartials(t);
     mTemp = target + ".partial." + std::to_string(::getpid());
     mFd = ::open(mTemp.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (mFd < 0) throw StoreIoError(mTemp + ": cannot create: " + errnoText());

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace bc::brickstore::detail {
 
@@ -28,6 +29,8 @@ class StoreFile {
     /// fsync, rename over the target, fsync the folder.
     void commit();
     const std::string& tempPath() const { return mTemp; }
+    /// The stale partial files (of ingests that no longer run) the constructor removed.
+    const std::vector<std::string>& removedStalePartials() const { return mRemovedStale; }
 
   private:
     std::string mTarget;
@@ -35,6 +38,7 @@ class StoreFile {
     int mFd = -1;
     std::atomic<std::uint64_t> mEnd;
     bool mCommitted = false;
+    std::vector<std::string> mRemovedStale;
 };
 
 } // namespace bc::brickstore::detail

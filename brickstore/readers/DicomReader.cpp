@@ -22,6 +22,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <optional>
 #include <set>
@@ -83,6 +84,13 @@ struct SliceHeader {
     double slope = 1.0;
     double intercept = 0.0;
     double along = 0.0; ///< position projected on the slice normal
+};
+
+/// Where a file's PixelData value starts and how long it says it is (nullopt: undefined
+/// length, i.e. encapsulated frames whose decoded size only the decoder knows).
+struct PixelDataSpan {
+    std::uint64_t offset = 0;
+    std::optional<std::uint64_t> declaredBytes;
 };
 
 std::string fileName(const std::string& path) {
@@ -221,6 +229,71 @@ void readPixelDescription(const TagText& tags, SliceHeader& slice) {
                           numberText(slice.intercept) + " is absurdly large");
 }
 
+/// The PixelData element's value as the file holds it. gdcm's ReadUpToTag stops right after
+/// the element's tag and length (implicit VR: tag, 4-byte length; explicit OB/OW: tag, VR, 2
+/// reserved bytes, 4-byte length), so the length is the 4 bytes before the stream position.
+std::optional<PixelDataSpan> locatePixelData(const std::string& path, const gdcm::Reader& reader) {
+    const std::uint64_t position = reader.GetStreamCurrentPosition();
+    if (position < 8) return std::nullopt;
+    std::ifstream in(path, std::ios::binary);
+    std::array<unsigned char, 12> head{};
+    const std::uint64_t start = position >= 12 ? position - 12 : position - 8;
+    in.seekg(std::streamoff(start));
+    in.read(reinterpret_cast<char*>(head.data()), std::streamsize(position - start));
+    if (std::uint64_t(in.gcount()) != position - start) return std::nullopt;
+    const bool big = reader.GetFile().GetHeader().GetDataSetTransferSyntax().GetSwapCode() ==
+                     gdcm::SwapCode::BigEndian;
+    // The tag (7FE0,0010) sits 8 (implicit) or 12 (explicit) bytes back: otherwise the stream
+    // is not where this expects and nothing is claimed.
+    auto isTag = [&](std::size_t i) {
+        return big ? head[i] == 0x7f && head[i + 1] == 0xe0 && head[i + 2] == 0x00 &&
+                         head[i + 3] == 0x10
+                   : head[i] == 0xe0 && head[i + 1] == 0x7f && head[i + 2] == 0x10 &&
+                         head[i + 3] == 0x00;
+    };
+    const std::size_t n = std::size_t(position - start);
+    if (!isTag(n - 8) && !(n == 12 && isTag(0))) return std::nullopt;
+    const unsigned char* l = head.data() + n - 4;
+    const std::uint32_t length = big ? std::uint32_t(l[0]) << 24 | std::uint32_t(l[1]) << 16 |
+                                           std::uint32_t(l[2]) << 8 | l[3]
+                                     : std::uint32_t(l[3]) << 24 | std::uint32_t(l[2]) << 16 |
+                                           std::uint32_t(l[1]) << 8 | l[0];
+    PixelDataSpan span;
+    span.offset = position;
+    if (length != 0xffffffffu) span.declaredBytes = length;
+    return span;
+}
+
+/// Rows x Columns within the slice limit, and a native PixelData that holds Rows x Columns x
+/// Samples x Bits Allocated / 8 bytes both by its declared length and by the bytes the file
+/// really has after it: checked for every slice, before any is decoded.
+void checkPixelData(const SliceHeader& slice, const std::optional<PixelDataSpan>& span) {
+    const std::string need = std::to_string(slice.columns) + " x " + std::to_string(slice.rows) +
+                             " x 1 sample x " + std::to_string(slice.layout.bitsAllocated / 8) +
+                             " bytes";
+    if (slice.rows * slice.columns > kMaxSliceVoxels)
+        throw FormatError(slice.path, "Rows/Columns",
+                          std::to_string(slice.rows) + " x " + std::to_string(slice.columns) +
+                              ": a slice of " + std::to_string(slice.rows * slice.columns) +
+                              " pixels exceeds the limit of " + std::to_string(kMaxSliceVoxels));
+    if (!span || !span->declaredBytes) return;
+    const std::uint64_t needBytes = slice.rows * slice.columns * (slice.layout.bitsAllocated / 8);
+    std::error_code ec;
+    const std::uint64_t fileBytes = std::filesystem::file_size(slice.path, ec);
+    if (ec) throw FormatError(slice.path, "file", "cannot get its size: " + ec.message());
+    const std::uint64_t held = fileBytes > span->offset ? fileBytes - span->offset : 0;
+    if (*span->declaredBytes < needBytes)
+        throw FormatError(slice.path, "PixelData",
+                          "declares " + std::to_string(*span->declaredBytes) + " bytes; " + need +
+                              " need " + std::to_string(needBytes));
+    if (held < needBytes)
+        throw FormatError(slice.path, "PixelData",
+                          "the file holds " + std::to_string(held) +
+                              " bytes of pixel data after byte " + std::to_string(span->offset) +
+                              "; " + need + " need " + std::to_string(needBytes) +
+                              " (file truncated)");
+}
+
 /// The header of one file; nullopt for a file that is not DICOM (LICENSE, notes) or a DICOM
 /// object that is not an image (DICOMDIR, structured report: no Rows).
 std::optional<SliceHeader> readSliceHeader(const std::string& path) {
@@ -237,6 +310,7 @@ std::optional<SliceHeader> readSliceHeader(const std::string& path) {
     slice.modality = tags.text(kModality);
     readGeometry(tags, slice);
     readPixelDescription(tags, slice);
+    checkPixelData(slice, locatePixelData(path, reader));
     return slice;
 }
 

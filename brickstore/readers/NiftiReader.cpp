@@ -17,6 +17,7 @@
 #include <fstream>
 #include <limits>
 #include <memory>
+#include <utility>
 #include <vector>
 
 // After the standard headers: nifti1.h redefines DT_UNKNOWN, which <dirent.h> also declares.
@@ -104,18 +105,32 @@ std::array<double, 2> integerRange(InputKind k) {
     }
 }
 
-/// value * slope + inter; the identity when scl_slope is 0 or not finite (as niftilib reads it).
+/// value * slope + inter; the identity when scl_slope is 0 (NIfTI-1: no scaling).
 struct Scaling {
     double slope = 1.0;
     double inter = 0.0;
     bool identity() const { return slope == 1.0 && inter == 0.0; }
 };
 
-Scaling scalingOf(const nifti_1_header& hdr) {
-    const double slope = std::isfinite(hdr.scl_slope) ? hdr.scl_slope : 0.0;
-    const double inter = std::isfinite(hdr.scl_inter) ? hdr.scl_inter : 0.0;
-    if (slope == 0.0) return {};
-    return {slope, inter};
+std::string numberText(double v) {
+    char text[32];
+    std::snprintf(text, sizeof(text), "%g", v);
+    return text;
+}
+
+/// A non-finite scl_slope or scl_inter is refused rather than read as "no scaling" (as
+/// niftilib does): it says the header is damaged, and guessing would change every value.
+Scaling scalingOf(const std::string& path, const nifti_1_header& hdr) {
+    const std::pair<const char*, float> fields[2] = {{"scl_slope", hdr.scl_slope},
+                                                     {"scl_inter", hdr.scl_inter}};
+    for (const auto& [name, value] : fields)
+        if (!std::isfinite(value))
+            throw FormatError(path, name,
+                              numberText(value) +
+                                  " is not a finite number; NIfTI-1 scaling needs a finite "
+                                  "scl_slope (0 = no scaling) and scl_inter");
+    if (hdr.scl_slope == 0.0f) return {};
+    return {hdr.scl_slope, hdr.scl_inter};
 }
 
 bool isSmallInteger(double v) {
@@ -234,13 +249,17 @@ bool isGzip(const std::string& path) {
     return in.gcount() == 2 && magic[0] == 0x1f && magic[1] == 0x8b;
 }
 
-/// A plain file is checked up front; a gzip stream can only fail when read (see readExact).
-void checkPlainFileHolds(const std::string& path, std::uint64_t voxOffset,
-                         std::uint64_t dataBytes) {
-    if (isGzip(path)) return;
+/// A plain file must hold the voxels; a gzip file must be large enough to inflate to them
+/// (a truncated one can only fail when read, see readExact).
+void checkFileHolds(const std::string& path, const VolumeInfo& info, std::uint64_t voxOffset,
+                    std::uint64_t dataBytes) {
     std::error_code ec;
     const std::uint64_t size = std::filesystem::file_size(path, ec);
     if (ec) throw FormatError(path, "file", "cannot get its size: " + ec.message());
+    if (isGzip(path)) {
+        checkCompressedPayload(info, voxOffset + dataBytes, size, "gzip", kMaxGzipRatio, path);
+        return;
+    }
     if (size < voxOffset || size - voxOffset < dataBytes)
         throw FormatError(path, "data",
                           "truncated: the header promises " + std::to_string(dataBytes) +
@@ -311,16 +330,10 @@ void convert(InputKind kind, const std::byte* in, std::size_t count, const Scali
     }
 }
 
-std::string numberText(double v) {
-    char text[32];
-    std::snprintf(text, sizeof(text), "%g", v);
-    return text;
-}
-
 class NiftiVolume final : public VolumeSource {
   public:
     NiftiVolume(const std::string& path, const nifti_1_header& hdr, bool swapped)
-        : mPath(path), mInput(inputTypeOf(path, hdr.datatype)), mScaling(scalingOf(hdr)),
+        : mPath(path), mInput(inputTypeOf(path, hdr.datatype)), mScaling(scalingOf(path, hdr)),
           mSwapped(swapped) {
         std::uint64_t volumes = 1;
         mInfo.dims = dimsOf(path, hdr, volumes);
@@ -334,7 +347,7 @@ class NiftiVolume final : public VolumeSource {
         if (!checkedVolumeBytes(mInfo.dims, mInput.bytes, dataBytes))
             throw FormatError(path, "dims", "byte size of the volume overflows 64 bits");
         const std::uint64_t voxOffset = voxOffsetOf(path, hdr);
-        checkPlainFileHolds(path, voxOffset, dataBytes);
+        checkFileHolds(path, mInfo, voxOffset, dataBytes);
         open(voxOffset);
     }
 
@@ -380,11 +393,11 @@ class NiftiVolume final : public VolumeSource {
                     " to " + stored;
         else if (isNative())
             text += stored;
+        else
+            text += std::string(mInput.name) + " converted to " + stored;
         if (mInfo.valueScale != 1.0 || mInfo.valueOffset != 0.0)
             text += " with scl_slope " + numberText(mInfo.valueScale) + ", scl_inter " +
                     numberText(mInfo.valueOffset) + " recorded (physical = stored x slope + inter)";
-        else
-            text += std::string(mInput.name) + " converted to " + stored;
         if (volumes > 1) text += ", first of " + std::to_string(volumes) + " volumes";
         return text;
     }

@@ -395,11 +395,13 @@ std::unique_ptr<VolumeSource> openNrrd(const std::string& path) {
     offset += skipLines(*data, h.lineSkip, dataPath);
     const std::uint64_t expected = h.info.voxelCount() * voxelBytes(h.info.type);
     const std::string claim = "header " + fs::path(path).filename().string() + " promises";
-    if (h.gzip)
-        return detail::makeRawVoxelSource(detail::openGzipStream(std::move(data), dataPath), h.info,
-                                          h.endian, dataPath, claim);
     std::uint64_t fileBytes = detail::fileBytes(dataPath);
     std::uint64_t held = fileBytes > offset ? fileBytes - offset : 0;
+    if (h.gzip) {
+        checkCompressedPayload(h.info, expected, held, "gzip", kMaxGzipRatio, dataPath);
+        return detail::makeRawVoxelSource(detail::openGzipStream(std::move(data), dataPath), h.info,
+                                          h.endian, dataPath, claim);
+    }
     if (held != expected)
         throw FormatError(dataPath, "size",
                           claim + " " + std::to_string(expected) + " bytes, file holds " +

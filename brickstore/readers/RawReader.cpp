@@ -59,12 +59,15 @@ std::unique_ptr<VolumeSource> openRaw(const std::string& path, const RawLayout& 
                                   std::to_string(held));
         return detail::makeRawVoxelSource(std::move(file), info, layout.endian, path, claim);
     }
-    // A first frame that declares more than expected is wrong for sure; one that declares less
-    // may be followed by more frames, so that case is checked while streaming.
-    if (auto first = detail::zstdFirstFrameBytes(path); first && *first > expected)
+    // The frames' declared sizes, summed, must be the volume's; where a frame declares none,
+    // the file must at least be large enough for zstd's largest expansion.
+    const detail::ZstdFrames frames = detail::zstdFrames(path);
+    if (frames.contentBytes && *frames.contentBytes != expected)
         throw FormatError(path, "size",
-                          claim + " " + std::to_string(expected) + " bytes, zstd frame declares " +
-                              std::to_string(*first));
+                          claim + " " + std::to_string(expected) +
+                              " bytes, the zstd frames declare " +
+                              std::to_string(*frames.contentBytes));
+    checkCompressedPayload(info, expected, frames.fileBytes, "zstd", kMaxZstdRatio, path);
     return detail::makeRawVoxelSource(detail::openZstdStream(std::move(file), path), info,
                                       layout.endian, path, claim);
 }

@@ -203,6 +203,40 @@ TEST(DicomReaderTest, DifferentRowsAreRejected) {
     expectFolderError(dir.path().string(), "Rows/Columns", "256");
 }
 
+// Issue 16: a slice whose PixelData is short, by its declared length or by the bytes the file
+// really holds, is refused when the series is opened (every slice is checked before the first
+// is decoded), naming that file; gdcm would otherwise pad it or leave the previous slice's
+// pixels in place.
+TEST(DicomReaderTest, ShortOrTruncatedPixelDataIsRejectedOnOpen) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    const auto original = bc::test::readFile(sliceFile(32));
+    const std::uint8_t tag[] = {0xe0, 0x7f, 0x10, 0x00}; // (7FE0,0010), implicit VR
+    std::size_t pixels = std::string::npos;
+    for (std::size_t i = 0; i + 8 <= original.size() && pixels == std::string::npos; ++i)
+        if (std::memcmp(original.data() + i, tag, 4) == 0) pixels = i;
+    ASSERT_NE(pixels, std::string::npos);
+    auto shortened = original;
+    const std::uint32_t length = 1000;
+    std::memcpy(shortened.data() + pixels + 4, &length, 4); // little-endian host
+    shortened.resize(pixels + 8 + length);
+    auto cut = original;
+    cut.resize(original.size() - 300000);
+    for (const auto* bytes : {&shortened, &cut}) {
+        TempDir dir;
+        linkSlices(dir, 30, 34, 32);
+        const std::string bad = dir.file("1-032.dcm");
+        bc::test::writeFile(bad, bytes->data(), bytes->size());
+        try {
+            openDicomSeries(dir.path().string());
+            FAIL() << "no FormatError for a short PixelData";
+        } catch (const FormatError& e) {
+            EXPECT_EQ(e.file(), bad) << e.what();
+            EXPECT_EQ(e.field(), "PixelData") << e.what();
+            EXPECT_NE(std::string(e.what()).find("524288"), std::string::npos) << e.what();
+        }
+    }
+}
+
 TEST(DicomReaderTest, DifferentOrientationIsRejected) {
     if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
     TempDir dir;

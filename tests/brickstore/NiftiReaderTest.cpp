@@ -398,4 +398,59 @@ TEST(NiftiReaderTest, FourDimensionalFileGivesItsFirstVolume) {
 }
 
 } // namespace
+// Issue 16: a non-finite scl_slope or scl_inter is an error naming the file and that field,
+// worded plainly (it used to be read as "no scaling" with a description that ran two type
+// names together).
+TEST(NiftiReaderTest, NonFiniteScalingIsAClearErrorNamingTheField) {
+    TempDir dir;
+    const float bad[] = {std::numeric_limits<float>::quiet_NaN(),
+                         std::numeric_limits<float>::infinity()};
+    for (float value : bad) {
+        for (const char* field : {"scl_slope", "scl_inter"}) {
+            nifti_1_header hdr = makeHeader({4, 2, 2}, DT_UINT8, 8);
+            hdr.scl_slope = 1.0f;
+            (std::string(field) == "scl_slope" ? hdr.scl_slope : hdr.scl_inter) = value;
+            const std::string path = dir.file("bad.nii");
+            writeNifti(path, hdr, rampU8(16));
+            expectFormatError(path, field);
+            try {
+                openNifti(path);
+            } catch (const FormatError& e) {
+                const std::string what = e.what();
+                EXPECT_NE(what.find(std::isnan(value) ? "nan" : "inf"), std::string::npos) << what;
+                EXPECT_NE(what.find("is not a finite number"), std::string::npos) << what;
+            }
+        }
+    }
+}
+
+TEST(NiftiReaderTest, DescriptionNamesEachTypeOnce) {
+    TempDir dir;
+    writeNifti(dir.file("plain.nii"), makeHeader({4, 2, 2}, DT_UINT8, 8), rampU8(16));
+    EXPECT_EQ(openNifti(dir.file("plain.nii"))->info().description, "NIfTI-1 plain.nii, u8");
+    nifti_1_header hdr = makeHeader({4, 2, 2}, DT_UINT8, 8);
+    hdr.scl_slope = 2.0f;
+    hdr.scl_inter = -1024.0f;
+    writeNifti(dir.file("scaled.nii"), hdr, rampU8(16));
+    EXPECT_EQ(openNifti(dir.file("scaled.nii"))->info().description,
+              "NIfTI-1 scaled.nii, uint8 scaled by scl_slope 2, scl_inter -1024 to i16");
+}
+
+// A .nii.gz whose dims need more voxel bytes than its gzip payload can inflate to (deflate
+// expands at most 1032:1) is refused when opened, before any voxel is read.
+TEST(NiftiReaderTest, GzipTooSmallForItsDimsIsRefusedOnOpen) {
+    TempDir dir;
+    nifti_1_header hdr = makeHeader({4096, 4096, 64}, DT_UINT8, 8); // 1 GiB of voxels
+    const std::string plain = dir.file("big.nii");
+    writeNifti(plain, hdr, rampU8(4096));
+    ASSERT_EQ(bc::test::runCommand("gzip -f " + plain).exitCode, 0);
+    try {
+        openNifti(plain + ".gz");
+        FAIL() << "no FormatError";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.field(), "dims") << e.what();
+        EXPECT_NE(std::string(e.what()).find("1032:1"), std::string::npos) << e.what();
+    }
+}
+
 } // namespace bc::brickstore

@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <new>
 #include <sstream>
 
 namespace {
@@ -217,6 +218,11 @@ int main(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
     try {
         return fly(o);
+    } catch (const std::bad_alloc&) {
+        std::fprintf(stderr,
+                     "brickcast-client: out of memory (std::bad_alloc) flying volume %s on %s\n",
+                     o.volume.c_str(), o.host.c_str());
+        return 1;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "brickcast-client: %s\n", e.what());
         return 1;

@@ -7,8 +7,12 @@
 #include "tools/brickcast/Progress.h"
 
 #include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
 #include <cstdio>
 #include <memory>
+#include <new>
+#include <stdexcept>
 
 namespace bc::cli {
 namespace {
@@ -19,8 +23,67 @@ struct IngestOptions {
     std::uint32_t brick = 64, apron = 2, leaf = 8;
     unsigned threads = 0;
     int zstdLevel = 3;
+    std::uint64_t memoryBudgetMb = 0;
     bool quiet = false;
 };
+
+// SIGINT/SIGTERM during an ingest: the handler only sets these; the ingest loop polls the
+// flag, stops, removes its partial file, and runIngest then dies of the same signal. Before
+// the ingest has a partial file (opening the input, a long DICOM header scan) there is
+// nothing to remove: the process dies at once.
+std::atomic<bool> gCancel{false};
+std::atomic<bool> gIngesting{false};
+volatile std::sig_atomic_t gSignal = 0;
+static_assert(std::atomic<bool>::is_always_lock_free);
+
+extern "C" void onTerminate(int signal) {
+    gSignal = signal;
+    gCancel.store(true);
+    if (!gIngesting.load()) std::raise(signal); // SA_RESETHAND: the default action now
+}
+
+/// Installs onTerminate for SIGINT and SIGTERM while it lives (one-shot: a second signal
+/// kills at once), and restores the previous handlers.
+class TerminationGuard {
+  public:
+    TerminationGuard() {
+        struct sigaction action {};
+        action.sa_handler = onTerminate;
+        sigemptyset(&action.sa_mask);
+        action.sa_flags = SA_RESETHAND;
+        sigaction(SIGINT, &action, &mOldInt);
+        sigaction(SIGTERM, &action, &mOldTerm);
+    }
+    ~TerminationGuard() {
+        sigaction(SIGINT, &mOldInt, nullptr);
+        sigaction(SIGTERM, &mOldTerm, nullptr);
+    }
+    TerminationGuard(const TerminationGuard&) = delete;
+    TerminationGuard& operator=(const TerminationGuard&) = delete;
+
+    /// Ends the process by the signal that cancelled the ingest (exit status 128 + signal in
+    /// a shell), with its default action.
+    static void dieOfSignal() {
+        const int signal = gSignal;
+        std::signal(signal, SIG_DFL);
+        std::raise(signal);
+    }
+
+  private:
+    struct sigaction mOldInt {
+    }, mOldTerm{};
+};
+
+constexpr const char* kLimitsHelp =
+    "Limits (checked before anything is allocated; each error names the file and field):\n"
+    "  an edge of at most 1048576 voxels, a slice (x*y) of at most 2^30 voxels (32768^2), a\n"
+    "  volume of at most 2^42 voxels and 1 PiB; a raw or uncompressed file must hold exactly\n"
+    "  the declared bytes, a gzip payload at least 1/1032 and a zstd one 1/32768 of them (the\n"
+    "  codecs' largest ratios; zstd frames that declare their size must declare exactly them);\n"
+    "  every DICOM slice's PixelData must hold Rows x Columns x bytes per pixel; and the\n"
+    "  memory ingest needs (B+2A slices of every pyramid level, bricks in flight, the brick\n"
+    "  index) must fit --memory-budget-mb (default: half of physical memory, at most half of\n"
+    "  the address-space limit). SIGINT/SIGTERM remove the partial store before exiting.";
 
 brickstore::SourceSpec toSpec(const IngestOptions& o) {
     brickstore::SourceSpec spec;
@@ -43,16 +106,54 @@ brickstore::SourceSpec toSpec(const IngestOptions& o) {
     return spec;
 }
 
-void runIngest(const IngestOptions& o) {
-    auto source = brickstore::openSource(toSpec(o));
+std::unique_ptr<brickstore::VolumeSource> openInput(const IngestOptions& o) {
+    try {
+        return brickstore::openSource(toSpec(o));
+    } catch (const std::bad_alloc&) {
+        throw std::runtime_error("out of memory while opening " + o.input +
+                                 " (std::bad_alloc reading its header)");
+    }
+}
+
+brickstore::IngestReport ingestInput(brickstore::VolumeSource& source, const IngestOptions& o) {
     brickstore::IngestConfig config;
     config.geometry = {o.brick, o.apron, o.leaf};
     config.threads = o.threads;
     config.zstdLevel = o.zstdLevel;
+    config.memoryBudgetBytes = o.memoryBudgetMb << 20;
+    config.inputName = o.input;
+    config.cancel = &gCancel;
+    config.staleFileRemoved = [](const std::string& path) {
+        std::fprintf(stderr, "brickcast: removed %s, left by an ingest that was killed\n",
+                     path.c_str());
+    };
     ProgressLine line(!o.quiet);
-    auto report = brickstore::ingest(*source, o.output, config,
-                                     [&](const brickstore::IngestProgress& p) { line.update(p); });
-    line.finish();
+    gIngesting.store(true); // from here a signal only sets gCancel (see onTerminate)
+    try {
+        auto report = brickstore::ingest(
+            source, o.output, config, [&](const brickstore::IngestProgress& p) { line.update(p); });
+        line.finish();
+        return report;
+    } catch (const std::bad_alloc&) {
+        line.finish();
+        throw std::runtime_error("out of memory while ingesting " + o.input + " (" +
+                                 brickstore::dimsText(source.info().dims) + ") into " + o.output +
+                                 "; the partial store was removed (try a lower "
+                                 "--memory-budget-mb or fewer --threads)");
+    } catch (const brickstore::IngestCancelled&) {
+        line.finish();
+        std::fprintf(stderr, "brickcast: ingest of %s interrupted by signal %d; %s not written\n",
+                     o.input.c_str(), int(gSignal), o.output.c_str());
+        TerminationGuard::dieOfSignal();
+        throw;
+    }
+}
+
+void runIngest(const IngestOptions& o) {
+    const TerminationGuard guard;
+    auto source = openInput(o);
+    auto report = ingestInput(*source, o);
+    if (gCancel.load()) TerminationGuard::dieOfSignal(); // a signal after the commit
     if (o.quiet) return;
     std::printf("ingested %s -> %s\n", source->info().description.c_str(), o.output.c_str());
     std::printf(
@@ -67,6 +168,14 @@ void runIngest(const IngestOptions& o) {
                     ? double(report.uncompressedBrickBytes) / double(report.storedBytes)
                     : 0.0,
                 tools::formatBytes(double(report.constantBrickBytes)).c_str());
+    std::printf("  memory: %s estimated for the buffers, budget %s\n",
+                tools::formatBytes(double(report.memoryBytes)).c_str(),
+                tools::formatBytes(double(report.memoryBudgetBytes)).c_str());
+    // A thin volume fills each stored brick with few voxels but a whole leaf table.
+    if (report.leafTableBytes * 2 > report.storedBytes)
+        std::printf("  note: %s of the store are leaf tables (a fixed table per stored brick, "
+                    "however few voxels it holds; --leaf sets their size)\n",
+                    tools::formatBytes(double(report.leafTableBytes)).c_str());
 }
 
 } // namespace
@@ -97,6 +206,11 @@ void addIngestCommand(CLI::App& app) {
     cmd->add_option("--threads", o->threads, "Compression workers (0 = all cores)")
         ->capture_default_str();
     cmd->add_option("--zstd-level", o->zstdLevel, "zstd compression level")->capture_default_str();
+    cmd->add_option("--memory-budget-mb", o->memoryBudgetMb,
+                    "Most memory ingest may use, in MiB (0 = half of physical memory, at most "
+                    "half of the address-space limit)")
+        ->capture_default_str();
+    cmd->footer(kLimitsHelp);
     cmd->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
     cmd->callback([o] { runIngest(*o); });
 }

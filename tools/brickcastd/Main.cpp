@@ -10,6 +10,8 @@
 
 #include <cstdio>
 #include <fstream>
+#include <new>
+#include <string>
 
 int main(int argc, char** argv) {
     CLI::App app{"brickcastd: out-of-core volume rendering, streamed to thin clients"};
@@ -48,6 +50,11 @@ int main(int argc, char** argv) {
         writePort(portFile, daemon.port());
         daemon.run();
         return 0;
+    } catch (const std::bad_alloc&) {
+        log.error(
+            "brickcastd: out of memory (std::bad_alloc) while loading or serving the config " +
+            (configPath.empty() ? std::string("(embedded default)") : configPath));
+        return 1;
     } catch (const std::exception& e) {
         log.error(std::string("brickcastd: ") + e.what());
         return 1;

@@ -13,11 +13,14 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <new>
 #include <vector>
 
 #include <sys/types.h>
+// ZSTD_getFrameHeader: exported by libzstd, declared only in the static section.
+#define ZSTD_STATIC_LINKING_ONLY
 #include <zstd.h>
 
 namespace bc::brickstore::detail {
@@ -224,6 +227,69 @@ std::optional<std::uint64_t> zstdFirstFrameBytes(const std::string& path) {
         throw FormatError(path, "data", "not a zstd stream (no valid frame header at its start)");
     if (size == ZSTD_CONTENTSIZE_UNKNOWN) return std::nullopt;
     return size;
+}
+
+namespace {
+
+/// Reads `out.size()` bytes at `offset`; false when the file ends first.
+bool readAt(std::ifstream& in, std::uint64_t offset, std::span<std::byte> out) {
+    in.clear();
+    in.seekg(std::streamoff(offset));
+    in.read(reinterpret_cast<char*>(out.data()), std::streamsize(out.size()));
+    return std::size_t(in.gcount()) == out.size();
+}
+
+/// Offset just past the blocks (and checksum) of the frame whose blocks start at `offset`.
+std::uint64_t skipBlocks(std::ifstream& in, std::uint64_t offset, const ZSTD_frameHeader& frame,
+                         const std::string& path) {
+    for (bool last = false; !last;) {
+        std::array<std::byte, 3> head{};
+        if (!readAt(in, offset, head))
+            throw FormatError(path, "data", "zstd stream ends inside a frame (file truncated)");
+        const std::uint32_t bits =
+            std::uint32_t(head[0]) | std::uint32_t(head[1]) << 8 | std::uint32_t(head[2]) << 16;
+        last = (bits & 1u) != 0;
+        const std::uint32_t type = (bits >> 1) & 3u, size = bits >> 3;
+        if (type == 3)
+            throw FormatError(path, "data",
+                              "reserved zstd block type at byte " + std::to_string(offset));
+        offset += 3 + (type == 1 ? 1 : size); // an RLE block stores its one byte
+    }
+    return offset + (frame.checksumFlag ? 4 : 0);
+}
+
+} // namespace
+
+ZstdFrames zstdFrames(const std::string& path) {
+    ZstdFrames out;
+    out.fileBytes = fileBytes(path);
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw FormatError(path, "path", std::string("cannot open: ") + std::strerror(errno));
+    std::uint64_t total = 0;
+    bool known = true;
+    for (std::uint64_t offset = 0; offset < out.fileBytes;) {
+        std::array<std::byte, kZstdFrameHeaderMaxBytes> head{};
+        const std::size_t n =
+            std::size_t(std::min<std::uint64_t>(head.size(), out.fileBytes - offset));
+        readAt(in, offset, std::span(head).first(n));
+        ZSTD_frameHeader frame{};
+        if (ZSTD_getFrameHeader(&frame, head.data(), n) != 0)
+            throw FormatError(path, "data",
+                              "no valid zstd frame header at byte " + std::to_string(offset));
+        if (frame.frameType == ZSTD_skippableFrame) {
+            offset += frame.headerSize + frame.frameContentSize;
+            continue;
+        }
+        if (frame.frameContentSize == ZSTD_CONTENTSIZE_UNKNOWN)
+            known = false;
+        else
+            total += frame.frameContentSize;
+        offset = skipBlocks(in, offset + frame.headerSize, frame, path);
+        if (offset > out.fileBytes)
+            throw FormatError(path, "data", "zstd stream ends inside a frame (file truncated)");
+    }
+    if (known) out.contentBytes = total;
+    return out;
 }
 
 std::uint64_t fileBytes(const std::string& path) {

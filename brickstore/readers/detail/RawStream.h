@@ -43,6 +43,16 @@ std::unique_ptr<ByteStream> openZstdStream(std::unique_ptr<ByteStream> compresse
 /// @throw FormatError(path, "data") when the file does not start with a zstd frame.
 std::optional<std::uint64_t> zstdFirstFrameBytes(const std::string& path);
 
+/// What the frames of a zstd file say about it, walked from their frame and block headers
+/// without decompressing: the sum of the content sizes they declare (nullopt when a frame
+/// declares none) and the file's size.
+struct ZstdFrames {
+    std::optional<std::uint64_t> contentBytes;
+    std::uint64_t fileBytes = 0;
+};
+/// @throw FormatError(path, "data") when the file is not a sequence of whole zstd frames.
+ZstdFrames zstdFrames(const std::string& path);
+
 /// Slices of raw voxels (x fastest, `endian` byte order) read from `voxels`, which must hold
 /// exactly info.voxelCount() voxels. Converts to host byte order and rejects non-finite
 /// floats. `sizeClaim` starts the message of a stream that ends early ("the header promises").
