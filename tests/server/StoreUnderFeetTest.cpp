@@ -132,7 +132,7 @@ TEST(StrictStart, AMissingOrCorruptStoreStopsTheStartNamingIt) {
 TEST(StrictStart, AnOptionalMissingStoreIsLeftOutAndACorruptOneStillStops) {
     TempDir dir;
     const std::string good = makeStore(dir, "good.bcs", 32);
-    test::writeFile(dir.file("cfg.toml"), "[[volume]]\nname = \"first\"\nstore = \"good.bcs\"\n"
+    bc::test::writeFile(dir.file("cfg.toml"), "[[volume]]\nname = \"first\"\nstore = \"good.bcs\"\n"
                                           "[[volume]]\nname = \"second\"\nstore = \"gone.bcs\"\n"
                                           "optional = true\n");
     const DaemonConfig c = DaemonConfig::load(dir.file("cfg.toml"));
@@ -143,7 +143,7 @@ TEST(StrictStart, AnOptionalMissingStoreIsLeftOutAndACorruptOneStillStops) {
     EXPECT_EQ(catalog.size(), 1u);
     EXPECT_FALSE(catalog.lease("second"));
     // Optional covers a missing store only: one that exists and is not a store still stops.
-    test::writeFile(dir.file("gone.bcs"), "not a store");
+    bc::test::writeFile(dir.file("gone.bcs"), "not a store");
     EXPECT_THROW(Catalog(c, quiet), ConfigError);
     // optional is a store's key only.
     EXPECT_THROW(DaemonConfig::parse("[[volume]]\nname = \"g\"\ngenerate = \"phantom\"\n"
