@@ -2,8 +2,8 @@
 
 #include "brickstore/Error.h"
 #include "brickstore/detail/BrickSummary.h"
-#include "brickstore/detail/StoreReadFile.h"
 #include "brickstore/detail/StoreFormat.h"
+#include "brickstore/detail/StoreReadFile.h"
 
 #include <algorithm>
 #include <atomic>
@@ -146,7 +146,8 @@ void BrickStore::readBrick(const BrickKey& key, std::span<std::byte> out) const 
     auto fail = [&](const std::string& why) {
         throw StoreCorrupt(mPath + ": brick " + key.toString() + ": " + why);
     };
-    if (detail::checksum(std::span<const std::byte>(frame)) != r.payloadChecksum) fail("payload checksum mismatch");
+    if (detail::checksum(std::span<const std::byte>(frame)) != r.payloadChecksum)
+        fail("payload checksum mismatch");
     std::size_t n =
         ZSTD_decompressDCtx(threadDCtx(), out.data(), out.size(), frame.data(), frame.size());
     if (ZSTD_isError(n)) fail(std::string("cannot decompress: ") + ZSTD_getErrorName(n));

@@ -92,8 +92,7 @@ void VolumeLease::release() {
     mVolume.reset();
 }
 
-Catalog::Catalog(const DaemonConfig& config, Log& log)
-    : mHostBudgetBytes(config.hostBudgetBytes) {
+Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config.hostBudgetBytes) {
     for (const auto& preset : config.presets)
         mPresets.emplace(preset.name, preset.json);
     for (const auto& entry : config.volumes) {

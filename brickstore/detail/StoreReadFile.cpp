@@ -19,8 +19,7 @@ FileIdentity identityOf(const struct stat& st) {
 /// "size 1000 -> 400 bytes", "modified", or "" when `now` is `was`.
 std::string contentChange(const FileIdentity& was, const FileIdentity& now) {
     if (now.bytes != was.bytes)
-        return "size " + std::to_string(was.bytes) + " -> " + std::to_string(now.bytes) +
-               " bytes";
+        return "size " + std::to_string(was.bytes) + " -> " + std::to_string(now.bytes) + " bytes";
     if (now.mtimeNs != was.mtimeNs) return "modified (same size, new modification time)";
     return {};
 }

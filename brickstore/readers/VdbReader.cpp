@@ -89,7 +89,8 @@ openvdb::GridBase::Ptr readChosenGrid(const std::string& path, const std::string
     } catch (const openvdb::Exception& e) {
         // OpenVDB's message can be huge (1.6 GB of spaces was seen): keep its start only.
         throw FormatError(path, "file",
-                          "OpenVDB cannot read it: " + std::string(e.what(), ::strnlen(e.what(), 300)));
+                          "OpenVDB cannot read it: " +
+                              std::string(e.what(), ::strnlen(e.what(), 300)));
     }
 }
 
@@ -383,16 +384,16 @@ class SandboxedVdb final : public VolumeSource {
                      std::to_string(gParseSeconds.load()) + " s to parse";
         int fds[2];
         if (::pipe2(fds, O_CLOEXEC) != 0)
-            throw FormatError(path, "file", std::string("cannot create a pipe: ") +
-                                                std::strerror(errno));
+            throw FormatError(path, "file",
+                              std::string("cannot create a pipe: ") + std::strerror(errno));
         const std::uint64_t as = gAddressSpaceBytes.load();
         const std::uint32_t parse = gParseSeconds.load(), cpu = gCpuSeconds.load();
         mPid = ::fork();
         if (mPid < 0) {
             ::close(fds[0]);
             ::close(fds[1]);
-            throw FormatError(path, "file", std::string("cannot fork the parser: ") +
-                                                std::strerror(errno));
+            throw FormatError(path, "file",
+                              std::string("cannot fork the parser: ") + std::strerror(errno));
         }
         if (mPid == 0) {
             ::close(fds[0]);
@@ -488,7 +489,8 @@ class SandboxedVdb final : public VolumeSource {
         const int status = reap(false);
         if (WIFSIGNALED(status)) {
             const int sig = WTERMSIG(status);
-            if (sig == SIGALRM) return "the parser took longer than its time limit (" + mLimitText + ")";
+            if (sig == SIGALRM)
+                return "the parser took longer than its time limit (" + mLimitText + ")";
             if (sig == SIGXCPU) return "the parser used more than its CPU-time limit";
             if (sig == SIGKILL) return "the parser was killed (SIGKILL; out of memory?)";
             return std::string("the parser crashed: ") + ::strsignal(sig) + " (limits " +

@@ -132,9 +132,10 @@ TEST(StrictStart, AMissingOrCorruptStoreStopsTheStartNamingIt) {
 TEST(StrictStart, AnOptionalMissingStoreIsLeftOutAndACorruptOneStillStops) {
     TempDir dir;
     const std::string good = makeStore(dir, "good.bcs", 32);
-    bc::test::writeFile(dir.file("cfg.toml"), "[[volume]]\nname = \"first\"\nstore = \"good.bcs\"\n"
-                                          "[[volume]]\nname = \"second\"\nstore = \"gone.bcs\"\n"
-                                          "optional = true\n");
+    bc::test::writeFile(dir.file("cfg.toml"),
+                        "[[volume]]\nname = \"first\"\nstore = \"good.bcs\"\n"
+                        "[[volume]]\nname = \"second\"\nstore = \"gone.bcs\"\n"
+                        "optional = true\n");
     const DaemonConfig c = DaemonConfig::load(dir.file("cfg.toml"));
     ASSERT_EQ(c.volumes.size(), 2u);
     EXPECT_TRUE(c.volumes[1].optional);

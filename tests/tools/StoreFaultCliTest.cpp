@@ -76,8 +76,7 @@ void expectQuickShortFailure(const std::string& input, const std::string& store)
 }
 
 TEST(StoreFaultCli, TruncatedVdbFailsFastInBoundedMemoryWithAShortError) {
-    if (!bc::test::haveData("gaffer_smoke.vdb"))
-        return bc::test::missingData("gaffer_smoke.vdb");
+    if (!bc::test::haveData("gaffer_smoke.vdb")) return bc::test::missingData("gaffer_smoke.vdb");
     bc::test::TempDir dir;
     const auto whole = bc::test::readFile(bc::test::dataPath("gaffer_smoke.vdb"));
     const std::string first200 = dir.file("gaffer_first200.vdb"),
@@ -99,12 +98,11 @@ std::uint64_t fnv1a(const std::vector<std::uint8_t>& bytes) {
 }
 
 TEST(StoreFaultCli, WholeVdbStillIngestsToTheSameVoxelsUnderTheLimit) {
-    if (!bc::test::haveData("gaffer_smoke.vdb"))
-        return bc::test::missingData("gaffer_smoke.vdb");
+    if (!bc::test::haveData("gaffer_smoke.vdb")) return bc::test::missingData("gaffer_smoke.vdb");
     bc::test::TempDir dir;
     const std::string store = dir.file("g.bcs"), raw = dir.file("g.raw");
-    auto r = brickcast("ingest " + bc::test::dataPath("gaffer_smoke.vdb") + " -q -o " + store,
-                       kLimited);
+    auto r =
+        brickcast("ingest " + bc::test::dataPath("gaffer_smoke.vdb") + " -q -o " + store, kLimited);
     ASSERT_EQ(r.exitCode, 0) << r.text;
     EXPECT_EQ(brickcast("verify " + store).exitCode, 0);
     auto info = brickcast("info " + store);
