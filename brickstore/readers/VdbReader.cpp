@@ -278,8 +278,10 @@ std::atomic<std::uint64_t> gAddressSpaceBytes{VdbSandboxLimits{}.addressSpaceByt
 std::atomic<std::uint32_t> gParseSeconds{VdbSandboxLimits{}.parseSeconds};
 std::atomic<std::uint32_t> gCpuSeconds{VdbSandboxLimits{}.cpuSeconds};
 
-std::string clip(const std::string& text) {
-    return text.size() <= kMaxErrorText ? text : text.substr(0, kMaxErrorText) + "...";
+constexpr std::size_t kMaxDescriptionText = 4096; ///< as a store's description
+
+std::string clip(const std::string& text, std::size_t maxBytes = kMaxErrorText) {
+    return text.size() <= maxBytes ? text : text.substr(0, maxBytes) + "...";
 }
 
 /// The child's side: blocking writes; a parent gone (EPIPE) ends the child.
@@ -297,8 +299,8 @@ class ChildWriter {
         }
     }
     template <class T> void value(T v) { bytes(&v, sizeof v); }
-    void text(const std::string& s) {
-        const std::string c = clip(s);
+    void text(const std::string& s, std::size_t maxBytes = kMaxErrorText) {
+        const std::string c = clip(s, maxBytes);
         value(std::uint32_t(c.size()));
         bytes(c.data(), c.size());
     }
@@ -319,7 +321,7 @@ void sendInfo(ChildWriter& w, const VolumeInfo& i) {
     w.value(i.background);
     w.value(i.valueScale);
     w.value(i.valueOffset);
-    w.text(i.description);
+    w.text(i.description, kMaxDescriptionText);
 }
 
 /// Runs in the child: limits, parse, stream. Never returns.
@@ -358,10 +360,13 @@ void sendInfo(ChildWriter& w, const VolumeInfo& i) {
         }
         ::_exit(0);
     } catch (const FormatError& e) {
+        // what() is "FILE: FIELD: why"; only the why crosses, bounded (never copied whole).
+        const char* what = e.what();
+        const std::size_t prefix = e.file().size() + e.field().size() + 4;
+        const std::size_t skip = ::strnlen(what, prefix);
         w.value(kError);
         w.text(e.field());
-        w.text(std::string(e.what()).substr(std::min(e.what() ? std::strlen(e.what()) : 0,
-                                                     e.file().size() + e.field().size() + 4)));
+        w.text(std::string(what + skip, ::strnlen(what + skip, kMaxErrorText + 1)));
     } catch (const std::bad_alloc&) {
         w.value(kError);
         w.text("file");
@@ -467,7 +472,7 @@ class SandboxedVdb final : public VolumeSource {
     }
     std::string text() {
         const auto n = value<std::uint32_t>();
-        if (n > kMaxErrorText + 3 && n > 4096) fail("the parser sent a text too long");
+        if (n > kMaxDescriptionText + 3) fail("the parser sent a text too long");
         std::string s(n, '\0');
         read(s.data(), n);
         return s;
