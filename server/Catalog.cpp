@@ -96,7 +96,7 @@ Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config
     for (const auto& preset : config.presets)
         mPresets.emplace(preset.name, preset.json);
     for (const auto& entry : config.volumes) {
-        if (entry.optional && !std::filesystem::exists(entry.store)) {
+        if (entry.optional && !entry.store.empty() && !std::filesystem::exists(entry.store)) {
             log.error("catalog: " + entry.name + " left out: optional store " + entry.store +
                       " is missing");
             continue;
@@ -118,7 +118,7 @@ Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config
 
 std::shared_ptr<Volume> Catalog::reopen(const CatalogEntry& entry, const std::string& storeDir,
                                         const std::string& verb, Log& log) {
-    if (entry.optional && !std::filesystem::exists(entry.store)) {
+    if (entry.optional && !entry.store.empty() && !std::filesystem::exists(entry.store)) {
         log.error("catalog reload: " + entry.name + " left out: optional store " + entry.store +
                   " is missing");
         return nullptr;

@@ -89,7 +89,7 @@ openvdb::GridBase::Ptr readChosenGrid(const std::string& path, const std::string
     } catch (const openvdb::Exception& e) {
         // OpenVDB's message can be huge (1.6 GB of spaces was seen): keep its start only.
         throw FormatError(path, "file",
-                          "OpenVDB cannot read it: " +
+                          "OpenVDB cannot read it (damaged or truncated?): " +
                               std::string(e.what(), ::strnlen(e.what(), 300)));
     }
 }
