@@ -460,7 +460,8 @@ class SandboxedVdb final : public VolumeSource {
         if (tag == kError) {
             const std::string field = text(), why = text();
             reap(false);
-            throw FormatError(mPath, field.empty() ? "file" : field, why);
+            throw FormatError(mPath, field.empty() ? "file" : field,
+                              why + " [sandboxed parser: " + mLimitText + "]");
         }
         fail("the parser sent an unexpected message");
     }

@@ -103,6 +103,20 @@ TEST(StoreFaultCli, TruncatedVdbFailsFastInBoundedMemoryWithAShortError) {
     EXPECT_LT(peakKib, 2304l * 1024) << "over 2.25 GiB resident: the parse is not bounded";
 }
 
+TEST(StoreFaultCli, TheParserLimitsCanBeSetAndAreNamedWhenHit) {
+    if (!bc::test::haveData("gaffer_smoke.vdb")) return bc::test::missingData("gaffer_smoke.vdb");
+    bc::test::TempDir dir;
+    const std::string store = dir.file("g.bcs");
+    // 64 MiB of address space: less than the parser needs to map its libraries and the file.
+    auto r = brickcast("ingest " + bc::test::dataPath("gaffer_smoke.vdb") +
+                       " --vdb-memory-mb 64 --vdb-parse-s 5 -q -o " + store);
+    EXPECT_NE(r.exitCode, 0) << r.text;
+    EXPECT_TRUE(contains(r.text, "gaffer_smoke.vdb")) << r.text;
+    EXPECT_TRUE(contains(r.text, "sandboxed parser: 64 MiB, 5 s to parse")) << r.text;
+    EXPECT_LT(r.text.size(), 1024u) << r.text;
+    EXPECT_FALSE(std::filesystem::exists(store));
+}
+
 /// FNV-1a 64 of a file's bytes.
 std::uint64_t fnv1a(const std::vector<std::uint8_t>& bytes) {
     std::uint64_t h = 1469598103934665603ull;
