@@ -2,8 +2,8 @@
 
 #include "brickstore/Error.h"
 #include "brickstore/detail/BrickSummary.h"
-#include "brickstore/detail/MappedFile.h"
 #include "brickstore/detail/StoreFormat.h"
+#include "brickstore/detail/StoreReadFile.h"
 
 #include <algorithm>
 #include <atomic>
@@ -24,6 +24,14 @@ struct DCtxDeleter {
 ZSTD_DCtx* threadDCtx() {
     thread_local std::unique_ptr<ZSTD_DCtx, DCtxDeleter> ctx(ZSTD_createDCtx());
     return ctx.get();
+}
+
+/// Compressed bytes of one frame or leaf table, read into a buffer kept per thread (its
+/// size is bounded by the index checks: a frame is at most ZSTD_compressBound of a brick).
+std::span<std::byte> threadBuffer(std::size_t bytes) {
+    thread_local std::vector<std::byte> buffer;
+    if (buffer.size() < bytes) buffer.resize(bytes);
+    return {buffer.data(), bytes};
 }
 
 void checkIndexPlacement(const detail::StoreHeader& h, std::uint64_t fileBytes,
@@ -76,10 +84,12 @@ std::unique_ptr<BrickStore> BrickStore::open(const std::string& path) {
     std::unique_ptr<BrickStore> s(new BrickStore());
     s->mPath = path;
     s->mInstance = nextInstance.fetch_add(1);
-    s->mFile = std::make_unique<detail::MappedFile>(path);
-    auto bytes = s->mFile->bytes();
-    detail::StoreHeader h = detail::decodeHeader(bytes, path);
-    checkIndexPlacement(h, bytes.size(), path);
+    s->mFile = std::make_unique<detail::StoreReadFile>(path);
+    const std::uint64_t fileBytes = s->mFile->size();
+    std::vector<std::byte> header(std::min<std::uint64_t>(fileBytes, kHeaderBytes));
+    s->mFile->readAt(0, header);
+    detail::StoreHeader h = detail::decodeHeader(header, path);
+    checkIndexPlacement(h, fileBytes, path);
     try {
         validateVolumeInfo(h.volume, path);
         s->mLayout = std::make_unique<StoreLayout>(h.volume.dims, h.geometry);
@@ -88,8 +98,10 @@ std::unique_ptr<BrickStore> BrickStore::open(const std::string& path) {
     }
     if (s->mLayout->brickCount() != h.brickCount)
         throw StoreCorrupt(path + ": header: brick count does not match dims and brick size");
-    auto index = bytes.subspan(h.indexOffset, h.indexBytes);
-    if (detail::checksum(index) != h.indexChecksum)
+    // The index is parsed into memory once; later reads touch frames and leaf tables only.
+    std::vector<std::byte> index(h.indexBytes); // within the file: checkIndexPlacement
+    s->mFile->readAt(h.indexOffset, index);
+    if (detail::checksum(std::span<const std::byte>(index)) != h.indexChecksum)
         throw StoreCorrupt(path + ": index checksum mismatch");
     detail::DecodedIndex decoded = detail::decodeIndex(index, h, *s->mLayout, path);
     checkPayloadPlacement(decoded.records, *s->mLayout, h, path);
@@ -111,6 +123,10 @@ const BrickRecord& BrickStore::record(const BrickKey& key) const {
     return mRecords[mLayout->indexOf(key)];
 }
 
+std::optional<std::string> BrickStore::fileChange() const {
+    return mFile->changeAtPath();
+}
+
 std::uint64_t BrickStore::brickBytes() const {
     return mLayout->storedVoxels() * voxelBytes(mInfo.volume.type);
 }
@@ -124,11 +140,14 @@ void BrickStore::readBrick(const BrickKey& key, std::span<std::byte> out) const 
         detail::fillConstant(mInfo.volume.type, r.range.min, out);
         return;
     }
-    auto frame = mFile->bytes().subspan(r.offset, r.compressedBytes);
+    mFile->checkUnchanged(); // a store rewritten in place must not decode as another volume
+    const auto frame = threadBuffer(r.compressedBytes);
+    mFile->readAt(r.offset, frame);
     auto fail = [&](const std::string& why) {
         throw StoreCorrupt(mPath + ": brick " + key.toString() + ": " + why);
     };
-    if (detail::checksum(frame) != r.payloadChecksum) fail("payload checksum mismatch");
+    if (detail::checksum(std::span<const std::byte>(frame)) != r.payloadChecksum)
+        fail("payload checksum mismatch");
     std::size_t n =
         ZSTD_decompressDCtx(threadDCtx(), out.data(), out.size(), frame.data(), frame.size());
     if (ZSTD_isError(n)) fail(std::string("cannot decompress: ") + ZSTD_getErrorName(n));
@@ -140,10 +159,12 @@ void BrickStore::readBrick(const BrickKey& key, std::span<std::byte> out) const 
 std::vector<ValueRange> BrickStore::leafRanges(const BrickKey& key) const {
     const BrickRecord& r = record(key);
     if (!r.stored()) return std::vector<ValueRange>(mLayout->leafCount(), r.range);
-    auto table = mFile->bytes().subspan(r.offset + r.compressedBytes, r.leafBytes);
-    if (detail::checksum(table) != r.leafChecksum)
+    mFile->checkUnchanged();
+    const auto table = threadBuffer(r.leafBytes);
+    mFile->readAt(r.offset + r.compressedBytes, table);
+    if (detail::checksum(std::span<const std::byte>(table)) != r.leafChecksum)
         throw StoreCorrupt(mPath + ": brick " + key.toString() + ": leaf table checksum mismatch");
-    return detail::decodeLeafTable(table);
+    return detail::decodeLeafTable(std::span<const std::byte>(table));
 }
 
 std::vector<std::string> BrickStore::verify(unsigned threads) const {

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -45,7 +46,7 @@ struct StoreInfo {
 };
 
 namespace detail {
-class MappedFile;
+class StoreReadFile;
 }
 
 class BrickStore {
@@ -63,15 +64,23 @@ class BrickStore {
     const StoreInfo& info() const { return mInfo; }
     const StoreLayout& layout() const { return *mLayout; }
     const BrickRecord& record(const BrickKey& key) const;
+    /// What changed between the file opened and the one at path() now ("replaced by another
+    /// file", "size A -> B bytes", "modified", "gone: ..."); nullopt when it is the same file,
+    /// unchanged. One stat; what a reload asks before reopening a store.
+    std::optional<std::string> fileChange() const;
     /// Bytes of one decompressed brick ((B+2A)^3 voxels).
     std::uint64_t brickBytes() const;
 
     /// Decompresses brick `key` into `out` (brickBytes() long); a brick not stored is filled
     /// with its constant value. @throw StoreCorrupt naming the brick on a checksum or
-    /// decompression failure; other bricks stay readable.
+    /// decompression failure (other bricks stay readable), or naming the store and what
+    /// changed when the file changed size or was modified since open; StoreIoError on a read
+    /// error or short read. Reads with pread: a store truncated while open is an error here,
+    /// never a SIGBUS.
     void readBrick(const BrickKey& key, std::span<std::byte> out) const;
     /// Per-leaf value ranges (leafCount() entries, x fastest), checksum verified, without
-    /// touching voxels. @throw StoreCorrupt naming the brick.
+    /// touching voxels. @throw StoreCorrupt naming the brick, or the store when it changed
+    /// since open; StoreIoError on a short read.
     std::vector<ValueRange> leafRanges(const BrickKey& key) const;
 
     /// Full scrub of every brick and leaf table on `threads` workers (0 = all cores).
@@ -85,7 +94,7 @@ class BrickStore {
     StoreInfo mInfo;
     std::unique_ptr<StoreLayout> mLayout;
     std::vector<BrickRecord> mRecords;
-    std::unique_ptr<detail::MappedFile> mFile;
+    std::unique_ptr<detail::StoreReadFile> mFile;
 };
 
 } // namespace bc::brickstore

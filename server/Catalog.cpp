@@ -4,6 +4,7 @@
 
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
+#include "server/Error.h"
 #include "server/Log.h"
 
 #include <algorithm>
@@ -95,21 +96,94 @@ Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config
     for (const auto& preset : config.presets)
         mPresets.emplace(preset.name, preset.json);
     for (const auto& entry : config.volumes) {
+        if (entry.optional && !entry.store.empty() && !std::filesystem::exists(entry.store)) {
+            log.error("catalog: " + entry.name + " left out: optional store " + entry.store +
+                      " is missing");
+            continue;
+        }
         try {
             auto volume = open(entry, config.storeDir);
             mByName[entry.name] = volume;
             mVolumes.push_back(std::move(volume));
             log.info("catalog: " + entry.name + " <- " + mVolumes.back()->store->path());
         } catch (const std::exception& e) {
-            log.error("catalog: " + entry.name + " left out: " + e.what());
+            throw ConfigError(config.source + ": volume '" + entry.name + "': " + e.what() +
+                              (entry.store.empty() || entry.optional
+                                   ? ""
+                                   : " (optional = true lets the daemon start without a "
+                                     "missing store)"));
         }
     }
+}
+
+std::shared_ptr<Volume> Catalog::reopen(const CatalogEntry& entry, const std::string& storeDir,
+                                        const std::string& verb, Log& log) {
+    if (entry.optional && !entry.store.empty() && !std::filesystem::exists(entry.store)) {
+        log.error("catalog reload: " + entry.name + " left out: optional store " + entry.store +
+                  " is missing");
+        return nullptr;
+    }
+    try {
+        auto volume = open(entry, storeDir);
+        log.info("catalog reload: " + entry.name + " " + verb + " <- " + volume->store->path());
+        return volume;
+    } catch (const std::exception& e) {
+        log.error("catalog reload: " + entry.name + " left out: " + e.what());
+        return nullptr;
+    }
+}
+
+std::vector<std::shared_ptr<Volume>> Catalog::reload(const DaemonConfig& config, Log& log) {
+    std::vector<std::shared_ptr<Volume>> volumes, gone;
+    std::map<std::string, std::shared_ptr<Volume>> byName;
+    std::size_t unchanged = 0;
+    std::map<std::string, std::shared_ptr<Volume>> old;
+    {
+        std::lock_guard lock(mMutex);
+        old = mByName;
+    }
+    for (const auto& entry : config.volumes) {
+        const auto it = old.find(entry.name);
+        std::shared_ptr<Volume> volume;
+        if (it == old.end()) {
+            volume = reopen(entry, config.storeDir, "added", log);
+        } else {
+            const auto change = it->second->store->fileChange();
+            if (it->second->entry == entry && !change) {
+                volume = it->second;
+                ++unchanged;
+            } else {
+                const std::string why = change ? "store " + *change : "entry changed";
+                volume = reopen(entry, config.storeDir, "reopened (" + why + ")", log);
+                gone.push_back(it->second);
+            }
+            old.erase(it);
+        }
+        if (!volume) continue;
+        byName[entry.name] = volume;
+        volumes.push_back(std::move(volume));
+    }
+    for (auto& [name, volume] : old) {
+        log.info("catalog reload: " + name + " removed");
+        gone.push_back(std::move(volume));
+    }
+    log.info("catalog reload: " + std::to_string(unchanged) + " volume(s) unchanged, " +
+             std::to_string(volumes.size()) + " served");
+    std::lock_guard lock(mMutex);
+    mVolumes = std::move(volumes);
+    mByName = std::move(byName);
+    mPresets.clear();
+    for (const auto& preset : config.presets)
+        mPresets.emplace(preset.name, preset.json);
+    rebalance();
+    return gone;
 }
 
 std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry, const std::string& storeDir) {
     const std::string path = entry.store.empty() ? generatedStore(entry, storeDir) : entry.store;
     auto v = std::make_shared<Volume>();
     v->name = entry.name;
+    v->entry = entry;
     v->store = brickstore::BrickStore::open(path);
     // No session yet: the cache keeps nothing until a lease gives it a share.
     v->cache = std::make_unique<brickstore::BrickCache>(*v->store, brickstore::BrickCacheConfig{0});
@@ -118,7 +192,13 @@ std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry, const std::stri
     return v;
 }
 
+std::size_t Catalog::size() const {
+    std::lock_guard lock(mMutex);
+    return mVolumes.size();
+}
+
 std::vector<protocol::VolumeInfo> Catalog::list() const {
+    std::lock_guard lock(mMutex);
     std::vector<protocol::VolumeInfo> out;
     for (const auto& v : mVolumes)
         out.push_back(v->info);
@@ -126,9 +206,14 @@ std::vector<protocol::VolumeInfo> Catalog::list() const {
 }
 
 VolumeLease Catalog::lease(const std::string& name) {
-    const auto it = mByName.find(name);
-    if (it == mByName.end()) return {};
-    return VolumeLease(this, it->second);
+    std::shared_ptr<Volume> volume;
+    {
+        std::lock_guard lock(mMutex);
+        const auto it = mByName.find(name);
+        if (it == mByName.end()) return {};
+        volume = it->second;
+    }
+    return VolumeLease(this, std::move(volume));
 }
 
 std::uint64_t Catalog::shareOf(const Volume& volume, std::uint64_t totalBytes) const {
@@ -139,9 +224,13 @@ std::uint64_t Catalog::shareOf(const Volume& volume, std::uint64_t totalBytes) c
 }
 
 void Catalog::changeSessions(Volume& volume, int delta) {
-    std::lock_guard lock(mBudgetMutex);
+    std::lock_guard lock(mMutex);
     volume.sessions += std::uint32_t(delta);
     mSessions += std::uint32_t(delta);
+    rebalance();
+}
+
+void Catalog::rebalance() {
     for (const auto& v : mVolumes)
         v->cache->setBudgetBytes(v->sessions.load() ? shareOf(*v, mHostBudgetBytes) : 0);
 }
@@ -159,6 +248,7 @@ std::vector<std::string> Catalog::presetNames() const {
 }
 
 void Catalog::collect(MetricSet& m) const {
+    std::lock_guard lock(mMutex);
     for (const auto& v : mVolumes) {
         const auto c = v->cache->stats();
         const std::vector<std::pair<std::string, std::string>> l{{"volume", v->name}};

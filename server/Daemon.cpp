@@ -10,6 +10,7 @@
 
 #include <asio.hpp>
 
+#include <csignal>
 #include <map>
 
 namespace bc::server {
@@ -42,12 +43,60 @@ struct Daemon::Impl {
         if (handleSignals) {
             signals.add(SIGTERM);
             signals.add(SIGINT);
-            signals.async_wait([this](const asio::error_code& ec, int signal) {
-                if (ec) return;
-                log.info("signal " + std::to_string(signal) + ": draining");
-                drain();
-            });
+            signals.add(SIGHUP);
+            waitForSignal();
         }
+    }
+
+    /// SIGHUP reloads the catalog and waits again; SIGTERM and SIGINT drain.
+    void waitForSignal() {
+        signals.async_wait([this](const asio::error_code& ec, int signal) {
+            if (ec) return;
+            if (signal == SIGHUP) {
+                log.info("signal " + std::to_string(signal) + " (SIGHUP): reloading the catalog");
+                reload();
+                return waitForSignal();
+            }
+            log.info("signal " + std::to_string(signal) + ": draining");
+            drain();
+        });
+    }
+
+    /// Re-reads the config file and applies its volumes and presets; a config that fails to
+    /// load is logged and the catalog kept. Network thread.
+    void reload() {
+        if (draining) return;
+        if (config.file.empty()) {
+            log.error("reload: no config file to re-read (serving " + config.source +
+                      "); catalog unchanged");
+            return;
+        }
+        DaemonConfig next;
+        try {
+            next = DaemonConfig::load(config.file);
+        } catch (const std::exception& e) {
+            log.error(std::string("reload: ") + e.what() + "; the old catalog is kept");
+            return;
+        }
+        if (!onlyCatalogDiffers(next))
+            log.info("reload: settings outside [[volume]] and [[preset]] changed in " +
+                     config.file + "; they apply at the next restart");
+        const auto gone = catalog.reload(next, log);
+        if (gone.empty()) return;
+        for (auto& [id, s] : std::map(sessions))
+            s->leaveIfGone(gone);
+    }
+
+    /// Whether `next` equals the running config but for volumes and presets (and the
+    /// command-line overrides of listen and metrics, which a reload keeps).
+    bool onlyCatalogDiffers(DaemonConfig next) const {
+        next.volumes = config.volumes;
+        next.presets = config.presets;
+        next.listenHost = config.listenHost;
+        next.listenPort = config.listenPort;
+        next.metricsHost = config.metricsHost;
+        next.metricsPort = config.metricsPort;
+        return next == config;
     }
 
     std::uint32_t capabilities() {
@@ -187,6 +236,10 @@ void Daemon::run() {
     mImpl->io.run();
     mImpl->sessions.clear();
     mImpl->log.info("stopped");
+}
+
+void Daemon::reload() {
+    asio::post(mImpl->io, [impl = mImpl.get()] { impl->reload(); });
 }
 
 void Daemon::stop() {

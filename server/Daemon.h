@@ -2,7 +2,8 @@
 // brickcastd: accepts clients on the configured address, one network thread (Asio) for all
 // sessions and one render thread for all frames. stop() (or SIGTERM/SIGINT when
 // handleSignals) drains: no new clients, every session gets Bye, run() returns once they are
-// written or the write deadline passes.
+// written or the write deadline passes. reload() (or SIGHUP) re-reads the config file and
+// applies its catalog (Catalog::reload); sessions on removed or reopened volumes get an Error.
 #include "server/DaemonConfig.h"
 
 #include <cstdint>
@@ -15,7 +16,8 @@ class Log;
 class Daemon {
   public:
     /// Opens the catalog, starts the render thread and binds the listen address.
-    /// @throw ConfigError when the address cannot be bound (naming it).
+    /// @throw ConfigError when the address cannot be bound (naming it) or a volume's store
+    /// cannot be opened (Catalog).
     Daemon(DaemonConfig config, Log& log, bool handleSignals = false);
     ~Daemon();
     Daemon(const Daemon&) = delete;
@@ -29,6 +31,9 @@ class Daemon {
     void run();
     /// Starts the drain; thread-safe, returns at once.
     void stop();
+    /// Starts a catalog reload from config.file (what SIGHUP does); thread-safe, returns at
+    /// once. A config that fails to load is logged and the catalog kept.
+    void reload();
 
   private:
     struct Impl;

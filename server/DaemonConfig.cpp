@@ -105,11 +105,15 @@ generate = "vessels"
 dims = [160, 160, 160]
 description = "synthetic branching vessel tree, 8-bit, 1-5% occupied"
 
-# An ingested scan is served like this:
+# An ingested scan is served like this. A store that is missing or fails its header check
+# stops the daemon at start, naming it; optional = true accepts a missing one (logged, left
+# out until a reload finds it). SIGHUP re-reads this file: volumes added, removed and
+# reopened (their store file changed) are logged; sessions on unchanged volumes go on.
 # [[volume]]
 # name = "cthead"
 # store = "stores/cthead.bcs"
 # description = "Stanford CT head, 256x256x113"
+# optional = false
 
 # Transfer-function presets clients may name in SetTransferFunction, beside the built-in ones
 # (ct-bone, ct-skin, mr, smoke, vessels). Each file is read once, at start-up; a client never
@@ -398,7 +402,7 @@ std::array<std::uint64_t, 3> Reader::readDims(const toml::table& t,
 }
 
 CatalogEntry Reader::readVolume(const toml::table& t, const std::string& prefix) const {
-    checkKeys(t, prefix, {"name", "store", "generate", "dims", "description"});
+    checkKeys(t, prefix, {"name", "store", "generate", "dims", "description", "optional"});
     CatalogEntry e;
     auto name = string(t, prefix, "name");
     if (!name) fail(t.source(), prefix + "name", "missing: every volume needs a name");
@@ -426,6 +430,12 @@ CatalogEntry Reader::readVolume(const toml::table& t, const std::string& prefix)
         e.dims = readDims(t, prefix);
     }
     e.description = string(t, prefix, "description").value_or("");
+    if (auto optional = boolean(t, prefix, "optional")) {
+        if (!store)
+            fail(t.get("optional")->source(), prefix + "optional",
+                 "only for store: a generated volume is made when missing");
+        e.optional = *optional;
+    }
     return e;
 }
 
@@ -606,7 +616,9 @@ DaemonConfig DaemonConfig::load(const std::string& path) {
     text << in.rdbuf();
     if (in.bad()) throw ConfigError(path + ": cannot read: " + std::strerror(errno));
     const auto folder = std::filesystem::absolute(path, ec).parent_path();
-    return parse(text.str(), path, folder.string());
+    DaemonConfig c = parse(text.str(), path, folder.string());
+    c.file = path;
+    return c;
 }
 
 } // namespace bc::server

@@ -17,6 +17,8 @@ struct CatalogEntry {
     std::string generate; ///< "phantom" | "vessels" | "checker" when store is empty
     std::array<std::uint64_t, 3> dims{}; ///< for generate: each 8..1024
     std::string description;
+    /// For store: a missing store is logged and left out instead of stopping the daemon.
+    bool optional = false;
 
     bool operator==(const CatalogEntry&) const = default;
 };
@@ -32,10 +34,11 @@ struct PresetEntry {
 
 struct DaemonConfig {
     std::string source = "<embedded default>"; ///< what it was read from
-    std::string listenHost = "127.0.0.1";      ///< without brackets: "::1"
-    std::uint16_t listenPort = 7411;           ///< 0 = any free port (tests)
-    std::string token;                         ///< empty = no auth; required off loopback
-    std::string metricsHost;                   ///< empty = no metrics endpoint; loopback
+    std::string file; ///< the file load() read (what SIGHUP re-reads); empty otherwise
+    std::string listenHost = "127.0.0.1"; ///< without brackets: "::1"
+    std::uint16_t listenPort = 7411;      ///< 0 = any free port (tests)
+    std::string token;                    ///< empty = no auth; required off loopback
+    std::string metricsHost;              ///< empty = no metrics endpoint; loopback
     std::uint16_t metricsPort = 0;
     std::uint32_t maxClients = 16;
     std::uint32_t handshakeTimeoutMs = 5000;

@@ -87,6 +87,17 @@ void Session::shutdown() {
     closeAfterFlush("server shutting down");
 }
 
+void Session::leaveIfGone(const std::vector<std::shared_ptr<Volume>>& gone) {
+    if (!mLease || mPhase == Phase::Closing || mPhase == Phase::Closed) return;
+    if (std::find(gone.begin(), gone.end(), mLease.volume()) == gone.end()) return;
+    const std::string name = mLease.volume()->name;
+    mSlot->setVolume(nullptr); // the render thread stops drawing the old store
+    mLease = {};
+    sendError(ErrorCode::UnknownVolume, false, std::uint8_t(MessageType::OpenVolume), 0,
+              "volume '" + name +
+                  "' was removed or reopened by a catalog reload; open a volume again");
+}
+
 // ---- reading -------------------------------------------------------------------------------
 
 void Session::read() {

@@ -49,6 +49,10 @@ class Session : public std::enable_shared_from_this<Session> {
     void refuseBusy();
     /// The server is draining: Bye (shutting down), then close once written.
     void shutdown();
+    /// A catalog reload removed or reopened volumes: when this session views one of `gone`,
+    /// it stops drawing it, drops its lease and is sent Error UnknownVolume (not fatal; the
+    /// client may open a volume again).
+    void leaveIfGone(const std::vector<std::shared_ptr<Volume>>& gone);
     std::uint64_t id() const { return mId; }
     /// Messages waiting in the write queue (the one being written included).
     std::size_t queued() const { return mQueue.size(); }

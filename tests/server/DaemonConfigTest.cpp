@@ -56,7 +56,9 @@ TEST(DaemonConfigTest, ShippedConfigFileEqualsTheEmbeddedDefault) {
     const std::string path = std::string(BC_CONFIGS_DIR) + "/brickcastd.toml";
     DaemonConfig file = DaemonConfig::load(path);
     EXPECT_EQ(file.source, path);
+    EXPECT_EQ(file.file, path); // what SIGHUP re-reads
     file.source = "<embedded default>";
+    file.file.clear();
     EXPECT_EQ(file, DaemonConfig::embeddedDefault());
 }
 

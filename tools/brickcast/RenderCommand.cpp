@@ -1,6 +1,7 @@
 // brickcast render STORE -o OUT.png: one frame on the GPU raycaster (or the CPU reference).
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
+#include "brickstore/Error.h"
 #include "render/BrickPlan.h"
 #include "render/Camera.h"
 #include "render/CpuRaycaster.h"
@@ -124,6 +125,31 @@ nlohmann::json statsJson(const render::FrameStats& s, const std::string& rendere
             {"totalMs", s.totalMs}};
 }
 
+/// The renderers draw past a leaf table that fails its checksum (its brick is treated as
+/// occupied everywhere, so the image stays conservative), which would leave a corrupt store
+/// unnoticed: the command checks every stored brick's leaf table of the level it drew.
+/// @throw StoreCorrupt naming the first bad brick and the store, and how many more there are.
+void checkLeafTables(const brickstore::BrickStore& store, std::uint32_t level) {
+    const auto& levels = store.layout().levels();
+    if (level >= levels.size()) return;
+    const auto& l = levels[level];
+    std::vector<std::string> faults;
+    for (std::uint64_t b = 0; b < l.brickCount(); ++b) {
+        const brickstore::BrickKey key = store.layout().keyOf(l.firstBrick + b);
+        if (!store.record(key).stored()) continue;
+        try {
+            store.leafRanges(key);
+        } catch (const brickstore::StoreCorrupt& e) {
+            faults.push_back(e.what());
+        }
+    }
+    if (faults.empty()) return;
+    throw brickstore::StoreCorrupt(
+        faults.front() +
+        (faults.size() > 1 ? " (and " + std::to_string(faults.size() - 1) + " more bricks)" : "") +
+        "; no image written");
+}
+
 void runRender(const RenderCliOptions& o) {
     auto store = brickstore::BrickStore::open(o.store);
     const render::RenderOptions options = renderOptionsOf(o);
@@ -201,6 +227,7 @@ void runRender(const RenderCliOptions& o) {
         frameMs.push_back(stats.totalMs);
     }
     renderer = describe();
+    checkLeafTables(*store, stats.level);
     render::writePng(o.output, image);
     std::printf(
         "%s: %ux%u, level %u, %.1f ms (upload %.1f, render %.1f, readback %.1f), %.1f "

@@ -1,0 +1,125 @@
+// SIGHUP reloads the catalog of a running daemon: the config file is read again, volumes are
+// added, removed and reopened (their store file changed), one log line each; a session on an
+// unchanged volume keeps its frames, one on a removed or reopened volume gets an Error; a
+// config that fails to parse keeps the old catalog. The daemon no longer dies of SIGHUP.
+#include "ServerTestSupport.h"
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <set>
+
+namespace bc::server::test {
+namespace {
+
+void makeStore(const std::string& path, std::uint64_t edge) {
+    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {edge, edge, edge}, 1);
+    brickstore::IngestConfig config;
+    config.geometry = {32, 2, 8};
+    brickstore::ingest(*source, path, config); // renamed into place: a new file
+}
+
+std::string volumeToml(const std::string& name) {
+    return "[[volume]]\nname = \"" + name + "\"\nstore = \"" + name + ".bcs\"\n";
+}
+
+void writeConfig(const std::string& path, const std::vector<std::string>& names) {
+    std::string text = "[server]\nlisten = \"127.0.0.1:0\"\n";
+    for (const auto& n : names)
+        text += volumeToml(n);
+    std::ofstream(path) << text;
+}
+
+std::set<std::string> served(std::uint16_t port) {
+    client::ClientConfig cc;
+    cc.port = port;
+    client::Client c(cc);
+    std::set<std::string> names;
+    for (const auto& v : c.listVolumes())
+        names.insert(v.name);
+    return names;
+}
+
+/// Polls ListVolumes until it is `want` (a reload runs on the daemon's own thread).
+bool waitForCatalog(std::uint16_t port, const std::set<std::string>& want) {
+    for (int i = 0; i < 100; ++i) {
+        if (served(port) == want) return true;
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    return false;
+}
+
+bool frameArrives(client::Client& c, const protocol::VolumeInfo& v, std::uint32_t id) {
+    c.setCamera(orbitCamera(v, 20.0 * id, id));
+    c.requestFrame();
+    return c.nextFrame().header.cameraId == id;
+}
+
+/// The next Error the server sends this client (frames and others skipped).
+protocol::Error nextError(client::Client& c) {
+    for (;;) {
+        auto m = c.nextMessage();
+        if (auto* e = std::get_if<protocol::Error>(&m)) return *e;
+    }
+}
+
+TEST(CatalogReload, SighupReloadsTheCatalogAndLeavesSessionsOnUnchangedVolumesAlone) {
+    TempDir dir;
+    for (const auto* n : {"keep", "drop", "swap", "added"})
+        makeStore(dir.file(std::string(n) + ".bcs"), 32);
+    const std::string config = dir.file("brickcastd.toml");
+    writeConfig(config, {"keep", "drop", "swap"});
+    ::testing::internal::CaptureStderr();
+    std::string logText;
+    {
+        Log log(false);
+        Daemon daemon(DaemonConfig::load(config), log, /*handleSignals=*/true);
+        std::thread thread([&] { daemon.run(); });
+        client::ClientConfig cc;
+        cc.port = daemon.port();
+        cc.timeoutMs = 20000;
+        client::Client keep(cc), drop(cc), swap(cc);
+        const auto vk = keep.openVolume("keep");
+        const auto vd = drop.openVolume("drop");
+        swap.openVolume("swap");
+        for (auto* c : {&keep, &drop, &swap})
+            c->setRenderOptions(smallCpuFrames(32));
+        ASSERT_TRUE(frameArrives(keep, vk, 1));
+        ASSERT_TRUE(frameArrives(drop, vd, 1));
+
+        makeStore(dir.file("swap.bcs"), 48); // a new store under the same name
+        writeConfig(config, {"keep", "swap", "added"});
+        ASSERT_EQ(::kill(::getpid(), SIGHUP), 0);
+        EXPECT_TRUE(waitForCatalog(cc.port, {"keep", "swap", "added"}))
+            << "ListVolumes did not follow the new config";
+
+        for (std::uint32_t i = 2; i < 5; ++i)
+            EXPECT_TRUE(frameArrives(keep, vk, i)) << "the unchanged volume's session broke";
+        const auto dropped = nextError(drop);
+        EXPECT_EQ(dropped.code, protocol::ErrorCode::UnknownVolume);
+        EXPECT_NE(dropped.message.find("'drop'"), std::string::npos) << dropped.message;
+        const auto swapped = nextError(swap);
+        EXPECT_EQ(swapped.code, protocol::ErrorCode::UnknownVolume);
+        EXPECT_EQ(swap.openVolume("swap").dims[0], 48u) << "the reopened volume is the old store";
+
+        // A config that does not parse: logged, the catalog kept, the daemon still serving.
+        std::ofstream(config) << "[[volume]\nname = ";
+        ASSERT_EQ(::kill(::getpid(), SIGHUP), 0);
+        std::this_thread::sleep_for(std::chrono::milliseconds(500));
+        EXPECT_EQ(served(cc.port), (std::set<std::string>{"keep", "swap", "added"}));
+        EXPECT_TRUE(frameArrives(keep, vk, 9));
+
+        daemon.stop();
+        thread.join();
+    }
+    logText = ::testing::internal::GetCapturedStderr();
+    for (const char* line :
+         {"catalog reload: drop removed", "catalog reload: added added",
+          "catalog reload: swap reopened (store replaced by another file)",
+          "catalog reload: 1 volume(s) unchanged, 3 served", "the old catalog is kept"})
+        EXPECT_NE(logText.find(line), std::string::npos) << "no log line '" << line << "' in:\n"
+                                                         << logText;
+}
+
+} // namespace
+} // namespace bc::server::test
