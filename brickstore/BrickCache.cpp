@@ -3,6 +3,7 @@
 #include "brickstore/BrickStore.h"
 #include "brickstore/detail/CacheCore.h"
 
+#include <algorithm>
 #include <cassert>
 #include <utility>
 
@@ -114,9 +115,15 @@ BrickCacheStats CacheCore::stats() const {
     return s;
 }
 
+void CacheCore::resetPinnedPeak() {
+    std::lock_guard lock(mMutex);
+    mStats.pinnedPeakBytes = mStats.pinnedBytes;
+}
+
 void CacheCore::addPin(CacheEntry& entry) {
     if (entry.inLru) lruRemove(entry);
     if (entry.pinCount++ == 0) mStats.pinnedBytes += entry.data.size();
+    mStats.pinnedPeakBytes = std::max(mStats.pinnedPeakBytes, mStats.pinnedBytes);
 }
 
 void CacheCore::lruPushBack(CacheEntry& entry) {
@@ -222,6 +229,10 @@ void BrickCache::setBudgetBytes(std::uint64_t budgetBytes) {
 
 BrickCacheStats BrickCache::stats() const {
     return mCore->stats();
+}
+
+void BrickCache::resetPinnedPeak() {
+    mCore->resetPinnedPeak();
 }
 
 } // namespace bc::brickstore

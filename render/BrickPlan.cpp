@@ -142,6 +142,22 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
     return plan;
 }
 
+std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,
+                                     std::uint64_t budgetBytes) {
+    std::vector<std::size_t> ends;
+    std::uint64_t bytes = 0;
+    for (std::size_t i = 0; i < plan.drawn.size(); ++i) {
+        if (plan.drawn[i].draw != BrickDraw::Sampled) continue;
+        if (bytes > 0 && bytes + brickBytes > budgetBytes) {
+            ends.push_back(i);
+            bytes = 0;
+        }
+        bytes += brickBytes;
+    }
+    ends.push_back(plan.drawn.size());
+    return ends;
+}
+
 void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats) {
     stats.level = level;
     stats.bricksTotal = plan.total;

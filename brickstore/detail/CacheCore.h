@@ -45,6 +45,7 @@ class CacheCore {
     void unpin(CacheEntry& entry);
     void setBudgetBytes(std::uint64_t budgetBytes);
     BrickCacheStats stats() const;
+    void resetPinnedPeak();
 
   private:
     CacheEntry& load(std::unique_lock<std::mutex>& lock, const BrickKey& key);
