@@ -61,6 +61,11 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
                      const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
                      const OccupancyTrees* occupancy = nullptr);
 
+/// Every brick of the level, front to back, nothing culled or skipped (for the reference, which
+/// samples wherever a ray goes).
+BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometry& geometry,
+                         const ViewBasis& view);
+
 /// Splits the front-to-back order into batches of consecutive bricks whose sampled bricks
 /// (`brickBytes` each once pinned) fit `budgetBytes`, so that a renderer drawing one batch at
 /// a time never pins more than the budget (one brick when the budget holds less). Constant

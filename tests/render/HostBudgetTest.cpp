@@ -1,7 +1,8 @@
 // Every CPU-side renderer honours the host cache's budget (issue 16): a frame whose bricks do
 // not fit is drawn in front-to-back batches that do, the cache never holds more pinned bytes
 // than the budget (the splatters: than one chunk that fits it), no pin outlives render(), and
-// the image is the one drawn with room for everything, bit for bit.
+// the image is the one drawn with room for everything, bit for bit (the reference's: the one
+// of the level held whole).
 #include "RenderTestSupport.h"
 #include "render/CpuRaycaster.h"
 #include "render/GpuSplatter.h"
@@ -115,6 +116,32 @@ TEST(HostBudget, HybridSplatterPreparesChunksThatFitAndTheSameImage) {
     EXPECT_EQ(small.cache.pinnedBytes, 0u) << "a pin outlived render()";
     EXPECT_EQ(compareImages(all.image, small.image).maxAbs, 0.0);
     EXPECT_EQ(all.stats.samples, small.stats.samples);
+}
+
+// The reference samples bricks from the cache in batches: the image of the level held whole,
+// bit for bit, under any budget.
+TEST(HostBudget, ReferenceRendererDrawsInBatchesThatFitAndTheWholeLevelsImage) {
+    auto t = cthead();
+    if (!t) return test::missingData("scan cthead");
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
+    const std::uint64_t brickBytes = t->store->brickBytes();
+    ReferenceRenderer reference;
+    for (const Camera& camera : cameras(LevelGeometry::of(*t->store, 0).box)) {
+        RenderOptions o;
+        o.width = o.height = 48;
+        SCOPED_TRACE(camera.orthographic ? "ortho" : "perspective");
+        const Image whole = test::referenceFrame(*t, tf, camera, o);
+        const Budgeted all = frameUnder(*t, reference, 1ull << 30, tf, camera, o);
+        const Budgeted tiny = frameUnder(*t, reference, kTinyBudgetBytes, tf, camera, o);
+        EXPECT_GE(tiny.stats.batches, 4u);
+        EXPECT_LE(tiny.cache.pinnedPeakBytes, kTinyBudgetBytes);
+        EXPECT_GT(tiny.cache.pinnedPeakBytes, kTinyBudgetBytes - brickBytes);
+        EXPECT_EQ(tiny.cache.pinnedBytes, 0u) << "a pin outlived render()";
+        EXPECT_EQ(compareImages(whole, all.image).maxAbs, 0.0);
+        EXPECT_EQ(compareImages(whole, tiny.image).maxAbs, 0.0);
+        EXPECT_EQ(all.stats.samples, tiny.stats.samples);
+        EXPECT_EQ(all.stats.oracleSamples, tiny.stats.oracleSamples);
+    }
 }
 
 // The GPU splatter prepares its primitives on the CPU from the same chunks (GL: llvmpipe in CI).

@@ -24,7 +24,7 @@ constexpr long kFixedOverheadMiB = 80;
 // MALLOC_MMAP_THRESHOLD_=131072, which returns every brick to the system when freed).
 constexpr long kAllocatorSlackMiB = 96;
 
-struct Run {
+struct ProcessRun {
     int exitCode = -1;
     long peakAnonKiB = 0;
     double seconds = 0;
@@ -40,7 +40,7 @@ long rssAnonKiB(pid_t pid) {
 }
 
 /// Runs `args` with `env` added to the environment, polling its RssAnon until it exits.
-Run run(const std::vector<std::string>& args, const std::string& logPath,
+ProcessRun run(const std::vector<std::string>& args, const std::string& logPath,
         const std::vector<std::string>& env = {}) {
     std::vector<char*> argv;
     for (const auto& a : args)
@@ -56,7 +56,7 @@ Run run(const std::vector<std::string>& args, const std::string& logPath,
         ::execv(argv[0], argv.data());
         ::_exit(127);
     }
-    Run r;
+    ProcessRun r;
     int status = 0;
     while (::waitpid(pid, &status, WNOHANG) == 0) {
         r.peakAnonKiB = std::max(r.peakAnonKiB, rssAnonKiB(pid));
@@ -75,12 +75,12 @@ TEST(CpuRaycasterHostBudget, MosaicOf236GiBRendersWithinTheBudgetAndTheSameImage
         return bc::test::missingData("tcia_pancreas_ct_dicom");
     bc::test::TempDir dir;
     const std::string exe = BC_BRICKCAST_EXE, store = dir.file("mosaic.bcs");
-    const Run ingest =
+    const ProcessRun ingest =
         run({exe, "ingest", dicom, "--mosaic", "3,3,4", "-q", "-o", store}, dir.file("ingest.log"));
     ASSERT_EQ(ingest.exitCode, 0) << ingest.output;
     auto render = [&](long budgetMiB, const std::string& name,
                       const std::vector<std::string>& env = {}) {
-        const Run r = run({exe, "render", store, "-o", dir.file(name), "--renderer", "cpu",
+        const ProcessRun r = run({exe, "render", store, "-o", dir.file(name), "--renderer", "cpu",
                            "--size", "512,512", "--host-budget-mb", std::to_string(budgetMiB)},
                           dir.file(name + ".log"), env);
         EXPECT_EQ(r.exitCode, 0) << r.output;
@@ -89,9 +89,9 @@ TEST(CpuRaycasterHostBudget, MosaicOf236GiBRendersWithinTheBudgetAndTheSameImage
                     r.output.c_str());
         return r;
     };
-    const Run bounded = render(256, "bounded.png");
-    const Run unbounded = render(4096, "unbounded.png");
-    const Run trimmed = render(256, "trimmed.png", {"MALLOC_MMAP_THRESHOLD_=131072"});
+    const ProcessRun bounded = render(256, "bounded.png");
+    const ProcessRun unbounded = render(4096, "unbounded.png");
+    const ProcessRun trimmed = render(256, "trimmed.png", {"MALLOC_MMAP_THRESHOLD_=131072"});
     EXPECT_LE(bounded.peakAnonKiB, (256 + kFixedOverheadMiB + kAllocatorSlackMiB) << 10);
     EXPECT_LE(trimmed.peakAnonKiB, (256 + kFixedOverheadMiB) << 10);
     // The unbounded frame pins every planned brick (about 2 GiB): the bound is what kept the
