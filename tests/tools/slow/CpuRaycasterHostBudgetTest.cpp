@@ -2,7 +2,7 @@
 // issue 16): the shared pancreas DICOM series mosaicked 3x3x4 (1536x1536x536 i16), rendered
 // at 512^2 by the real `brickcast` with --host-budget-mb 256 and 4096. The peak anonymous
 // memory (RssAnon, polled every 2 ms; the mapped store is file memory and not counted) stays
-// within the budget plus the stated overhead, and both images are the same bytes.
+// within the budget plus the stated overhead, and the images are the same bytes.
 #include "tests/TestSupport.h"
 
 #include <chrono>
@@ -19,11 +19,12 @@ namespace {
 // bricks x 512 leaves x 17 B), the rays' state between batches and the image (16 MiB: 48 +
 // 16 B per pixel), and the rest. Stated with room for other builds.
 constexpr long kFixedOverheadMiB = 80;
-// glibc's per-thread arenas keep bricks freed by eviction for reuse by the thread that
-// allocated them: measured 77 MiB over budget + fixed at 256 MiB (0 with
-// MALLOC_MMAP_THRESHOLD_=131072, which returns every brick to the system when freed).
-constexpr long kAllocatorSlackMiB = 96;
-
+// With glibc's default malloc, bricks the cache evicts stay in the per-thread arena of the
+// thread that loaded them (the dynamic mmap threshold rises to a brick's size after the first
+// free): measured 77 to 133 MiB over budget + fixed at 256 MiB, varying run to run. The strict
+// check runs with MALLOC_MMAP_THRESHOLD_=131072, where every brick goes back to the system
+// when freed; the default run is allowed one more budget.
+constexpr long kBudgetMiB = 256;
 struct ProcessRun {
     int exitCode = -1;
     long peakAnonKiB = 0;
@@ -41,12 +42,13 @@ long rssAnonKiB(pid_t pid) {
 
 /// Runs `args` with `env` added to the environment, polling its RssAnon until it exits.
 ProcessRun run(const std::vector<std::string>& args, const std::string& logPath,
-        const std::vector<std::string>& env = {}) {
+               const std::vector<std::string>& env = {}) {
     std::vector<char*> argv;
     for (const auto& a : args)
         argv.push_back(const_cast<char*>(a.c_str()));
     argv.push_back(nullptr);
     const auto t0 = std::chrono::steady_clock::now();
+    std::fflush(stdout); // or the child's stdout repeats what the parent has not written yet
     const pid_t pid = ::fork();
     if (pid == 0) {
         for (const auto& e : env)
@@ -80,27 +82,28 @@ TEST(CpuRaycasterHostBudget, MosaicOf236GiBRendersWithinTheBudgetAndTheSameImage
     ASSERT_EQ(ingest.exitCode, 0) << ingest.output;
     auto render = [&](long budgetMiB, const std::string& name,
                       const std::vector<std::string>& env = {}) {
-        const ProcessRun r = run({exe, "render", store, "-o", dir.file(name), "--renderer", "cpu",
-                           "--size", "512,512", "--host-budget-mb", std::to_string(budgetMiB)},
-                          dir.file(name + ".log"), env);
+        const ProcessRun r =
+            run({exe, "render", store, "-o", dir.file(name), "--renderer", "cpu", "--size",
+                 "512,512", "--host-budget-mb", std::to_string(budgetMiB)},
+                dir.file(name + ".log"), env);
         EXPECT_EQ(r.exitCode, 0) << r.output;
         std::printf("--host-budget-mb %ld %s: peak RssAnon %.0f MiB, %.1f s\n  %s", budgetMiB,
                     env.empty() ? "" : env[0].c_str(), r.peakAnonKiB / 1024.0, r.seconds,
                     r.output.c_str());
         return r;
     };
-    const ProcessRun bounded = render(256, "bounded.png");
+    const ProcessRun bounded = render(kBudgetMiB, "bounded.png", {"MALLOC_MMAP_THRESHOLD_=131072"});
     const ProcessRun unbounded = render(4096, "unbounded.png");
-    const ProcessRun trimmed = render(256, "trimmed.png", {"MALLOC_MMAP_THRESHOLD_=131072"});
-    EXPECT_LE(bounded.peakAnonKiB, (256 + kFixedOverheadMiB + kAllocatorSlackMiB) << 10);
-    EXPECT_LE(trimmed.peakAnonKiB, (256 + kFixedOverheadMiB) << 10);
+    const ProcessRun glibc = render(kBudgetMiB, "glibc.png");
+    EXPECT_LE(bounded.peakAnonKiB, (kBudgetMiB + kFixedOverheadMiB) << 10);
+    EXPECT_LE(glibc.peakAnonKiB, (2 * kBudgetMiB + kFixedOverheadMiB) << 10);
     // The unbounded frame pins every planned brick (about 2 GiB): the bound is what kept the
     // bounded one small, not the view.
     EXPECT_GT(unbounded.peakAnonKiB, 1024l << 10);
     const auto a = bc::test::readFile(dir.file("bounded.png"));
     EXPECT_FALSE(a.empty());
     EXPECT_TRUE(a == bc::test::readFile(dir.file("unbounded.png")));
-    EXPECT_TRUE(a == bc::test::readFile(dir.file("trimmed.png")));
+    EXPECT_TRUE(a == bc::test::readFile(dir.file("glibc.png")));
 }
 
 } // namespace
