@@ -59,6 +59,11 @@ CacheEntry& CacheCore::load(std::unique_lock<std::mutex>& lock, const BrickKey& 
     entry.key = key;
     ++mStats.misses; // a load that then fails was still a miss
     std::vector<std::byte> data;
+    if (!mSpare.empty()) { // an evicted brick's buffer: no allocation, no allocator growth
+        data = std::move(mSpare.back());
+        mSpare.pop_back();
+        data.clear();
+    }
     lock.unlock();
     try {
         mLoader(key, data);
@@ -154,6 +159,7 @@ void CacheCore::evictToBudget() {
         --mStats.residentBricks;
         ++mStats.evictions;
         const BrickKey key = victim.key; // not a reference into the node being erased
+        if (mSpare.size() < kSpareBuffers) mSpare.push_back(std::move(victim.data));
         mEntries.erase(key);
         mEvicted.insert(key);
     }

@@ -187,6 +187,7 @@ struct RayState {
     glm::ivec3 cell{0};
     glm::vec3 tMax{0.0f};
     int k = 0;
+    int brick = 0; ///< the brick it waits for
     RayPhase phase = RayPhase::Fresh;
 };
 
@@ -194,6 +195,7 @@ struct RayState {
 /// it stops, state saved, at the first planned brick of a later batch it would sample.
 template <class T> void marchRay(const Frame& f, float sx, float sy, RayState& s, RayCount& n) {
     if (s.phase == RayPhase::Done) return;
+    if (s.phase == RayPhase::Waiting && f.bricks[s.brick].batch != f.batch) return; // not yet
     const RayPhase phase = s.phase;
     s.phase = RayPhase::Done; // unless it stops to wait below
     const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
@@ -239,6 +241,7 @@ template <class T> void marchRay(const Frame& f, float sx, float sy, RayState& s
             s.cell = cell;
             s.tMax = tMax;
             s.k = k;
+            s.brick = index;
             s.phase = RayPhase::Waiting;
             return;
         }
