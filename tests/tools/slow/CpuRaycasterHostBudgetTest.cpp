@@ -16,7 +16,7 @@ namespace {
 
 // Measured on this store at 512^2 with a 1 MiB budget (one brick per batch): 72 MiB = the
 // process with the store's index (9 MiB), the classification's octree tables (46 MiB: 5184
-// bricks x 512 leaves x 17 B), the rays' state between batches and the image (16 MiB: 48 +
+// bricks x 512 leaves x 17 B), the rays' state between batches and the image (17 MiB: 52 +
 // 16 B per pixel), the cache's spare buffers (at most 8 bricks, 5 MiB) and the rest. Stated
 // with room for other builds.
 constexpr long kFixedOverheadMiB = 80;
