@@ -3,6 +3,7 @@
 #include "brickstore/BrickStore.h"
 #include "brickstore/detail/CacheCore.h"
 
+#include <algorithm>
 #include <cassert>
 #include <utility>
 
@@ -58,6 +59,11 @@ CacheEntry& CacheCore::load(std::unique_lock<std::mutex>& lock, const BrickKey& 
     entry.key = key;
     ++mStats.misses; // a load that then fails was still a miss
     std::vector<std::byte> data;
+    if (!mSpare.empty()) { // an evicted brick's buffer: no allocation, no allocator growth
+        data = std::move(mSpare.back());
+        mSpare.pop_back();
+        data.clear();
+    }
     lock.unlock();
     try {
         mLoader(key, data);
@@ -114,9 +120,15 @@ BrickCacheStats CacheCore::stats() const {
     return s;
 }
 
+void CacheCore::resetPinnedPeak() {
+    std::lock_guard lock(mMutex);
+    mStats.pinnedPeakBytes = mStats.pinnedBytes;
+}
+
 void CacheCore::addPin(CacheEntry& entry) {
     if (entry.inLru) lruRemove(entry);
     if (entry.pinCount++ == 0) mStats.pinnedBytes += entry.data.size();
+    mStats.pinnedPeakBytes = std::max(mStats.pinnedPeakBytes, mStats.pinnedBytes);
 }
 
 void CacheCore::lruPushBack(CacheEntry& entry) {
@@ -147,6 +159,7 @@ void CacheCore::evictToBudget() {
         --mStats.residentBricks;
         ++mStats.evictions;
         const BrickKey key = victim.key; // not a reference into the node being erased
+        if (mSpare.size() < kSpareBuffers) mSpare.push_back(std::move(victim.data));
         mEntries.erase(key);
         mEvicted.insert(key);
     }
@@ -222,6 +235,10 @@ void BrickCache::setBudgetBytes(std::uint64_t budgetBytes) {
 
 BrickCacheStats BrickCache::stats() const {
     return mCore->stats();
+}
+
+void BrickCache::resetPinnedPeak() {
+    mCore->resetPinnedPeak();
 }
 
 } // namespace bc::brickstore

@@ -37,6 +37,9 @@ struct BrickCacheStats {
     std::uint64_t residentBytes = 0;  ///< now
     std::uint64_t pinnedBytes = 0;    ///< now
     std::uint64_t residentBricks = 0; ///< now
+    /// Most bytes pinned at once since construction or the last resetPinnedPeak(): what a
+    /// renderer that bounds its pins by the budget is checked against.
+    std::uint64_t pinnedPeakBytes = 0;
 };
 
 namespace detail {
@@ -87,6 +90,8 @@ class BrickCache {
     /// Changes the budget; evicts unpinned bricks down to it.
     void setBudgetBytes(std::uint64_t budgetBytes);
     BrickCacheStats stats() const;
+    /// Restarts stats().pinnedPeakBytes from the bytes pinned now.
+    void resetPinnedPeak();
 
   private:
     std::unique_ptr<detail::CacheCore> mCore;

@@ -142,6 +142,44 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
     return plan;
 }
 
+BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometry& g,
+                         const ViewBasis& view) {
+    BrickPlan plan;
+    plan.total = g.brickCount();
+    std::uint64_t index = 0;
+    for (std::uint32_t z = 0; z < g.bricks[2]; ++z)
+        for (std::uint32_t y = 0; y < g.bricks[1]; ++y)
+            for (std::uint32_t x = 0; x < g.bricks[0]; ++x, ++index) {
+                const brickstore::BrickKey key{g.level, {x, y, z}};
+                const auto& record = store.record(key);
+                PlannedBrick b{index, key,
+                               record.stored() ? BrickDraw::Sampled : BrickDraw::Constant,
+                               record.range.min, visibilityKey(key.pos, g, view)};
+                ++(b.draw == BrickDraw::Sampled ? plan.sampled : plan.constant);
+                plan.drawn.push_back(b);
+            }
+    std::stable_sort(
+        plan.drawn.begin(), plan.drawn.end(),
+        [](const PlannedBrick& a, const PlannedBrick& b) { return a.order < b.order; });
+    return plan;
+}
+
+std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,
+                                     std::uint64_t budgetBytes) {
+    std::vector<std::size_t> ends;
+    std::uint64_t bytes = 0;
+    for (std::size_t i = 0; i < plan.drawn.size(); ++i) {
+        if (plan.drawn[i].draw != BrickDraw::Sampled) continue;
+        if (bytes > 0 && bytes + brickBytes > budgetBytes) {
+            ends.push_back(i);
+            bytes = 0;
+        }
+        bytes += brickBytes;
+    }
+    ends.push_back(plan.drawn.size());
+    return ends;
+}
+
 void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats) {
     stats.level = level;
     stats.bricksTotal = plan.total;

@@ -7,6 +7,7 @@
 #include "render/RenderTypes.h"
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -59,6 +60,20 @@ struct BrickPlan {
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& geometry,
                      const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
                      const OccupancyTrees* occupancy = nullptr);
+
+/// Every brick of the level, front to back, nothing culled or skipped (for the reference, which
+/// samples wherever a ray goes).
+BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometry& geometry,
+                         const ViewBasis& view);
+
+/// Splits the front-to-back order into batches of consecutive bricks whose sampled bricks
+/// (`brickBytes` each once pinned) fit `budgetBytes`, so that a renderer drawing one batch at
+/// a time never pins more than the budget (one brick when the budget holds less). Constant
+/// bricks cost nothing. Returns each batch's end in plan.drawn (one batch for an empty plan).
+/// Batches composite in order: along any ray the visibility key rises by one per brick face,
+/// so a ray meets the bricks of batch b before those of batch b + 1.
+std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,
+                                     std::uint64_t budgetBytes);
 
 /// The plan's brick counts and `level` into a frame's stats.
 void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats);

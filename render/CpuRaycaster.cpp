@@ -29,8 +29,9 @@ double msSince(Clock::time_point t) {
 enum class Slot : std::uint8_t { Absent, Sampled, Constant };
 
 struct BrickRef {
-    const void* voxels = nullptr;
+    const void* voxels = nullptr; ///< while its batch is drawn
     float constant = 0.0f;
+    std::uint32_t batch = 0; ///< the front-to-back batch that draws it
     Slot slot = Slot::Absent;
 };
 
@@ -53,6 +54,7 @@ struct Frame {
     int octDepth = 0, occWords = 0, leafAxis = 1;
     float leaf = 1;
     const BrickRef* bricks = nullptr;
+    std::uint32_t batch = 0; ///< the batch being drawn
 };
 
 struct Rgba {
@@ -176,16 +178,34 @@ bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec
     return true;
 }
 
-/// One ray through the brick grid (the shader's main()).
-template <class T> Rgba marchRay(const Frame& f, float sx, float sy, RayCount& n) {
+enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
+
+/// A ray between batches: its colour so far and, while it waits for a brick of a later batch,
+/// its DDA state at that brick (so the next pass goes on with the same floats).
+struct RayState {
+    Rgba acc;
+    glm::ivec3 cell{0};
+    glm::vec3 tMax{0.0f};
+    int k = 0;
+    int brick = 0; ///< the brick it waits for
+    RayPhase phase = RayPhase::Fresh;
+};
+
+/// One ray through the brick grid (the shader's main()), for the bricks of batch f.batch:
+/// it stops, state saved, at the first planned brick of a later batch it would sample.
+template <class T> void marchRay(const Frame& f, float sx, float sy, RayState& s, RayCount& n) {
+    if (s.phase == RayPhase::Done) return;
+    if (s.phase == RayPhase::Waiting && f.bricks[s.brick].batch != f.batch) return; // not yet
+    const RayPhase phase = s.phase;
+    s.phase = RayPhase::Done; // unless it stops to wait below
     const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
     const glm::vec3 d = f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
     const glm::vec3 ov = o * f.invSpacing, dv = d * f.invSpacing;
-    Rgba acc;
+    Rgba& acc = s.acc;
     float t0 = 0.0f, t1 = 3.0e38f;
     for (int a = 0; a < 3; ++a) {
         if (dv[a] == 0.0f) {
-            if (ov[a] < 0.0f || ov[a] > f.dims[a]) return acc;
+            if (ov[a] < 0.0f || ov[a] > f.dims[a]) return;
             continue;
         }
         const float ta = -ov[a] / dv[a], tb = (f.dims[a] - ov[a]) / dv[a];
@@ -193,38 +213,49 @@ template <class T> Rgba marchRay(const Frame& f, float sx, float sy, RayCount& n
         t1 = std::min(t1, std::max(ta, tb));
     }
     const int total = int(std::ceil((t1 - t0) / f.stepMm - 0.5f));
-    if (total <= 0) return acc;
-    const glm::vec3 pin = ov + dv * t0;
-    glm::ivec3 cell =
-        glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
-    glm::ivec3 stepDir;
-    glm::vec3 tDelta, tMax;
+    if (total <= 0) return;
+    glm::ivec3 cell = s.cell, stepDir;
+    glm::vec3 tDelta, tMax = s.tMax;
+    if (phase == RayPhase::Fresh) {
+        const glm::vec3 pin = ov + dv * t0;
+        cell = glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
+    }
     for (int a = 0; a < 3; ++a) {
         stepDir[a] = dv[a] > 0.0f ? 1 : dv[a] < 0.0f ? -1 : 0;
         if (stepDir[a] == 0) {
-            tDelta[a] = tMax[a] = 3.0e38f;
+            tDelta[a] = 3.0e38f;
+            if (phase == RayPhase::Fresh) tMax[a] = 3.0e38f;
             continue;
         }
         tDelta[a] = float(f.brick) / std::abs(dv[a]);
+        if (phase != RayPhase::Fresh) continue;
         const float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * f.brick);
         tMax[a] = (plane - ov[a]) / dv[a];
     }
-    for (int k = 0; k < total;) {
+    for (int k = phase == RayPhase::Fresh ? 0 : s.k; k < total;) {
         const float tOut = std::min({tMax.x, tMax.y, tMax.z});
         const int kEnd = std::min(total, int(std::ceil((tOut - t0) / f.stepMm - 0.5f)));
         const int index = (cell.z * f.grid.y + cell.y) * f.grid.x + cell.x;
         const BrickRef& b = f.bricks[index];
+        if (b.slot != Slot::Absent && kEnd > k && b.batch != f.batch) {
+            s.cell = cell;
+            s.tMax = tMax;
+            s.k = k;
+            s.brick = index;
+            s.phase = RayPhase::Waiting;
+            return;
+        }
         if (b.slot == Slot::Sampled && kEnd > k) {
             const std::uint32_t* words = f.occ ? f.occ + std::size_t(index) * f.occWords : nullptr;
             if (!marchBrick(f, static_cast<const T*>(b.voxels), words,
                             ov - glm::vec3(cell * f.brick), dv, d, t0, k, kEnd, acc, n))
-                return acc;
+                return;
         } else if (b.slot == Slot::Constant && kEnd > k) {
             const Rgba c = classify(f, b.constant);
             n.samples += std::uint64_t(kEnd - k);
             for (; c.a > 0.0f && k < kEnd; ++k) {
                 composite(acc, c);
-                if (acc.a >= f.ert) return acc;
+                if (acc.a >= f.ert) return;
             }
         }
         k = std::max(k, kEnd);
@@ -233,33 +264,44 @@ template <class T> Rgba marchRay(const Frame& f, float sx, float sy, RayCount& n
         tMax[a] += tDelta[a];
         if (cell[a] < 0 || cell[a] >= f.grid[a]) break;
     }
-    return acc;
 }
 
+/// One pass over the region's pixels for the bricks of batch f.batch (rays: the region's, row
+/// by row).
 template <class T>
-void renderTiles(const Frame& f, const PixelRect& region, Image& image, RayCount& total) {
+void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& rays,
+               RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0};
-    const auto x0 = region.x, y0 = region.y;
-    tbb::parallel_for(
-        tbb::blocked_range2d<std::uint32_t>(y0, y0 + region.height, 8, x0, x0 + region.width, 8),
-        [&](const tbb::blocked_range2d<std::uint32_t>& r) {
-            RayCount n;
-            for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
-                for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
-                    const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
-                    const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
-                    const Rgba c = marchRay<T>(f, sx, sy, n);
-                    float* px = image.pixel(x - x0, y - y0);
-                    px[0] = std::clamp(c.r, 0.0f, 1.0f);
-                    px[1] = std::clamp(c.g, 0.0f, 1.0f);
-                    px[2] = std::clamp(c.b, 0.0f, 1.0f);
-                    px[3] = std::clamp(c.a, 0.0f, 1.0f);
-                }
-            samples += n.samples;
-            leaps += n.leaps;
-        });
-    total.samples = samples;
-    total.leaps = leaps;
+    const auto x0 = region.x, y0 = region.y, w = region.width;
+    tbb::parallel_for(tbb::blocked_range2d<std::uint32_t>(y0, y0 + region.height, 8, x0, x0 + w, 8),
+                      [&](const tbb::blocked_range2d<std::uint32_t>& r) {
+                          RayCount n;
+                          for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
+                              for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
+                                  const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
+                                  const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
+                                  marchRay<T>(f, sx, sy, rays[std::size_t(y - y0) * w + (x - x0)],
+                                              n);
+                              }
+                          samples += n.samples;
+                          leaps += n.leaps;
+                      });
+    total.samples += samples;
+    total.leaps += leaps;
+}
+
+void marchPassOfType(brickstore::VoxelType type, const Frame& f, const PixelRect& region,
+                     std::vector<RayState>& rays, RayCount& total) {
+    switch (type) {
+    case brickstore::VoxelType::U8:
+        return marchPass<std::uint8_t>(f, region, rays, total);
+    case brickstore::VoxelType::U16:
+        return marchPass<std::uint16_t>(f, region, rays, total);
+    case brickstore::VoxelType::I16:
+        return marchPass<std::int16_t>(f, region, rays, total);
+    case brickstore::VoxelType::F32:
+        return marchPass<float>(f, region, rays, total);
+    }
 }
 
 Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions& o,
@@ -290,6 +332,53 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     return f;
 }
 
+/// Every brick of the level: what it draws and in which batch (`ends` as planBatches gives).
+std::vector<BrickRef> brickRefs(const BrickPlan& plan, const std::vector<std::size_t>& ends,
+                                std::uint64_t brickCount) {
+    std::vector<BrickRef> bricks(std::max<std::uint64_t>(brickCount, 1));
+    for (std::size_t batch = 0, i = 0; batch < ends.size(); ++batch)
+        for (; i < ends[batch]; ++i) {
+            const PlannedBrick& b = plan.drawn[i];
+            BrickRef& ref = bricks[b.index];
+            ref.batch = std::uint32_t(batch);
+            ref.slot = b.draw == BrickDraw::Constant ? Slot::Constant : Slot::Sampled;
+            ref.constant = b.constantValue;
+        }
+    return bricks;
+}
+
+Image imageOf(const std::vector<RayState>& rays, std::uint32_t width, std::uint32_t height) {
+    Image image(width, height);
+    for (std::uint32_t y = 0; y < height; ++y)
+        for (std::uint32_t x = 0; x < width; ++x) {
+            const Rgba& c = rays[std::size_t(y) * width + x].acc;
+            float* px = image.pixel(x, y);
+            px[0] = std::clamp(c.r, 0.0f, 1.0f);
+            px[1] = std::clamp(c.g, 0.0f, 1.0f);
+            px[2] = std::clamp(c.b, 0.0f, 1.0f);
+            px[3] = std::clamp(c.a, 0.0f, 1.0f);
+        }
+    return image;
+}
+
+/// Pins plan.drawn[first, end) (decompressing misses on every core) and points their refs at
+/// the voxels; the pins are the batch's and go when it is drawn.
+std::vector<brickstore::BrickPin> pinBatch(const BrickPlan& plan, std::size_t first,
+                                           std::size_t end, brickstore::BrickCache& cache,
+                                           std::vector<BrickRef>& bricks) {
+    std::vector<brickstore::BrickPin> pins(end - first);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(first, end),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                              const PlannedBrick& b = plan.drawn[i];
+                              if (b.draw != BrickDraw::Sampled) continue;
+                              pins[i - first] = cache.pin(b.key);
+                              bricks[b.index].voxels = pins[i - first].data().data();
+                          }
+                      });
+    return pins;
+}
+
 } // namespace
 
 CpuRaycaster::CpuRaycaster() = default;
@@ -313,30 +402,12 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     const bool octree = occupancy != nullptr;
     const BrickPlan plan = planBricks(store, g, table, view.basis, options.skip, occupancy);
     recordPlan(plan, level, stats);
-    stats.batches = 1;
 
-    // Pin the frame's sampled bricks (decompressing misses on every core).
-    const auto loadStart = Clock::now();
-    std::vector<BrickRef> bricks(std::max<std::uint64_t>(g.brickCount(), 1));
-    std::vector<brickstore::BrickPin> pins(plan.drawn.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, plan.drawn.size()),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                              const PlannedBrick& b = plan.drawn[i];
-                              BrickRef& ref = bricks[b.index];
-                              if (b.draw == BrickDraw::Constant) {
-                                  ref.slot = Slot::Constant;
-                                  ref.constant = b.constantValue;
-                                  continue;
-                              }
-                              pins[i] = cache.pin(b.key);
-                              ref.slot = Slot::Sampled;
-                              ref.voxels = pins[i].data().data();
-                          }
-                      });
-    stats.uploadMs = msSince(loadStart);
-
-    const auto renderStart = Clock::now();
+    // Batches of the front-to-back order whose bricks fit the host budget, drawn one after
+    // the other, each pinned only while it is drawn (the cache can then evict behind it).
+    const auto ends = planBatches(plan, store.brickBytes(), cache.stats().budgetBytes);
+    stats.batches = std::uint32_t(ends.size());
+    std::vector<BrickRef> bricks = brickRefs(plan, ends, g.brickCount());
     Frame f = frameOf(g, view.basis, options, table);
     f.bricks = bricks.data();
     if (octree && occupancy->depth() > 0) {
@@ -347,28 +418,22 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         f.leaf = float(occupancy->leafVoxels());
     }
     const PixelRect region = options.drawn();
-    Image image(region.width, region.height);
+    std::vector<RayState> rays(region.pixels());
     RayCount count;
-    switch (store.info().volume.type) {
-    case brickstore::VoxelType::U8:
-        renderTiles<std::uint8_t>(f, region, image, count);
-        break;
-    case brickstore::VoxelType::U16:
-        renderTiles<std::uint16_t>(f, region, image, count);
-        break;
-    case brickstore::VoxelType::I16:
-        renderTiles<std::int16_t>(f, region, image, count);
-        break;
-    case brickstore::VoxelType::F32:
-        renderTiles<float>(f, region, image, count);
-        break;
+    for (std::size_t batch = 0, first = 0; batch < ends.size(); first = ends[batch++]) {
+        const auto loadStart = Clock::now();
+        std::vector<brickstore::BrickPin> pins = pinBatch(plan, first, ends[batch], cache, bricks);
+        stats.uploadMs += msSince(loadStart);
+        const auto renderStart = Clock::now();
+        f.batch = std::uint32_t(batch);
+        marchPassOfType(store.info().volume.type, f, region, rays, count);
+        stats.renderMs += msSince(renderStart);
     }
-    stats.renderMs = msSince(renderStart);
     stats.samples = count.samples;
     stats.octreeLeaps = count.leaps;
     stats.occlusionReason = "not on the CPU raycaster";
     stats.totalMs = msSince(frameStart);
-    return image;
+    return imageOf(rays, region.width, region.height);
 }
 
 } // namespace bc::render

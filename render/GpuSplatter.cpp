@@ -340,8 +340,10 @@ Image GpuSplatter::render(const Scene& scene, const View& view, const RenderOpti
     const Frame f = detail::frameOf(mConfig, splat.g, view.basis, options, splat.table());
     PrimitiveList list(f, mFootprint, options.width, options.height, mLast);
     const auto type = store.info().volume.type;
-    for (std::size_t first = 0; first < plan.drawn.size(); first += detail::kChunkBricks) {
-        std::vector<PreparedBrick> chunk(std::min(detail::kChunkBricks, plan.drawn.size() - first));
+    const std::uint64_t brickBytes = store.brickBytes(), budget = cache.stats().budgetBytes;
+    for (std::size_t first = 0, end; first < plan.drawn.size(); first = end) {
+        end = detail::chunkEnd(plan, first, brickBytes, budget);
+        std::vector<PreparedBrick> chunk(end - first);
         detail::prepareChunk(f, plan, first, cache, type, occupancy, chunk);
         for (const PreparedBrick& p : chunk) {
             mLast.leavesSkipped += p.leavesSkipped;

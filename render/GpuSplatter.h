@@ -4,10 +4,11 @@
 // points below pointThresholdPixels summed in slabs of one voxel's depth, splats composited
 // 'over', front to back), drawn by OpenGL so that both images agree. The CPU side is the
 // CPU splatter's own (render/detail/SplatPrep.h): bricks in the plan's visibility order,
-// pinned, classified, shaded and sorted on every core, each voxel made a point or a splat by
-// the same rules. From that it writes one ordered list of primitives into one vertex buffer,
-// cut into batches: a run of splats, or the points of one slab (a slab ends where the CPU
-// flushes it: a point deeper than its end, a splat, the end of a brick).
+// pinned (never more than the host budget at once), classified, shaded and sorted on every
+// core, each voxel made a point or a splat by the same rules. From that it writes one ordered
+// list of primitives into one vertex buffer, cut into batches: a run of splats, or the points
+// of one slab (a slab ends where the CPU flushes it: a point deeper than its end, a splat,
+// the end of a brick).
 //
 // GPU path. A splat is an instanced quad over the pixel rectangle of its exact ellipse
 // (projectSphere); the fragment shader takes the distance from the sphere centre to the

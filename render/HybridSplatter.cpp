@@ -25,7 +25,6 @@ namespace bc::render {
 namespace {
 
 using detail::Frame;
-using detail::kChunkBricks;
 using detail::PreparedBrick;
 using detail::SplatScene;
 using detail::Visible;
@@ -590,8 +589,10 @@ Image HybridSplatter::render(const Scene& scene, const View& view, const RenderO
                   options.earlyTermination ? options.ertThreshold : 2.0);
     ChunkDrawer drawer(f, mFootprint, mConfig, canvas, mLast);
     const auto type = store.info().volume.type;
-    for (std::size_t first = 0; first < plan.drawn.size(); first += kChunkBricks) {
-        std::vector<PreparedBrick> chunk(std::min(kChunkBricks, plan.drawn.size() - first));
+    const std::uint64_t brickBytes = store.brickBytes(), budget = cache.stats().budgetBytes;
+    for (std::size_t first = 0, end; first < plan.drawn.size(); first = end) {
+        end = detail::chunkEnd(plan, first, brickBytes, budget);
+        std::vector<PreparedBrick> chunk(end - first);
         drawer.cullBricks(plan.drawn.data() + first, chunk);
         const auto prepareStart = Clock::now();
         detail::prepareChunk(f, plan, first, cache, type, occupancy, chunk);

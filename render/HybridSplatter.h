@@ -26,9 +26,10 @@
 // (ertThreshold, with earlyTermination on), and a planned brick is skipped unpinned when the
 // tiles under its screen box are; pixels at the threshold take no more colour either way, so
 // culling changes no pixel. Bricks are pinned, classified, shaded and sorted on every core
-// (TBB, 16 bricks at a time), then drawn in order in horizontal bands of whole tiles, one
-// worker per band (parallelDraw): slab cuts are decided once for all bands, culling per band,
-// so every pixel sees the serial operations and the image and counts are those of one band.
+// (TBB, 16 bricks at a time, fewer when the host budget holds fewer: no frame pins more than
+// the budget), then drawn in order in horizontal bands of whole tiles, one worker per band
+// (parallelDraw): slab cuts are decided once for all bands, culling per band, so every pixel
+// sees the serial operations and the image and counts are those of one band.
 // Not thread-safe: one frame at a time per instance.
 #include "render/Renderer.h"
 #include "render/SplatConfig.h"

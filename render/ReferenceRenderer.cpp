@@ -1,9 +1,12 @@
 #include "render/ReferenceRenderer.h"
 
+#include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "brickstore/StoreVolume.h"
 #include "render/BrickPlan.h"
 #include "render/TransferFunction.h"
+
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <atomic>
@@ -30,21 +33,24 @@ ReferenceVolume::ReferenceVolume(const brickstore::BrickStore& store, std::uint3
     }
 }
 
-double ReferenceVolume::sample(double px, double py, double pz) const {
+namespace {
+
+/// Trilinear value at continuous voxel position p, clamped to the edge of a volume of `dims`;
+/// `at(x, y, z)` reads a voxel. One function for the whole level and for bricks, so both give
+/// the same double to the bit.
+template <class At>
+double trilinear(const std::array<std::uint64_t, 3>& dims, double px, double py, double pz,
+                 const At& at) {
     const double p[3] = {px - 0.5, py - 0.5, pz - 0.5};
     std::int64_t i0[3], i1[3];
     double w[3];
     for (int a = 0; a < 3; ++a) {
         const double f = std::floor(p[a]);
-        const auto hi = std::int64_t(mDims[a]) - 1;
+        const auto hi = std::int64_t(dims[a]) - 1;
         w[a] = p[a] - f;
         i0[a] = std::clamp<std::int64_t>(std::int64_t(f), 0, hi);
         i1[a] = std::clamp<std::int64_t>(std::int64_t(f) + 1, 0, hi);
     }
-    auto at = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
-        return double(mVoxels[(std::uint64_t(z) * mDims[1] + std::uint64_t(y)) * mDims[0] +
-                              std::uint64_t(x)]);
-    };
     auto lerp = [](double a, double b, double t) { return a + (b - a) * t; };
     const double c00 = lerp(at(i0[0], i0[1], i0[2]), at(i1[0], i0[1], i0[2]), w[0]);
     const double c10 = lerp(at(i0[0], i1[1], i0[2]), at(i1[0], i1[1], i0[2]), w[0]);
@@ -53,19 +59,27 @@ double ReferenceVolume::sample(double px, double py, double pz) const {
     return lerp(lerp(c00, c10, w[1]), lerp(c01, c11, w[1]), w[2]);
 }
 
+} // namespace
+
+double ReferenceVolume::sample(double px, double py, double pz) const {
+    return trilinear(mDims, px, py, pz, [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+        return double(mVoxels[(std::uint64_t(z) * mDims[1] + std::uint64_t(y)) * mDims[0] +
+                              std::uint64_t(x)]);
+    });
+}
+
 namespace {
 
 struct RayContext {
-    const ReferenceVolume& volume;
     const TransferFunctionTable& table;
     const LevelGeometry& geometry;
     const RenderOptions& options;
     glm::dvec3 gradScale; ///< value difference -> TF-domain units per voxel of the smallest spacing
 };
 
-std::array<double, 4> shade(const RayContext& c, const std::array<double, 4>& rgba,
+template <class Volume>
+std::array<double, 4> shade(const RayContext& c, const Volume& v, const std::array<double, 4>& rgba,
                             const glm::dvec3& p, const glm::dvec3& dir) {
-    const ReferenceVolume& v = c.volume;
     const glm::dvec3 g = glm::dvec3(v.sample(p.x + 1, p.y, p.z) - v.sample(p.x - 1, p.y, p.z),
                                     v.sample(p.x, p.y + 1, p.z) - v.sample(p.x, p.y - 1, p.z),
                                     v.sample(p.x, p.y, p.z + 1) - v.sample(p.x, p.y, p.z - 1)) *
@@ -84,11 +98,22 @@ std::array<double, 4> shade(const RayContext& c, const std::array<double, 4>& rg
     return out;
 }
 
-/// Marches one ray; returns premultiplied RGBA and adds its samples to `samples`, and to
-/// `oracle` those with non-zero opacity taken before the ray's opacity reaches the early
-/// termination threshold (what an ideal skipping renderer would have to take).
-std::array<double, 4> marchRay(const RayContext& c, const Ray& ray, std::uint64_t& samples,
-                               std::uint64_t& oracle) {
+/// A ray between passes: its colour so far and its next sample.
+struct RayProgress {
+    std::array<double, 4> acc{0, 0, 0, 0};
+    std::int64_t k = 0;
+    bool done = false;
+};
+
+/// Marches one ray from progress.k on; `volumeAt(p)` is the volume that samples point p, or
+/// nullptr when it is not drawn in this pass (the ray stops there and goes on in a later one).
+/// Adds the ray's samples to `samples` when it ends, and to `oracle` those with non-zero
+/// opacity taken before the ray's opacity reaches the early termination threshold (what an
+/// ideal skipping renderer would have to take).
+template <class VolumeAt>
+void marchRay(const RayContext& c, const Ray& ray, const VolumeAt& volumeAt, RayProgress& s,
+              std::uint64_t& samples, std::uint64_t& oracle) {
+    if (s.done) return;
     const LevelGeometry& g = c.geometry;
     const glm::dvec3 ov = ray.origin / g.spacing, dv = ray.direction / g.spacing;
     const Box voxelBox{glm::dvec3(0.0),
@@ -97,23 +122,154 @@ std::array<double, 4> marchRay(const RayContext& c, const Ray& ray, std::uint64_
     t0 = std::max(t0, 0.0);
     const double step = c.options.stepVoxels * g.minSpacing();
     const double count = std::ceil((t1 - t0) / step - 0.5);
-    std::array<double, 4> acc{0, 0, 0, 0};
-    if (!(count > 0)) return acc;
-    const auto total = std::int64_t(count);
-    for (std::int64_t k = 0; k < total; ++k) {
+    const auto total = count > 0 ? std::int64_t(count) : 0;
+    std::array<double, 4>& acc = s.acc;
+    for (std::int64_t k = s.k; k < total; ++k) {
         const glm::dvec3 p = ov + dv * (t0 + (double(k) + 0.5) * step);
-        const auto f = c.table.lookup(c.volume.sample(p.x, p.y, p.z));
+        const auto* volume = volumeAt(p);
+        if (volume == nullptr) {
+            s.k = k;
+            return;
+        }
+        const auto f = c.table.lookup(volume->sample(p.x, p.y, p.z));
         std::array<double, 4> rgba{f[0], f[1], f[2], f[3]};
         if (rgba[3] <= 0.0) continue;
         if (acc[3] < c.options.ertThreshold) ++oracle;
-        if (c.options.shading) rgba = shade(c, rgba, p, ray.direction);
+        if (c.options.shading) rgba = shade(c, *volume, rgba, p, ray.direction);
         const double w = (1.0 - acc[3]) * rgba[3];
         for (int i = 0; i < 3; ++i)
             acc[i] += w * rgba[i];
         acc[3] += w;
     }
     samples += std::uint64_t(total);
-    return acc;
+    s.done = true;
+}
+
+/// Runs `pixel(x, y, i, samples, oracle)` for every pixel of `region` (i: its index in the
+/// region, row by row) on `threads` threads (0 = all cores). Pixels are shared out in runs of a
+/// few of one row, so a region of a few pixels (a slice of a frame at a tiny step, as the
+/// daemon draws long frames) still keeps every core busy.
+template <class Pixel>
+void forEachPixel(unsigned threads, const PixelRect& region, const Pixel& pixel,
+                  FrameStats& stats) {
+    constexpr std::uint32_t kRunPixels = 16;
+    const std::uint32_t runsPerRow = (region.width + kRunPixels - 1) / kRunPixels;
+    const std::uint64_t runs = std::uint64_t(runsPerRow) * region.height;
+    std::atomic<std::uint64_t> nextRun{0};
+    std::atomic<std::uint64_t> samples{0}, oracle{0};
+    auto worker = [&] {
+        std::uint64_t mine = 0, mineOracle = 0;
+        for (std::uint64_t run; (run = nextRun++) < runs;) {
+            const auto row = std::uint32_t(run / runsPerRow);
+            const std::uint32_t x0 = std::uint32_t(run % runsPerRow) * kRunPixels;
+            const std::uint32_t x1 = std::min(x0 + kRunPixels, region.width);
+            for (std::uint32_t x = x0; x < x1; ++x)
+                pixel(region.x + x, region.y + row, std::size_t(row) * region.width + x, mine,
+                      mineOracle);
+        }
+        samples += mine;
+        oracle += mineOracle;
+    };
+    threads = threads ? threads : std::max(1u, std::thread::hardware_concurrency());
+    std::vector<std::thread> pool;
+    for (unsigned i = 1; i < threads; ++i)
+        pool.emplace_back(worker);
+    worker();
+    for (auto& t : pool)
+        t.join();
+    stats.samples += samples;
+    stats.oracleSamples += oracle;
+}
+
+Image imageOf(const std::vector<RayProgress>& rays, std::uint32_t width, std::uint32_t height) {
+    Image image(width, height);
+    for (std::uint32_t y = 0; y < height; ++y)
+        for (std::uint32_t x = 0; x < width; ++x) {
+            float* px = image.pixel(x, y);
+            for (int i = 0; i < 4; ++i)
+                px[i] = float(std::clamp(rays[std::size_t(y) * width + x].acc[i], 0.0, 1.0));
+        }
+    return image;
+}
+
+/// One brick as the reference samples it: a sample point of its payload reads only voxels
+/// of the stored brick (apron >= 2 covers the trilinear and the gradient's reads), by global
+/// index, so it gives ReferenceVolume::sample's double exactly. A constant brick (apron
+/// included) gives its value, which trilinear weights of equal values give exactly too.
+template <class T> struct BrickSampler {
+    const T* voxels = nullptr; ///< while its batch is drawn; null for a constant brick
+    double constant = 0.0;
+    std::array<std::int64_t, 3> first{}; ///< global index of the stored brick's voxel 0
+    std::array<std::uint64_t, 3> dims{}; ///< the level's
+    std::int64_t edge = 0;
+    std::uint32_t batch = 0;
+
+    double sample(double px, double py, double pz) const {
+        if (voxels == nullptr) return constant;
+        return trilinear(dims, px, py, pz, [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+            return double(voxels[((z - first[2]) * edge + (y - first[1])) * edge + (x - first[0])]);
+        });
+    }
+};
+
+template <class T>
+std::vector<BrickSampler<T>> brickSamplers(const LevelGeometry& g, const BrickPlan& plan,
+                                           const std::vector<std::size_t>& ends) {
+    std::vector<BrickSampler<T>> bricks(g.brickCount());
+    for (std::size_t batch = 0, i = 0; batch < ends.size(); ++batch)
+        for (; i < ends[batch]; ++i) {
+            const PlannedBrick& b = plan.drawn[i];
+            BrickSampler<T>& s = bricks[b.index];
+            for (int a = 0; a < 3; ++a)
+                s.first[a] = std::int64_t(b.key.pos[a]) * g.brickVoxels - g.apronVoxels;
+            s.dims = g.dims;
+            s.edge = g.brickVoxels + 2 * g.apronVoxels;
+            s.constant = b.constantValue;
+            s.batch = std::uint32_t(batch);
+        }
+    return bricks;
+}
+
+/// The reference over the host cache: every brick of the level in front-to-back batches that
+/// fit the cache's budget, each pinned while its pass runs; a ray stops at the first sample
+/// whose brick is in a later batch and goes on from there.
+template <class T>
+void renderBricked(const Scene& scene, const RayContext& c, const ViewBasis& view,
+                   const ReferenceConfig& config, std::vector<RayProgress>& rays,
+                   FrameStats& stats) {
+    const LevelGeometry& g = c.geometry;
+    const BrickPlan plan = planEveryBrick(scene.store, g, view);
+    const auto ends = planBatches(plan, scene.store.brickBytes(), scene.cache.stats().budgetBytes);
+    std::vector<BrickSampler<T>> bricks = brickSamplers<T>(g, plan, ends);
+    const std::uint32_t w = c.options.width, h = c.options.height;
+    const PixelRect region = c.options.drawn();
+    for (std::size_t batch = 0, first = 0; batch < ends.size(); first = ends[batch++]) {
+        std::vector<brickstore::BrickPin> pins(ends[batch] - first);
+        tbb::parallel_for(first, ends[batch], [&](std::size_t i) {
+            const PlannedBrick& b = plan.drawn[i];
+            if (b.draw != BrickDraw::Sampled) return;
+            pins[i - first] = scene.cache.pin(b.key);
+            bricks[b.index].voxels = reinterpret_cast<const T*>(pins[i - first].data().data());
+        });
+        auto volumeAt = [&](const glm::dvec3& p) -> const BrickSampler<T>* {
+            std::uint64_t index = 0;
+            for (int a = 2; a >= 0; --a) {
+                const double cell = std::floor(p[a] / double(g.brickVoxels));
+                index = index * g.bricks[a] +
+                        std::uint64_t(std::clamp(cell, 0.0, double(g.bricks[a] - 1)));
+            }
+            const BrickSampler<T>& b = bricks[index];
+            return b.batch == batch ? &b : nullptr;
+        };
+        forEachPixel(
+            config.threads, region,
+            [&](std::uint32_t x, std::uint32_t y, std::size_t i, std::uint64_t& samples,
+                std::uint64_t& oracle) {
+                marchRay(c, view.ray(x, y, w, h), volumeAt, rays[i], samples, oracle);
+            },
+            stats);
+    }
+    stats.batches = std::uint32_t(ends.size());
 }
 
 } // namespace
@@ -141,49 +297,24 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
     if (geometry.dims != volume.dims())
         throw std::invalid_argument("reference volume is not the requested level");
     const double span = table.domainMax - table.domainMin;
-    const RayContext context{volume, table, geometry, options,
+    const RayContext context{table, geometry, options,
                              0.5 / span * geometry.minSpacing() / geometry.spacing};
-
-    // Runs of pixels of the region in row order, shared out one at a time: a region of a few
-    // pixels (a slice of a frame at a tiny step) still keeps every core busy.
+    const std::uint32_t w = options.width, h = options.height;
     const PixelRect region = options.drawn();
-    Image image(region.width, region.height);
-    constexpr std::uint32_t kRunPixels = 16;
-    const std::uint32_t runsPerRow = (region.width + kRunPixels - 1) / kRunPixels;
-    const std::uint64_t runs = std::uint64_t(runsPerRow) * region.height;
-    std::atomic<std::uint64_t> nextRun{0};
-    std::atomic<std::uint64_t> samples{0}, oracle{0};
-    auto worker = [&] {
-        std::uint64_t mine = 0, mineOracle = 0;
-        for (std::uint64_t run; (run = nextRun++) < runs;) {
-            const std::uint32_t y = region.y + std::uint32_t(run / runsPerRow);
-            const std::uint32_t x0 = region.x + std::uint32_t(run % runsPerRow) * kRunPixels;
-            const std::uint32_t x1 = std::min(x0 + kRunPixels, region.x + region.width);
-            for (std::uint32_t x = x0; x < x1; ++x) {
-                const auto acc = marchRay(context, view.ray(x, y, options.width, options.height),
-                                          mine, mineOracle);
-                float* px = image.pixel(x - region.x, y - region.y);
-                for (int i = 0; i < 4; ++i)
-                    px[i] = float(std::clamp(acc[i], 0.0, 1.0));
-            }
-        }
-        samples += mine;
-        oracle += mineOracle;
-    };
-    unsigned threads =
-        config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
-    std::vector<std::thread> pool;
-    for (unsigned i = 1; i < threads; ++i)
-        pool.emplace_back(worker);
-    worker();
-    for (auto& t : pool)
-        t.join();
+    std::vector<RayProgress> rays(region.pixels());
+    auto whole = [&](const glm::dvec3&) { return &volume; };
+    forEachPixel(
+        config.threads, region,
+        [&](std::uint32_t x, std::uint32_t y, std::size_t i, std::uint64_t& samples,
+            std::uint64_t& oracle) {
+            marchRay(context, view.ray(x, y, w, h), whole, rays[i], samples, oracle);
+        },
+        stats);
     stats.level = level;
-    stats.samples = samples;
-    stats.oracleSamples = oracle;
+    stats.batches = 1;
     stats.totalMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return image;
+    return imageOf(rays, region.width, region.height);
 }
 
 // ---- ReferenceRenderer ------------------------------------------------------------------
@@ -201,12 +332,6 @@ Image ReferenceRenderer::render(const Scene& scene, const View& view, const Rend
     if (dims[0] * dims[1] * dims[2] > mConfig.maxVoxels)
         throw std::invalid_argument("the reference renderer is not offered for volumes over " +
                                     std::to_string(mConfig.maxVoxels >> 20) + " Mi voxels");
-    if (!mVolume || mStoreInstance != scene.store.instance() || mLevel != level) {
-        mVolume.reset(); // the old level's voxels go before the new ones are read
-        mVolume = std::make_unique<ReferenceVolume>(scene.store, level);
-        mStoreInstance = scene.store.instance();
-        mLevel = level;
-    }
     // Full precision: the table has the default entries (tables are equal for one step and
     // entry count, so the shared classification's serves).
     FrameStats ignored;
@@ -214,7 +339,47 @@ Image ReferenceRenderer::render(const Scene& scene, const View& view, const Rend
     tablesOnly.skip = SkipMode::None;
     const FrameClassification classified =
         classifyFrame(scene, level, tablesOnly, options.stepVoxels, ignored);
-    return renderReference(scene.store, *mVolume, *classified.table, view.basis, options, stats,
+    const LevelGeometry g = LevelGeometry::of(scene.store, level);
+    if (g.apronVoxels < 2) return renderWhole(scene, *classified.table, view, options, stats);
+    const auto start = std::chrono::steady_clock::now();
+    mVolume.reset(); // a level held whole for an earlier store goes
+    stats = FrameStats{};
+    const double span = classified.table->domainMax - classified.table->domainMin;
+    const RayContext context{*classified.table, g, options,
+                             0.5 / span * g.minSpacing() / g.spacing};
+    std::vector<RayProgress> rays(options.drawn().pixels());
+    switch (scene.store.info().volume.type) {
+    case brickstore::VoxelType::U8:
+        renderBricked<std::uint8_t>(scene, context, view.basis, mConfig.threads, rays, stats);
+        break;
+    case brickstore::VoxelType::U16:
+        renderBricked<std::uint16_t>(scene, context, view.basis, mConfig.threads, rays, stats);
+        break;
+    case brickstore::VoxelType::I16:
+        renderBricked<std::int16_t>(scene, context, view.basis, mConfig.threads, rays, stats);
+        break;
+    case brickstore::VoxelType::F32:
+        renderBricked<float>(scene, context, view.basis, mConfig.threads, rays, stats);
+        break;
+    }
+    stats.level = level;
+    stats.totalMs =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return imageOf(rays, options.drawn().width, options.drawn().height);
+}
+
+Image ReferenceRenderer::renderWhole(const Scene& scene, const TransferFunctionTable& table,
+                                     const View& view, const RenderOptions& options,
+                                     FrameStats& stats) {
+    const auto levels = std::uint32_t(scene.store.layout().levels().size());
+    const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
+    if (!mVolume || mStoreInstance != scene.store.instance() || mLevel != level) {
+        mVolume.reset(); // the old level's voxels go before the new ones are read
+        mVolume = std::make_unique<ReferenceVolume>(scene.store, level);
+        mStoreInstance = scene.store.instance();
+        mLevel = level;
+    }
+    return renderReference(scene.store, *mVolume, table, view.basis, options, stats,
                            mConfig.threads);
 }
 

@@ -53,13 +53,17 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
                       const ReferenceConfig& config = {});
 
 struct ReferenceRendererConfig {
-    /// Largest level it draws: it holds every voxel of the level in host memory.
+    /// Largest level it draws (it takes every sample of every ray, however slow).
     std::uint64_t maxVoxels = 64ull << 20;
     ReferenceConfig threads;
 };
 
-/// The reference as a Renderer: the level's voxels are read once per store and level and
-/// kept while the same ones are drawn.
+/// The reference as a Renderer. It samples the level's bricks through the host cache, in
+/// front-to-back batches whose bricks fit the cache's budget, each pinned only while its pass
+/// runs (no pin outlives render()); every sample reads the voxels ReferenceVolume would read,
+/// so the image is renderReference's to the bit, whatever the budget (render/RESIDENCY.md).
+/// A store with aprons under 2 voxels cannot be sampled brick by brick: its level is read
+/// whole (ReferenceVolume) and kept while the same one is drawn.
 class ReferenceRenderer final : public Renderer {
   public:
     explicit ReferenceRenderer(const ReferenceRendererConfig& config = {});
@@ -72,6 +76,9 @@ class ReferenceRenderer final : public Renderer {
     using Renderer::render;
 
   private:
+    Image renderWhole(const Scene& scene, const TransferFunctionTable& table, const View& view,
+                      const RenderOptions& options, FrameStats& stats);
+
     ReferenceRendererConfig mConfig;
     std::unique_ptr<ReferenceVolume> mVolume;
     std::uint64_t mStoreInstance = 0;

@@ -628,7 +628,7 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
         }
         if (at && (!wakeAt || *at < *wakeAt)) wakeAt = at;
     }
-    if (!mayWait) return nullptr;
+    if (!mayWait || mStop) return nullptr; // a stop set while the lock was let go is seen here
     if (wakeAt)
         mWake.wait_until(lock, *wakeAt);
     else

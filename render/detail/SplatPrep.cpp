@@ -187,6 +187,19 @@ bool pixelRect(const glm::dvec2& lo, const glm::dvec2& hi, std::uint32_t w, std:
     return true;
 }
 
+std::size_t chunkEnd(const BrickPlan& plan, std::size_t first, std::uint64_t brickBytes,
+                     std::uint64_t budgetBytes) {
+    const std::size_t last = std::min(plan.drawn.size(), first + kChunkBricks);
+    std::uint64_t bytes = 0;
+    std::size_t end = first;
+    for (; end < last; ++end) {
+        if (plan.drawn[end].draw != BrickDraw::Sampled) continue;
+        if (bytes > 0 && bytes + brickBytes > budgetBytes) break;
+        bytes += brickBytes;
+    }
+    return end;
+}
+
 void prepareChunk(const Frame& f, const BrickPlan& plan, std::size_t first,
                   brickstore::BrickCache& cache, brickstore::VoxelType type,
                   const OccupancyTrees* occupancy, std::vector<PreparedBrick>& chunk) {

@@ -95,6 +95,12 @@ struct PreparedBrick {
 /// busy, few enough that the CPU culling test before a chunk is still sharp.
 constexpr std::size_t kChunkBricks = 16;
 
+/// The end of the chunk that starts at plan.drawn[first]: at most kChunkBricks bricks, and
+/// no more sampled ones (`brickBytes` each once pinned) than `budgetBytes` holds (at least
+/// one), so that a frame never pins more than the host budget.
+std::size_t chunkEnd(const BrickPlan& plan, std::size_t first, std::uint64_t brickBytes,
+                     std::uint64_t budgetBytes);
+
 /// Pins, classifies, shades and sorts bricks plan.drawn[first + i] into chunk[i] on every core
 /// (TBB); entries marked culled are left alone. `occupancy` (second stage, or nullptr) is
 /// used for sampled bricks. @throw StoreCorrupt naming a brick.

@@ -1,0 +1,168 @@
+// Every CPU-side renderer honours the host cache's budget (issue 16): a frame whose bricks do
+// not fit is drawn in front-to-back batches that do, the cache never holds more pinned bytes
+// than the budget (the splatters: than one chunk that fits it), no pin outlives render(), and
+// the image is the one drawn with room for everything, bit for bit (the reference's: the one
+// of the level held whole).
+#include "RenderTestSupport.h"
+#include "render/CpuRaycaster.h"
+#include "render/GpuSplatter.h"
+#include "render/HybridSplatter.h"
+
+namespace bc::render {
+namespace {
+
+using test::TestStore;
+
+constexpr std::uint64_t kTinyBudgetBytes = 1u << 20; // ~11 bricks of 36^3 u16
+
+struct Budgeted {
+    Image image;
+    FrameStats stats;
+    brickstore::BrickCacheStats cache;
+};
+
+/// One frame through a fresh cache of `budgetBytes` over the test store.
+Budgeted frameUnder(TestStore& t, Renderer& renderer, std::uint64_t budgetBytes,
+                    const TransferFunction& tf, const Camera& camera, const RenderOptions& o) {
+    brickstore::BrickCache cache(*t.store, brickstore::BrickCacheConfig{budgetBytes});
+    Budgeted out;
+    out.image = renderer.render(*t.store, cache, tf, camera, o, out.stats);
+    out.cache = cache.stats();
+    return out;
+}
+
+std::vector<Camera> cameras(const Box& box) {
+    Camera inside; // the eye in the volume: batches in the order of the eye's own cell
+    inside.eye = box.centre() + glm::dvec3(0.0, -0.2 * box.size().y, 0.0);
+    inside.target = box.centre() + glm::dvec3(0.0, 1.0, 0.0) * box.size().y;
+    inside.up = {0, 0, 1};
+    inside.fovYDeg = 70;
+    Camera ortho = Camera::orbit(box, 300, -25);
+    ortho.orthographic = true;
+    ortho.orthoHeight = 2.0 * box.radius();
+    return {Camera::orbit(box, 210, 10), ortho, inside};
+}
+
+std::unique_ptr<TestStore> cthead() {
+    auto spec = test::realScan("cthead");
+    if (!spec) return nullptr;
+    return test::ingestSpec(*spec, {32, 2, 8});
+}
+
+TEST(HostBudget, CpuRaycasterDrawsInBatchesThatFitAndTheSameImage) {
+    auto t = cthead();
+    if (!t) return test::missingData("scan cthead");
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
+    const std::uint64_t brickBytes = t->store->brickBytes();
+    CpuRaycaster cpu;
+    for (const Camera& camera : cameras(LevelGeometry::of(*t->store, 0).box))
+        for (bool ert : {true, false}) {
+            RenderOptions o;
+            o.width = o.height = 96;
+            o.earlyTermination = ert;
+            o.shading = ert; // both branches of the sampler
+            const Budgeted all = frameUnder(*t, cpu, 1ull << 30, tf, camera, o);
+            const Budgeted tiny = frameUnder(*t, cpu, kTinyBudgetBytes, tf, camera, o);
+            SCOPED_TRACE(std::string(camera.orthographic ? "ortho" : "perspective") +
+                         (ert ? ", ert" : ", no ert"));
+            EXPECT_EQ(all.stats.batches, 1u);
+            EXPECT_GE(tiny.stats.batches, 4u) << "the budget must force several batches";
+            EXPECT_GT(all.cache.pinnedPeakBytes, 4 * kTinyBudgetBytes);
+            EXPECT_LE(tiny.cache.pinnedPeakBytes, kTinyBudgetBytes);
+            EXPECT_GT(tiny.cache.pinnedPeakBytes, kTinyBudgetBytes - brickBytes);
+            EXPECT_EQ(tiny.cache.pinnedBytes, 0u) << "a pin outlived render()";
+            EXPECT_EQ(compareImages(all.image, tiny.image).maxAbs, 0.0);
+            EXPECT_EQ(all.stats.samples, tiny.stats.samples);
+            EXPECT_EQ(all.stats.octreeLeaps, tiny.stats.octreeLeaps);
+            double alpha = 0;
+            for (std::size_t i = 3; i < all.image.rgba.size(); i += 4)
+                alpha += all.image.rgba[i];
+            EXPECT_GT(alpha, 0.05 * 96 * 96) << "the view shows almost nothing, so proves nothing";
+        }
+}
+
+// A budget below one brick still draws (one brick per batch), and skipping stays exact.
+TEST(HostBudget, CpuRaycasterUnderABudgetBelowOneBrickPinsOneBrickAtATime) {
+    auto t = cthead();
+    if (!t) return test::missingData("scan cthead");
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
+    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
+    CpuRaycaster cpu;
+    RenderOptions o;
+    o.width = o.height = 64;
+    RenderOptions none = o;
+    none.skip = SkipMode::None;
+    const Budgeted all = frameUnder(*t, cpu, 1ull << 30, tf, camera, none);
+    const Budgeted one = frameUnder(*t, cpu, 1, tf, camera, o);
+    EXPECT_EQ(one.cache.pinnedPeakBytes, t->store->brickBytes());
+    EXPECT_GT(one.stats.batches, 20u);
+    EXPECT_GT(one.stats.octreeLeaps, 0u);
+    EXPECT_EQ(compareImages(all.image, one.image).maxAbs, 0.0);
+}
+
+TEST(HostBudget, HybridSplatterPreparesChunksThatFitAndTheSameImage) {
+    auto t = cthead();
+    if (!t) return test::missingData("scan cthead");
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
+    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 210, 10);
+    HybridSplatter splat;
+    RenderOptions o;
+    o.width = o.height = 64;
+    const std::uint64_t budget = 4 * t->store->brickBytes(); // under one chunk of 16 bricks
+    const Budgeted all = frameUnder(*t, splat, 1ull << 30, tf, camera, o);
+    const Budgeted small = frameUnder(*t, splat, budget, tf, camera, o);
+    EXPECT_GT(all.cache.pinnedPeakBytes, budget);
+    EXPECT_LE(small.cache.pinnedPeakBytes, budget);
+    EXPECT_EQ(small.cache.pinnedBytes, 0u) << "a pin outlived render()";
+    EXPECT_EQ(compareImages(all.image, small.image).maxAbs, 0.0);
+    EXPECT_EQ(all.stats.samples, small.stats.samples);
+}
+
+// The reference samples bricks from the cache in batches: the image of the level held whole,
+// bit for bit, under any budget.
+TEST(HostBudget, ReferenceRendererDrawsInBatchesThatFitAndTheWholeLevelsImage) {
+    auto t = cthead();
+    if (!t) return test::missingData("scan cthead");
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
+    const std::uint64_t brickBytes = t->store->brickBytes();
+    ReferenceRenderer reference;
+    for (const Camera& camera : cameras(LevelGeometry::of(*t->store, 0).box)) {
+        RenderOptions o;
+        o.width = o.height = 48;
+        SCOPED_TRACE(camera.orthographic ? "ortho" : "perspective");
+        const Image whole = test::referenceFrame(*t, tf, camera, o);
+        const Budgeted all = frameUnder(*t, reference, 1ull << 30, tf, camera, o);
+        const Budgeted tiny = frameUnder(*t, reference, kTinyBudgetBytes, tf, camera, o);
+        EXPECT_GE(tiny.stats.batches, 4u);
+        EXPECT_LE(tiny.cache.pinnedPeakBytes, kTinyBudgetBytes);
+        EXPECT_GT(tiny.cache.pinnedPeakBytes, kTinyBudgetBytes - brickBytes);
+        EXPECT_EQ(tiny.cache.pinnedBytes, 0u) << "a pin outlived render()";
+        EXPECT_EQ(compareImages(whole, all.image).maxAbs, 0.0);
+        EXPECT_EQ(compareImages(whole, tiny.image).maxAbs, 0.0);
+        EXPECT_EQ(all.stats.samples, tiny.stats.samples);
+        EXPECT_EQ(all.stats.oracleSamples, tiny.stats.oracleSamples);
+    }
+}
+
+// The GPU splatter prepares its primitives on the CPU from the same chunks (GL: llvmpipe in CI).
+TEST(HostBudgetGl, GpuSplatterPreparesChunksThatFitAndTheSameImage) {
+    auto t = cthead();
+    if (!t) return test::missingData("scan cthead");
+    test::glContext();
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
+    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 210, 10);
+    GpuSplatter splat;
+    RenderOptions o;
+    o.width = o.height = 48;
+    const std::uint64_t budget = 4 * t->store->brickBytes();
+    const Budgeted all = frameUnder(*t, splat, 1ull << 30, tf, camera, o);
+    const Budgeted small = frameUnder(*t, splat, budget, tf, camera, o);
+    EXPECT_GT(all.cache.pinnedPeakBytes, budget);
+    EXPECT_LE(small.cache.pinnedPeakBytes, budget);
+    EXPECT_EQ(small.cache.pinnedBytes, 0u) << "a pin outlived render()";
+    EXPECT_EQ(compareImages(all.image, small.image).maxAbs, 0.0);
+    EXPECT_EQ(all.stats.samples, small.stats.samples);
+}
+
+} // namespace
+} // namespace bc::render
