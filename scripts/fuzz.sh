@@ -72,8 +72,9 @@ nifti_header)
     ;;
 dicom)
     harness=DicomFuzz
-    sources=(brickstore/readers/DicomReader.cpp "${reader_common[@]}")
-    folders=(brickstore brickstore/readers)
+    sources=(brickstore/readers/DicomReader.cpp brickstore/readers/detail/DicomLengths.cpp
+        "${reader_common[@]}")
+    folders=(brickstore brickstore/readers brickstore/readers/detail)
     cflags=(-isystem "$(ls -d /usr/include/gdcm-* | tail -1)")
     libs=(-lgdcmMSFF -lgdcmDSED -lgdcmCommon)
     max_len=65536
@@ -97,11 +98,24 @@ frame_codec)
     ;;
 daemon_config)
     harness=DaemonConfigFuzz
-    sources=(server/DaemonConfig.cpp render/TransferFunction.cpp brickstore/readers/SyntheticVolume.cpp
-        brickstore/Sources.cpp "${reader_common[@]}")
+    # The presets of configs/tf, embedded as bc_render embeds them (cmake/EmbedTfPresets.cmake).
+    presets=(configs/tf/*.json)
+    if [[ ! -e $out/TfPresets.cpp || -n $(find configs/tf -newer "$out/TfPresets.cpp") ]]; then
+        cmake -DOUTPUT="$out/TfPresets.cpp" "-DINPUTS=$(IFS=';'; echo "${presets[*]/#/$src/}")" \
+            -P cmake/EmbedTfPresets.cmake
+    fi
+    sources=(server/DaemonConfig.cpp render/TransferFunction.cpp "$out/TfPresets.cpp"
+        "${reader_common[@]}" brickstore/Sources.cpp brickstore/readers/*.cpp
+        brickstore/readers/detail/*.cpp)
     folders=(server render render/detail brickstore brickstore/readers protocol)
-    cflags=($(pkg-config --cflags tomlplusplus))
-    libs=($(pkg-config --libs tomlplusplus))
+    # The config checks generator names with parseSynthKind (Sources.cpp), which comes with
+    # openSource and so every reader.
+    cflags+=(-isystem /usr/include/nifti -isystem "$(ls -d /usr/include/gdcm-* | tail -1)")
+    libs+=(-lopenvdb -ltbb -lImath -lniftiio -lznz -lgdcmMSFF -lgdcmDSED -lgdcmCommon -lzstd -lz)
+    read -ra toml_cflags <<<"$(pkg-config --cflags tomlplusplus)"
+    read -ra toml_libs <<<"$(pkg-config --libs tomlplusplus)"
+    cflags+=("${toml_cflags[@]}")
+    libs+=("${toml_libs[@]}")
     max_len=16384
     ;;
 *)
@@ -134,7 +148,7 @@ if stale; then
     echo "building $fuzzer with $cxx"
     objects=()
     for s in "${sources[@]}" "$harness_src"; do
-        o=$out/obj/$(echo "$s" | tr / _).o
+        o=$out/obj/$(echo "${s#"$out"/}" | tr / _).o
         # The library sources without the fuzzer's main; the harness with it (at link time).
         "${launcher[@]}" "$cxx" "${flags[@]}" -c "$s" -o "$o"
         objects+=("$o")
@@ -151,7 +165,7 @@ export BC_CONFIGS_DIR=$src/configs
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1}
 # shellcheck disable=SC2086
 "$fuzzer" -max_total_time="$seconds" -max_len="$max_len" -timeout=10 -rss_limit_mb="$rss_mb" \
-    -malloc_limit_mb="$malloc_mb" -print_final_stats=1 -artifact_prefix="$out/" \
+    -malloc_limit_mb="$malloc_mb" -print_final_stats=1 -print_funcs=0 -artifact_prefix="$out/" \
     ${FUZZ_FLAGS:-} "$out/corpus" || {
     status=$?
     echo "fuzz.sh: $target found a problem (exit $status); the input is in $out/ (crash-*, leak-*," \

@@ -7,6 +7,7 @@
 // f32 otherwise.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/readers/detail/DicomLengths.h"
 
 #include <gdcmImage.h>
 #include <gdcmImageReader.h>
@@ -224,6 +225,8 @@ void readPixelDescription(const TagText& tags, SliceHeader& slice) {
 /// The header of one file; nullopt for a file that is not DICOM (LICENSE, notes) or a DICOM
 /// object that is not an image (DICOMDIR, structured report: no Rows).
 std::optional<SliceHeader> readSliceHeader(const std::string& path) {
+    // GDCM allocates whatever length a file declares before reading it: check them first.
+    if (!detail::checkDicomLengths(path)) return std::nullopt;
     gdcm::Reader reader;
     reader.SetFileName(path.c_str());
     if (!reader.ReadUpToTag(kPixelData, std::set<gdcm::Tag>{kPixelData})) return std::nullopt;

@@ -70,7 +70,11 @@ void writeSeeds(const std::string& seeds) {
         if (real.empty()) return;
         if (cropped.empty()) {
             const std::size_t pixels = valueOffset(real, 0x7fe0, 0x0010);
-            if (pixels) fuzz::writeSeed(seeds, "truncated", Bytes(real.begin(), real.begin() + std::ptrdiff_t(std::min(real.size(), pixels + 2048))));
+            if (pixels)
+                fuzz::writeSeed(
+                    seeds, "truncated",
+                    Bytes(real.begin(),
+                          real.begin() + std::ptrdiff_t(std::min(real.size(), pixels + 2048))));
         }
         cropped.push_back(cropSlice(real));
         if (cropped.back().empty()) return;

@@ -103,8 +103,8 @@ void appendFrame(Bytes& out, Codec codec, std::uint16_t w, std::uint16_t h, bool
                  const Bytes& bytes) {
     const std::size_t n = std::min<std::size_t>(bytes.size(), 0xFFFF);
     const std::uint8_t header[kFrameHeaderBytes] = {
-        std::uint8_t(codec), std::uint8_t(w),      std::uint8_t(w >> 8), std::uint8_t(h),
-        std::uint8_t(h >> 8), std::uint8_t(keyframe), std::uint8_t(n),   std::uint8_t(n >> 8)};
+        std::uint8_t(codec),  std::uint8_t(w),        std::uint8_t(w >> 8), std::uint8_t(h),
+        std::uint8_t(h >> 8), std::uint8_t(keyframe), std::uint8_t(n),      std::uint8_t(n >> 8)};
     out.insert(out.end(), std::begin(header), std::end(header));
     out.insert(out.end(), bytes.begin(), bytes.begin() + std::ptrdiff_t(n));
 }

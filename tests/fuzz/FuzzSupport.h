@@ -28,7 +28,9 @@ inline void require(bool ok, const char* what) {
 inline const std::filesystem::path& scratchDir() {
     static const std::filesystem::path dir = [] {
         const bool shm = std::filesystem::is_directory("/dev/shm");
-        std::string pattern = (shm ? std::string("/dev/shm") : std::filesystem::temp_directory_path().string()) + "/bc-fuzz-XXXXXX";
+        std::string pattern =
+            (shm ? std::string("/dev/shm") : std::filesystem::temp_directory_path().string()) +
+            "/bc-fuzz-XXXXXX";
         require(mkdtemp(pattern.data()) != nullptr, "cannot make a scratch folder");
         std::atexit([] { std::filesystem::remove_all(scratchDir()); });
         return std::filesystem::path(pattern);

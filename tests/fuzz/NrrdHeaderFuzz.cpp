@@ -79,9 +79,11 @@ void writeScanSeeds(const std::string& seeds, const std::string& data) {
                 std::string("NRRD0004\n# cropped from ") + s.file + "\ntype: " + s.type +
                 "\ndimension: 3\nsizes: " + std::to_string(edge) + " " + std::to_string(edge) +
                 " " + std::to_string(slices) + "\nspace: left-posterior-superior\n" +
-                "space directions: (" + (n % 2 ? "3.2,0,0) (0,3.2,0) (0,0,1.5)" : "1,0,0) (0,1,0) (0,0,1)") +
-                "\nspacings: " + s.spacing + "\nspace origin: (0,0,0)\nendian: little\nencoding: " +
-                (gzip ? "gzip" : "raw") + "\n\n";
+                "space directions: (" +
+                (n % 2 ? "3.2,0,0) (0,3.2,0) (0,0,1.5)" : "1,0,0) (0,1,0) (0,0,1)") +
+                "\nspacings: " + s.spacing +
+                "\nspace origin: (0,0,0)\nendian: little\nencoding: " + (gzip ? "gzip" : "raw") +
+                "\n\n";
             Bytes bytes = fuzz::textBytes(header);
             const Bytes payload = gzip ? gzipBytes(voxels) : voxels;
             bytes.insert(bytes.end(), payload.begin(), payload.end());
