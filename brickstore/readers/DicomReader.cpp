@@ -468,6 +468,16 @@ class DicomSeries final : public VolumeSource {
                               "holds " + std::to_string(image.GetBufferLength()) +
                                   " bytes, not the " + std::to_string(voxels * wordBytes) +
                                   " that Rows x Columns x Bits Allocated need");
+        // GDCM copies GetBufferLength() bytes out of native pixel data without checking that
+        // the element holds that many (found by fuzzing: a heap overread).
+        const gdcm::ByteValue* native =
+            reader.GetFile().GetDataSet().GetDataElement(kPixelData).GetByteValue();
+        if (native && native->GetLength() < voxels * wordBytes)
+            throw FormatError(slice.path, "PixelData",
+                              "holds " + std::to_string(native->GetLength()) +
+                                  " bytes of native pixels, not the " +
+                                  std::to_string(voxels * wordBytes) +
+                                  " that Rows x Columns x Bits Allocated need");
         mPixels.resize(voxels * wordBytes);
         if (!image.GetBuffer(reinterpret_cast<char*>(mPixels.data())))
             throw FormatError(slice.path, "PixelData", "gdcm cannot decode the pixel data");

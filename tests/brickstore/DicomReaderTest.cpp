@@ -345,6 +345,49 @@ TEST(DicomReaderTest, ItemEndedBySequenceDelimiterIsRejected) {
     }
 }
 
+TEST(DicomReaderTest, MetaElementWithUnknownVrIsRejected) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    // Found by fuzzing: File Meta Information Group Length with its VR "UL" changed to "LU"
+    // made GDCM assert (abort) in ReadImplicitDataElement ("Should not happen").
+    std::ifstream in(sliceFile(62), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_EQ(bytes.substr(128, 10), std::string("DICM\x02\x00\x00\x00UL", 10));
+    bytes[136] = 'L';
+    bytes[137] = 'U';
+    TempDir dir;
+    bc::test::writeFile(dir.file("1-062.dcm"), bytes);
+    try {
+        openDicomSeries(dir.path().string());
+        FAIL() << "no FormatError for an unknown VR";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.file(), dir.file("1-062.dcm")) << e.what();
+        EXPECT_EQ(e.field(), "length") << e.what();
+    }
+}
+
+TEST(DicomReaderTest, PixelDataShorterThanRowsTimesColumnsIsRejected) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    // Found by fuzzing: GDCM copied Rows x Columns x 2 bytes out of a shorter native pixel
+    // data element (a heap overread). Columns 512 -> 520: 16 KiB more than the file holds.
+    std::string bytes = sliceWithLength(62, 0x0028, 0x0011, 2);
+    const std::size_t at = bytes.find(std::string("\x28\x00\x11\x00\x02\x00\x00\x00", 8), 132);
+    ASSERT_NE(at, std::string::npos);
+    const std::uint16_t columns = 520;
+    std::memcpy(bytes.data() + at + 8, &columns, 2);
+    TempDir dir;
+    bc::test::writeFile(dir.file("1-062.dcm"), bytes);
+    auto source = openDicomSeries(dir.path().string());
+    ASSERT_EQ(source->info().dims, (std::array<std::uint64_t, 3>{520, 512, 1}));
+    std::vector<std::byte> slice(source->info().sliceBytes());
+    try {
+        source->readSlices(1, slice);
+        FAIL() << "no FormatError for short pixel data";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.field(), "PixelData") << e.what();
+        EXPECT_NE(std::string(e.what()).find("holds 524288 bytes"), std::string::npos) << e.what();
+    }
+}
+
 TEST(DicomReaderTest, NotAFolderIsRejected) {
     TempDir dir;
     expectFolderError(dir.file("absent"), "folder", "not a folder");

@@ -127,14 +127,26 @@ class LengthWalker {
         }
     }
 
+    static bool knownVr(const char* vr) {
+        static const char* kVrs[] = {"AE", "AS", "AT", "CS", "DA", "DS", "DT", "FD", "FL",
+                                     "IS", "LO", "LT", "OB", "OD", "OF", "OL", "OV", "OW",
+                                     "PN", "SH", "SL", "SQ", "SS", "ST", "SV", "TM", "UC",
+                                     "UI", "UL", "UN", "UR", "US", "UT", "UV"};
+        for (const char* known : kVrs)
+            if (vr[0] == known[0] && vr[1] == known[1]) return true;
+        return false;
+    }
+
     /// Reads the rest of an element header whose first 8 bytes are `h`, advancing mPos past
-    /// the header; returns the value length.
+    /// the header; returns the value length. An unknown explicit VR is a fault (GDCM asserts
+    /// on some).
     std::uint64_t elementLength(const unsigned char* h, const Encoding& e) {
         const char* vr = reinterpret_cast<const char*>(h + 4);
         if (!e.explicitVr) {
             mPos += 8;
             return number(h + 4, 4, e.bigEndian);
         }
+        if (!knownVr(vr)) fault("element at byte " + std::to_string(mPos) + " has no known VR");
         if (!longForm(vr)) {
             mPos += 8;
             return number(h + 6, 2, e.bigEndian);
