@@ -149,7 +149,8 @@ if stale; then
     objects=()
     for s in "${sources[@]}" "$harness_src"; do
         o=$out/obj/$(echo "${s#"$out"/}" | tr / _).o
-        # The library sources without the fuzzer's main; the harness with it (at link time).
+        # One object per source (cached by ccache); -fsanitize=fuzzer at link time brings
+        # libFuzzer's main.
         "${launcher[@]}" "$cxx" "${flags[@]}" -c "$s" -o "$o"
         objects+=("$o")
     done
