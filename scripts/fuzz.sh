@@ -162,6 +162,12 @@ echo "fuzzing $target for ${seconds}s"
 export BC_FUZZ_SEED_DIR=$out/corpus
 export BC_SHARED_DATA_DIR=${BC_SHARED_DATA_DIR:-$src/../shared/data}
 export BC_CONFIGS_DIR=$src/configs
+# Scratch files (the inputs as files) in a folder of this run, removed when it ends.
+scratch_parent=/dev/shm
+[[ -d $scratch_parent && -w $scratch_parent ]] || scratch_parent=${TMPDIR:-/tmp}
+BC_FUZZ_SCRATCH=$(mktemp -d "$scratch_parent/bc-fuzz-$target.XXXXXX")
+export BC_FUZZ_SCRATCH
+trap 'rm -rf "$BC_FUZZ_SCRATCH"' EXIT
 # LeakSanitizer on; UBSan reports are fatal (-fno-sanitize-recover above).
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1}
 # shellcheck disable=SC2086

@@ -24,13 +24,23 @@ inline void require(bool ok, const char* what) {
     std::abort();
 }
 
-/// A folder of this process's own under /dev/shm (or TMPDIR), removed at exit.
+/// The folder named by an environment variable, or empty.
+inline std::string envFolder(const char* name) {
+    const char* value = std::getenv(name);
+    return value ? std::string(value) : std::string();
+}
+
+/// A folder of this process's own, in BC_FUZZ_SCRATCH (scripts/fuzz.sh makes one under /dev/shm
+/// and removes it afterwards) or else /dev/shm; removed at a normal exit (libFuzzer leaves some
+/// paths with _Exit, so the script's folder is what reliably goes away).
 inline const std::filesystem::path& scratchDir() {
     static const std::filesystem::path dir = [] {
-        const bool shm = std::filesystem::is_directory("/dev/shm");
-        std::string pattern =
-            (shm ? std::string("/dev/shm") : std::filesystem::temp_directory_path().string()) +
-            "/bc-fuzz-XXXXXX";
+        std::string parent = envFolder("BC_FUZZ_SCRATCH");
+        if (parent.empty())
+            parent = std::filesystem::is_directory("/dev/shm")
+                         ? std::string("/dev/shm")
+                         : std::filesystem::temp_directory_path().string();
+        std::string pattern = parent + "/bc-fuzz-XXXXXX";
         require(mkdtemp(pattern.data()) != nullptr, "cannot make a scratch folder");
         std::atexit([] { std::filesystem::remove_all(scratchDir()); });
         return std::filesystem::path(pattern);
@@ -71,12 +81,6 @@ inline Bytes cropVoxels(const Bytes& whole, std::size_t offset, std::size_t x, s
                        whole.begin() + std::ptrdiff_t(at + cx * bytes));
         }
     return out;
-}
-
-/// The folder named by an environment variable, or empty.
-inline std::string envFolder(const char* name) {
-    const char* value = std::getenv(name);
-    return value ? std::string(value) : std::string();
 }
 
 /// The real scans (../shared/data), when BC_SHARED_DATA_DIR names a folder that exists.
