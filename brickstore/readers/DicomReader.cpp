@@ -7,6 +7,7 @@
 // f32 otherwise.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/readers/detail/DicomLengths.h"
 
 #include <gdcmImage.h>
 #include <gdcmImageReader.h>
@@ -297,6 +298,8 @@ void checkPixelData(const SliceHeader& slice, const std::optional<PixelDataSpan>
 /// The header of one file; nullopt for a file that is not DICOM (LICENSE, notes) or a DICOM
 /// object that is not an image (DICOMDIR, structured report: no Rows).
 std::optional<SliceHeader> readSliceHeader(const std::string& path) {
+    // GDCM allocates whatever length a file declares before reading it: check them first.
+    if (!detail::checkDicomLengths(path)) return std::nullopt;
     gdcm::Reader reader;
     reader.SetFileName(path.c_str());
     if (!reader.ReadUpToTag(kPixelData, std::set<gdcm::Tag>{kPixelData})) return std::nullopt;
@@ -538,6 +541,16 @@ class DicomSeries final : public VolumeSource {
             throw FormatError(slice.path, "PixelData",
                               "holds " + std::to_string(image.GetBufferLength()) +
                                   " bytes, not the " + std::to_string(voxels * wordBytes) +
+                                  " that Rows x Columns x Bits Allocated need");
+        // GDCM copies GetBufferLength() bytes out of native pixel data without checking that
+        // the element holds that many (found by fuzzing: a heap overread).
+        const gdcm::ByteValue* native =
+            reader.GetFile().GetDataSet().GetDataElement(kPixelData).GetByteValue();
+        if (native && native->GetLength() < voxels * wordBytes)
+            throw FormatError(slice.path, "PixelData",
+                              "holds " + std::to_string(native->GetLength()) +
+                                  " bytes of native pixels, not the " +
+                                  std::to_string(voxels * wordBytes) +
                                   " that Rows x Columns x Bits Allocated need");
         mPixels.resize(voxels * wordBytes);
         if (!image.GetBuffer(reinterpret_cast<char*>(mPixels.data())))

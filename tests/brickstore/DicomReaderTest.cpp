@@ -9,6 +9,8 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <vector>
@@ -293,6 +295,131 @@ TEST(DicomReaderTest, NonDicomFilesBesideTheSlicesAreSkipped) {
     auto source = openDicomSeries(dir.path().string());
     EXPECT_EQ(source->info().dims, (std::array<std::uint64_t, 3>{512, 512, 5}));
     EXPECT_NEAR(source->info().spacingMm[2], 3.0, 1e-3);
+}
+
+/// The bytes of real slice `number` with the 4-byte length of implicit-VR element (group,
+/// element) set to `length` (found by fuzzing: GDCM allocates a declared length before reading).
+std::string sliceWithLength(int number, std::uint16_t group, std::uint16_t element,
+                            std::uint32_t length) {
+    std::ifstream in(sliceFile(number), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const char tag[4] = {char(group & 0xFF), char(group >> 8), char(element & 0xFF),
+                         char(element >> 8)};
+    const std::size_t at = bytes.find(std::string(tag, 4), 132);
+    EXPECT_NE(at, std::string::npos);
+    if (at != std::string::npos) std::memcpy(bytes.data() + at + 4, &length, 4);
+    return bytes;
+}
+
+TEST(DicomReaderTest, ElementLongerThanItsFileIsRejectedBeforeAllocation) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    TempDir dir;
+    linkSlices(dir, 60, 61);
+    // Modality (0008,0060) declaring 4 GiB - 256 bytes in a 0.5 MiB file.
+    const std::string path = dir.file("1-062.dcm");
+    bc::test::writeFile(path, sliceWithLength(62, 0x0008, 0x0060, 0xFFFFFF00u));
+    try {
+        openDicomSeries(dir.path().string());
+        FAIL() << "no FormatError for a 4 GiB element";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.file(), path) << e.what();
+        EXPECT_EQ(e.field(), "length") << e.what();
+        EXPECT_NE(std::string(e.what()).find("(0008,0060)"), std::string::npos) << e.what();
+    }
+}
+
+TEST(DicomReaderTest, FileWithoutPreambleAndBadLengthsIsSkipped) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    TempDir dir;
+    linkSlices(dir, 60, 62);
+    // Read as a bare implicit-VR data set, this claims a 0x78787878-byte element: not DICOM.
+    bc::test::writeFile(dir.file("notes.txt"), std::string(64, 'x'));
+    auto source = openDicomSeries(dir.path().string());
+    EXPECT_EQ(source->info().dims, (std::array<std::uint64_t, 3>{512, 512, 3}));
+}
+
+TEST(DicomReaderTest, TinyJunkFileBesideTheSlicesIsSkipped) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    TempDir dir;
+    linkSlices(dir, 60, 62);
+    // Found by fuzzing: these 4 bytes made GDCM's reader assert (abort) in ReadUpToTag.
+    const unsigned char junk[] = {0x08, 0x00, 0x00, 0x08};
+    bc::test::writeFile(dir.file("junk"), junk, sizeof(junk));
+    auto source = openDicomSeries(dir.path().string());
+    EXPECT_EQ(source->info().dims, (std::array<std::uint64_t, 3>{512, 512, 3}));
+}
+
+TEST(DicomReaderTest, ItemEndedBySequenceDelimiterIsRejected) {
+    // Found by fuzzing: an undefined-length item closed by a sequence delimiter (not an item
+    // delimiter) made GDCM assert (abort) in DataSet::ReadNested. Part 10, implicit VR LE.
+    std::string file(128, '\0');
+    file += "DICM";
+    const std::string syntax("1.2.840.10008.1.2\0", 18);
+    file += std::string("\x02\x00\x10\x00UI\x12\x00", 8) + syntax;
+    auto element = [&](std::uint16_t group, std::uint16_t tag, std::uint32_t length) {
+        const char header[8] = {char(group & 0xFF),        char(group >> 8),
+                                char(tag & 0xFF),          char(tag >> 8),
+                                char(length & 0xFF),       char(length >> 8 & 0xFF),
+                                char(length >> 16 & 0xFF), char(length >> 24)};
+        file.append(header, 8);
+    };
+    element(0x0008, 0x1140, 0xFFFFFFFFu); // a sequence of undefined length
+    element(0xFFFE, 0xE000, 0xFFFFFFFFu); // an item of undefined length
+    element(0x0008, 0x0100, 2);
+    file += "AB";
+    element(0xFFFE, 0xE0DD, 0); // sequence delimiter where the item delimiter belongs
+    TempDir dir;
+    bc::test::writeFile(dir.file("bad.dcm"), file);
+    try {
+        openDicomSeries(dir.path().string());
+        FAIL() << "no FormatError for a misnested item";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.file(), dir.file("bad.dcm")) << e.what();
+        EXPECT_EQ(e.field(), "length") << e.what();
+    }
+}
+
+TEST(DicomReaderTest, MetaElementWithUnknownVrIsRejected) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    // Found by fuzzing: File Meta Information Group Length with its VR "UL" changed to "LU"
+    // made GDCM assert (abort) in ReadImplicitDataElement ("Should not happen").
+    std::ifstream in(sliceFile(62), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_EQ(bytes.substr(128, 10), std::string("DICM\x02\x00\x00\x00UL", 10));
+    bytes[136] = 'L';
+    bytes[137] = 'U';
+    TempDir dir;
+    bc::test::writeFile(dir.file("1-062.dcm"), bytes);
+    try {
+        openDicomSeries(dir.path().string());
+        FAIL() << "no FormatError for an unknown VR";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.file(), dir.file("1-062.dcm")) << e.what();
+        EXPECT_EQ(e.field(), "length") << e.what();
+    }
+}
+
+TEST(DicomReaderTest, PixelDataShorterThanRowsTimesColumnsIsRejected) {
+    if (!bc::test::haveData(kSeries)) return bc::test::missingData(kSeries);
+    // Found by fuzzing: GDCM copied Rows x Columns x 2 bytes out of a shorter native pixel
+    // data element (a heap overread). Columns 512 -> 520: 16 KiB more than the file holds.
+    std::string bytes = sliceWithLength(62, 0x0028, 0x0011, 2);
+    const std::size_t at = bytes.find(std::string("\x28\x00\x11\x00\x02\x00\x00\x00", 8), 132);
+    ASSERT_NE(at, std::string::npos);
+    const std::uint16_t columns = 520;
+    std::memcpy(bytes.data() + at + 8, &columns, 2);
+    TempDir dir;
+    bc::test::writeFile(dir.file("1-062.dcm"), bytes);
+    auto source = openDicomSeries(dir.path().string());
+    ASSERT_EQ(source->info().dims, (std::array<std::uint64_t, 3>{520, 512, 1}));
+    std::vector<std::byte> slice(source->info().sliceBytes());
+    try {
+        source->readSlices(1, slice);
+        FAIL() << "no FormatError for short pixel data";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.field(), "PixelData") << e.what();
+        EXPECT_NE(std::string(e.what()).find("holds 524288 bytes"), std::string::npos) << e.what();
+    }
 }
 
 TEST(DicomReaderTest, NotAFolderIsRejected) {

@@ -1,4 +1,4 @@
-// libFuzzer target of the protocol decoder (scripts/fuzz_protocol.sh builds and runs it).
+// libFuzzer target of the protocol decoder (scripts/fuzz.sh protocol_decoder builds and runs it).
 //
 // Input: byte 0 = n (mod 8), then n chunk sizes (1..256 each, used in turn), then the byte
 // stream, fed into one Decoder in those chunks. Every decoded message must re-encode, and

@@ -1,0 +1,125 @@
+// libFuzzer target of the DICOM series reader over GDCM (scripts/fuzz.sh dicom builds and
+// runs it): our wrapper's checks of the headers GDCM parses (counts, lengths, geometry,
+// consistency across slices) and of the pixel data it decodes.
+//
+// Input: one to four files separated by "BCSPLIT!", written into a fresh folder of a private
+// scratch folder and opened with openDicomSeries, as ingest would. A FormatError is the
+// expected refusal; a crash, sanitizer report, other exception or a volume that
+// validateVolumeInfo rejects is a finding. Slices are then read (tests/fuzz/ReaderFuzz.h).
+//
+// With BC_FUZZ_SEED_DIR set, the binary first writes seeds there from the real series
+// (BC_SHARED_DATA_DIR/tcia_pancreas_ct_dicom, implicit VR little endian): a real file's
+// header with a truncated payload, and series of 1 and 3 real headers cropped to 16x16
+// pixels (Rows, Columns and the pixel data length patched) with their pixels.
+#include "brickstore/Readers.h"
+#include "tests/fuzz/ReaderFuzz.h"
+
+#include <algorithm>
+#include <cstring>
+#include <string_view>
+
+namespace {
+
+using namespace bc;
+using fuzz::Bytes;
+
+constexpr std::string_view kSplit = "BCSPLIT!";
+constexpr std::size_t kMaxFiles = 4;
+
+/// Offset of the value of implicit-VR element (group, element) after its tag and length;
+/// 0 when absent.
+std::size_t valueOffset(const Bytes& b, std::uint16_t group, std::uint16_t element) {
+    const std::uint8_t tag[4] = {std::uint8_t(group), std::uint8_t(group >> 8),
+                                 std::uint8_t(element), std::uint8_t(element >> 8)};
+    const auto at = std::search(b.begin() + std::min<std::size_t>(132, b.size()), b.end(),
+                                std::begin(tag), std::end(tag));
+    return at == b.end() ? 0 : std::size_t(at - b.begin()) + 8;
+}
+
+void setU16(Bytes& b, std::size_t at, std::uint16_t v) {
+    if (at + 2 <= b.size()) std::memcpy(b.data() + at, &v, 2);
+}
+
+/// A real slice cropped to 16x16 pixels; empty if its layout is not the expected one.
+Bytes cropSlice(const Bytes& real) {
+    const std::size_t rows = valueOffset(real, 0x0028, 0x0010),
+                      columns = valueOffset(real, 0x0028, 0x0011),
+                      pixels = valueOffset(real, 0x7fe0, 0x0010);
+    if (!rows || !columns || !pixels || pixels > real.size()) return {};
+    std::uint16_t x = 0, y = 0;
+    std::memcpy(&y, real.data() + rows, 2);
+    std::memcpy(&x, real.data() + columns, 2);
+    const Bytes voxels = fuzz::cropVoxels(real, pixels, x, y, 2, 16, 16, 1);
+    if (voxels.empty()) return {};
+    Bytes out(real.begin(), real.begin() + std::ptrdiff_t(pixels));
+    setU16(out, rows, 16);
+    setU16(out, columns, 16);
+    const std::uint32_t length = std::uint32_t(voxels.size());
+    std::memcpy(out.data() + pixels - 4, &length, 4);
+    out.insert(out.end(), voxels.begin(), voxels.end());
+    return out;
+}
+
+void writeSeeds(const std::string& seeds) {
+    const std::string data = fuzz::sharedData();
+    if (data.empty()) return;
+    const std::filesystem::path series = std::filesystem::path(data) / "tcia_pancreas_ct_dicom";
+    std::vector<Bytes> cropped;
+    for (const char* name : {"1-001.dcm", "1-002.dcm", "1-003.dcm"}) {
+        const Bytes real = fuzz::readFile(series / name);
+        if (real.empty()) return;
+        if (cropped.empty()) {
+            const std::size_t pixels = valueOffset(real, 0x7fe0, 0x0010);
+            if (pixels)
+                fuzz::writeSeed(
+                    seeds, "truncated",
+                    Bytes(real.begin(),
+                          real.begin() + std::ptrdiff_t(std::min(real.size(), pixels + 2048))));
+        }
+        cropped.push_back(cropSlice(real));
+        if (cropped.back().empty()) return;
+    }
+    fuzz::writeSeed(seeds, "one-slice", cropped[0]);
+    Bytes three;
+    for (const Bytes& slice : cropped) {
+        if (!three.empty()) three.insert(three.end(), kSplit.begin(), kSplit.end());
+        three.insert(three.end(), slice.begin(), slice.end());
+    }
+    fuzz::writeSeed(seeds, "three-slices", three);
+}
+
+/// A fresh, empty series folder for each input.
+std::filesystem::path seriesFolder() {
+    const std::filesystem::path dir = fuzz::scratchDir() / "series";
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directory(dir);
+    return dir;
+}
+
+} // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    const std::filesystem::path dir = seriesFolder();
+    std::string_view rest(reinterpret_cast<const char*>(data), size);
+    for (std::size_t i = 0; i < kMaxFiles && (i == 0 || !rest.empty()); ++i) {
+        const std::size_t end = i + 1 == kMaxFiles ? rest.npos : rest.find(kSplit);
+        const std::string_view file = rest.substr(0, end);
+        fuzz::writeFile(dir / ("slice-" + std::to_string(i) + ".dcm"),
+                        {reinterpret_cast<const std::uint8_t*>(file.data()), file.size()});
+        rest = end == rest.npos ? std::string_view() : rest.substr(end + kSplit.size());
+    }
+    std::unique_ptr<brickstore::VolumeSource> source;
+    try {
+        source = brickstore::openDicomSeries(dir.string());
+    } catch (const brickstore::FormatError&) {
+        return 0;
+    }
+    fuzz::exerciseVolume(*source, dir.string());
+    return 0;
+}
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+    if (const std::string seeds = fuzz::envFolder("BC_FUZZ_SEED_DIR"); !seeds.empty())
+        writeSeeds(seeds);
+    return 0;
+}

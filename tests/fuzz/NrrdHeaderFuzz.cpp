@@ -1,0 +1,131 @@
+// libFuzzer target of the NRRD reader (scripts/fuzz.sh nrrd_header builds and runs it).
+//
+// Input: the bytes of a .nrrd/.nhdr file, written to a private scratch folder and opened with
+// openNrrd, as ingest would; the folder also holds data.raw and data.raw.gz (16x16x8 u8) for
+// detached headers. A FormatError is the expected refusal; a crash, sanitizer report, other
+// exception or a volume that validateVolumeInfo rejects is a finding. Slices are then read
+// (tests/fuzz/ReaderFuzz.h).
+//
+// With BC_FUZZ_SEED_DIR set, the binary first writes seeds there: NRRD headers of the real
+// scans (BC_SHARED_DATA_DIR) cropped to 32x32x4 voxels with their data attached raw and gzip,
+// truncated copies, and detached headers naming data.raw and data.raw.gz.
+#include "brickstore/Readers.h"
+#include "tests/fuzz/ReaderFuzz.h"
+
+#include <zlib.h>
+
+namespace {
+
+using namespace bc;
+using fuzz::Bytes;
+
+Bytes gzipBytes(const Bytes& raw) {
+    z_stream z{};
+    fuzz::require(deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) == Z_OK,
+                  "deflateInit2");
+    Bytes out(deflateBound(&z, uLong(raw.size())) + 32);
+    z.next_in = const_cast<Bytes::value_type*>(raw.data());
+    z.avail_in = uInt(raw.size());
+    z.next_out = out.data();
+    z.avail_out = uInt(out.size());
+    fuzz::require(deflate(&z, Z_FINISH) == Z_STREAM_END, "deflate");
+    out.resize(z.total_out);
+    deflateEnd(&z);
+    return out;
+}
+
+/// 16x16x8 u8 voxels: the detached data file of the seeds.
+Bytes detachedVoxels() {
+    Bytes v(16 * 16 * 8);
+    for (std::size_t i = 0; i < v.size(); ++i)
+        v[i] = std::uint8_t((i * 37) ^ (i >> 4));
+    return v;
+}
+
+const std::filesystem::path& folder() {
+    static const std::filesystem::path dir = [] {
+        const auto& d = fuzz::scratchDir();
+        const Bytes voxels = detachedVoxels();
+        fuzz::writeFile(d / "data.raw", voxels);
+        fuzz::writeFile(d / "data.raw.gz", gzipBytes(voxels));
+        return d;
+    }();
+    return dir;
+}
+
+struct Scan {
+    const char* file;
+    const char* type;
+    unsigned x, y, bytes;
+    const char* spacing;
+};
+
+void writeScanSeeds(const std::string& seeds, const std::string& data) {
+    const Scan scans[] = {
+        {"vtk_headsq_quarter_64x64x93_uint16.raw", "ushort", 64, 64, 2, "3.2 3.2 1.5"},
+        {"hydrogen_64x64x64_float32.raw", "float", 64, 64, 4, "1 1 1"},
+        {"CT_AVM_256x242x154_uint8.raw", "uchar", 256, 242, 1, "0.72 0.721 1"},
+    };
+    int n = 0;
+    for (const Scan& s : scans) {
+        // A 32x32x4 corner: the seed stays well under -max_len.
+        const unsigned slices = 4, edge = 32;
+        const Bytes whole = fuzz::readPrefix(std::filesystem::path(data) / s.file,
+                                             std::size_t(s.x) * s.y * s.bytes * slices);
+        const Bytes voxels = fuzz::cropVoxels(whole, 0, s.x, s.y, s.bytes, edge, edge, slices);
+        if (voxels.empty()) continue;
+        for (bool gzip : {false, true}) {
+            const std::string header =
+                std::string("NRRD0004\n# cropped from ") + s.file + "\ntype: " + s.type +
+                "\ndimension: 3\nsizes: " + std::to_string(edge) + " " + std::to_string(edge) +
+                " " + std::to_string(slices) + "\nspace: left-posterior-superior\n" +
+                "space directions: (" +
+                (n % 2 ? "3.2,0,0) (0,3.2,0) (0,0,1.5)" : "1,0,0) (0,1,0) (0,0,1)") +
+                "\nspacings: " + s.spacing +
+                "\nspace origin: (0,0,0)\nendian: little\nencoding: " + (gzip ? "gzip" : "raw") +
+                "\n\n";
+            Bytes bytes = fuzz::textBytes(header);
+            const Bytes payload = gzip ? gzipBytes(voxels) : voxels;
+            bytes.insert(bytes.end(), payload.begin(), payload.end());
+            fuzz::writeSeed(seeds, "scan-" + std::to_string(n++), bytes);
+            // The real header with a truncated payload.
+            bytes.resize(header.size() + payload.size() / 3);
+            fuzz::writeSeed(seeds, "scan-" + std::to_string(n++), bytes);
+        }
+    }
+}
+
+void writeSeeds(const std::string& seeds) {
+    const char* detached[] = {
+        "NRRD0005\ntype: uint8\ndimension: 3\nsizes: 16 16 8\nencoding: raw\ndata file: data.raw\n",
+        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 16 16 8\nspacings: 1 1 2\nencoding: gzip\n"
+        "datafile: data.raw.gz\nline skip: 0\nbyte skip: 0\n\n",
+        "NRRD0001\ntype: uchar\ndimension: 3\nsizes: 16 16 4\nencoding: raw\nline skip: 1\n"
+        "data file: ./data.raw\nkey:=value\n",
+    };
+    int n = 0;
+    for (const char* text : detached)
+        fuzz::writeSeed(seeds, "detached-" + std::to_string(n++), fuzz::textBytes(text));
+    if (const std::string data = fuzz::sharedData(); !data.empty()) writeScanSeeds(seeds, data);
+}
+
+} // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    const std::string path = (folder() / "volume.nrrd").string();
+    fuzz::writeFile(path, {data, size});
+    std::unique_ptr<brickstore::VolumeSource> source;
+    try {
+        source = brickstore::openNrrd(path);
+    } catch (const brickstore::FormatError&) {
+        return 0;
+    }
+    fuzz::exerciseVolume(*source, path);
+    return 0;
+}
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+    if (const std::string seeds = fuzz::envFolder("BC_FUZZ_SEED_DIR"); !seeds.empty())
+        writeSeeds(seeds);
+    return 0;
+}
