@@ -244,6 +244,7 @@ void renderBricked(const Scene& scene, const RayContext& c, const ViewBasis& vie
     const std::uint32_t w = c.options.width, h = c.options.height;
     const PixelRect region = c.options.drawn();
     for (std::size_t batch = 0, first = 0; batch < ends.size(); first = ends[batch++]) {
+        const auto loadStart = std::chrono::steady_clock::now();
         std::vector<brickstore::BrickPin> pins(ends[batch] - first);
         tbb::parallel_for(first, ends[batch], [&](std::size_t i) {
             const PlannedBrick& b = plan.drawn[i];
@@ -251,6 +252,9 @@ void renderBricked(const Scene& scene, const RayContext& c, const ViewBasis& vie
             pins[i - first] = scene.cache.pin(b.key);
             bricks[b.index].voxels = reinterpret_cast<const T*>(pins[i - first].data().data());
         });
+        stats.uploadMs +=
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - loadStart)
+                .count();
         auto volumeAt = [&](const glm::dvec3& p) -> const BrickSampler<T>* {
             std::uint64_t index = 0;
             for (int a = 2; a >= 0; --a) {

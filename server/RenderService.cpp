@@ -198,6 +198,7 @@ struct FrameDrawing {
     render::Box box;
     double stepMm = 1;
     std::vector<double> rowCost; ///< per row, computed as the cursor reaches it (< 0: not yet)
+    double sliceTargetMs = 0;    ///< the next slice's length
     std::uint32_t slices = 0;
     double slicesMs = 0; ///< drawing them
     render::FrameStats stats;
@@ -756,6 +757,7 @@ void RenderService::prepare(FrameDrawing& d) {
         d.box = g.box;
         d.stepMm = d.options.stepVoxels * g.minSpacing();
         d.rowCost.assign(d.options.height, -1.0);
+        d.sliceTargetMs = mConfig.sliceMs;
     }
 }
 
@@ -787,14 +789,15 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     const auto start = Clock::now();
     // Speeds measured, per renderer: whole frames against their upper-bound cost (whether to
     // slice), slices against their pixels' estimated samples (how large a slice is).
-    auto calibrate = [&](std::map<std::string, double, std::less<>>& rates, double cost) {
-        const double perMs = cost / std::max(msSince(start), 0.01);
+    auto calibrate = [&](std::map<std::string, double, std::less<>>& rates, double cost,
+                         double ms) {
+        const double perMs = cost / std::max(ms, 0.01);
         auto [it, fresh] = rates.try_emplace(d.kind->name, perMs);
         if (!fresh) it->second = 0.5 * (it->second + perMs);
     };
     if (!d.sliced) {
         d.image = renderer.render(scene, d.view, d.options, d.stats);
-        calibrate(mCostPerMs, double(d.cost));
+        calibrate(mCostPerMs, double(d.cost), msSince(start));
         if (render::GpuResidency* gpu = renderer.gpuResidency()) {
             auto& mine = mRenderers->of(slot);
             mine.previousCamera = mine.lastCamera;
@@ -812,12 +815,17 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     const double perMs = rate == mSliceCostPerMs.end() ? kFirstCostPerMs : rate->second;
     double cost = 0;
     render::RenderOptions options = d.options;
-    options.region = nextSlice(d, mConfig.sliceMs * perMs, cost);
+    options.region = nextSlice(d, d.sliceTargetMs * perMs, cost);
     render::FrameStats stats;
     const render::Image part = renderer.render(scene, d.view, options, stats);
     paste(d.image, part, options.region);
     accumulate(d.stats, stats, d.slices == 0);
-    calibrate(mSliceCostPerMs, cost);
+    // The speed of the rays alone: loading bricks is a cost per slice, not per pixel (when the
+    // frame's bricks exceed the host budget every slice loads its batches again). Slices are
+    // made long enough that it stays at most half of each.
+    const double ms = msSince(start), loadMs = std::min(stats.uploadMs, ms);
+    calibrate(mSliceCostPerMs, cost, ms - loadMs);
+    d.sliceTargetMs = std::max(double(mConfig.sliceMs), 2.0 * loadMs);
     ++d.slices;
     d.slicesMs += msSince(start);
     d.nextPixel += options.region.pixels();
