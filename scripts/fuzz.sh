@@ -82,7 +82,7 @@ dicom)
 brick_store)
     harness=BrickStoreFuzz
     sources=(brickstore/BrickStore.cpp brickstore/StoreLayout.cpp brickstore/detail/StoreFormat.cpp
-        brickstore/detail/MappedFile.cpp brickstore/detail/BrickSummary.cpp
+        brickstore/detail/StoreReadFile.cpp brickstore/detail/BrickSummary.cpp
         brickstore/Ingest.cpp brickstore/detail/LevelBuilder.cpp brickstore/detail/StoreFile.cpp
         brickstore/readers/SyntheticVolume.cpp "${reader_common[@]}")
     folders=(brickstore brickstore/detail brickstore/readers)

@@ -410,15 +410,16 @@ TEST(DicomReaderTest, PixelDataShorterThanRowsTimesColumnsIsRejected) {
     std::memcpy(bytes.data() + at + 8, &columns, 2);
     TempDir dir;
     bc::test::writeFile(dir.file("1-062.dcm"), bytes);
-    auto source = openDicomSeries(dir.path().string());
-    ASSERT_EQ(source->info().dims, (std::array<std::uint64_t, 3>{520, 512, 1}));
-    std::vector<std::byte> slice(source->info().sliceBytes());
+    // Refused when the series is opened (every slice's PixelData length is checked against
+    // Rows x Columns then), and by the read itself, should a file pass that check.
     try {
+        auto source = openDicomSeries(dir.path().string());
+        std::vector<std::byte> slice(source->info().sliceBytes());
         source->readSlices(1, slice);
         FAIL() << "no FormatError for short pixel data";
     } catch (const FormatError& e) {
         EXPECT_EQ(e.field(), "PixelData") << e.what();
-        EXPECT_NE(std::string(e.what()).find("holds 524288 bytes"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("524288 bytes"), std::string::npos) << e.what();
     }
 }
 

@@ -99,7 +99,9 @@ class LengthWalker {
     void checkFits(std::uint32_t group, std::uint32_t element, std::uint64_t length,
                    std::uint64_t end) const {
         if (length <= end - mPos) return;
-        throw FormatError(mPath, "length",
+        // The pixel data is named as the other checks of it name it (a slice cut short).
+        const bool pixelData = group == 0x7fe0 && element == 0x0010;
+        throw FormatError(mPath, pixelData ? "PixelData" : "length",
                           "element " + tagText(group, element) + " at byte " +
                               std::to_string(mPos) + " declares " + std::to_string(length) +
                               " bytes where " + std::to_string(end - mPos) +
