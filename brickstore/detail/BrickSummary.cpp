@@ -171,6 +171,13 @@ void downsampleSlices(VoxelType type, const std::byte* z0, const std::byte* z1, 
 void fillConstant(VoxelType type, double value, std::span<std::byte> out) {
     dispatch(type, [&](auto t) {
         using T = decltype(t);
+        // Only a damaged store holds a constant its type cannot (found by fuzzing: the cast
+        // of an out-of-range double to an integer type is undefined): clamped, NaN as 0.
+        if constexpr (std::is_integral_v<T>) {
+            const double lo = double(std::numeric_limits<T>::lowest());
+            const double hi = double(std::numeric_limits<T>::max());
+            value = value == value ? std::clamp(value, lo, hi) : 0.0;
+        }
         T v = static_cast<T>(value);
         T* p = reinterpret_cast<T*>(out.data());
         std::fill(p, p + out.size() / sizeof(T), v);

@@ -3,6 +3,7 @@
 #include "brickstore/Error.h"
 #include "brickstore/Ingest.h"
 #include "brickstore/StoreVolume.h"
+#include "brickstore/detail/BrickSummary.h"
 #include "tests/TestSupport.h"
 #include "tests/brickstore/VolumeTestSupport.h"
 
@@ -10,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <random>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -426,3 +428,20 @@ TEST(StoreTest, BadGeometryAndVolumeInfoAreRejectedBeforeAnythingIsWritten) {
 
 } // namespace
 } // namespace bc::brickstore
+
+// Found by fuzzing the store (fuzz_brick_store): a damaged record's constant outside its type's
+// range was cast to the type (undefined behaviour); it is clamped, NaN read as 0.
+TEST(StoreConstantBrick, AConstantOutsideTheTypeIsClampedNotCast) {
+    std::array<std::byte, 4> out{};
+    bc::brickstore::detail::fillConstant(bc::brickstore::VoxelType::U8, 3.7e19, out);
+    EXPECT_EQ(std::to_integer<int>(out[0]), 255);
+    bc::brickstore::detail::fillConstant(bc::brickstore::VoxelType::U8, -5.0, out);
+    EXPECT_EQ(std::to_integer<int>(out[3]), 0);
+    bc::brickstore::detail::fillConstant(bc::brickstore::VoxelType::U8, std::nan(""), out);
+    EXPECT_EQ(std::to_integer<int>(out[1]), 0);
+    std::array<std::byte, 4> words{};
+    bc::brickstore::detail::fillConstant(bc::brickstore::VoxelType::I16, -1e9, words);
+    std::int16_t v = 0;
+    std::memcpy(&v, words.data(), 2);
+    EXPECT_EQ(v, std::numeric_limits<std::int16_t>::lowest());
+}
