@@ -835,9 +835,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     }
     if (d.nextPixel < std::uint64_t(d.options.width) * d.options.height) return false;
     // The whole frame's speed too, so that a frame like it is sliced only when it must be.
-    const double perMsWhole = double(d.cost) / std::max(d.slicesMs, 0.01);
-    auto [it, fresh] = mCostPerMs.try_emplace(d.kind->name, perMsWhole);
-    if (!fresh) it->second = 0.5 * (it->second + perMsWhole);
+    calibrate(mCostPerMs, double(d.cost), d.slicesMs);
     return true;
 }
 
