@@ -107,6 +107,7 @@ std::unique_ptr<BrickStore> BrickStore::open(const std::string& path) {
     checkPayloadPlacement(decoded.records, *s->mLayout, h, path);
 
     s->mRecords = std::move(decoded.records);
+    s->mInfo.formatVersion = h.version;
     s->mInfo.volume = h.volume;
     s->mInfo.volume.description = decoded.description;
     s->mInfo.geometry = h.geometry;
@@ -164,7 +165,9 @@ std::vector<ValueRange> BrickStore::leafRanges(const BrickKey& key) const {
     mFile->readAt(r.offset + r.compressedBytes, table);
     if (detail::checksum(std::span<const std::byte>(table)) != r.leafChecksum)
         throw StoreCorrupt(mPath + ": brick " + key.toString() + ": leaf table checksum mismatch");
-    return detail::decodeLeafTable(std::span<const std::byte>(table));
+    auto leaves = detail::decodeLeafTable(std::span<const std::byte>(table));
+    if (mInfo.formatVersion < 2) return leaves;
+    return detail::expandLeafTable(leaves, mLayout->leavesPerAxis(), mLayout->leavesInside(key));
 }
 
 std::vector<std::string> BrickStore::verify(unsigned threads) const {
@@ -181,7 +184,14 @@ std::vector<std::string> BrickStore::verify(unsigned threads) const {
                 readBrick(key, buffer);
                 auto leaves = leafRanges(key);
                 auto range = detail::brickRange(mInfo.volume.type, buffer);
-                auto expect = detail::leafRanges(mInfo.volume.type, buffer, mInfo.geometry);
+                // What the table must read as: version 1 stored every leaf.
+                const std::uint32_t n = mLayout->leavesPerAxis();
+                const auto inside = mInfo.formatVersion >= 2
+                                        ? mLayout->leavesInside(key)
+                                        : std::array<std::uint32_t, 3>{n, n, n};
+                auto expect = detail::expandLeafTable(
+                    detail::leafRanges(mInfo.volume.type, buffer, mInfo.geometry, inside), n,
+                    inside);
                 bool leavesOk =
                     std::equal(leaves.begin(), leaves.end(), expect.begin(), expect.end(),
                                [](const ValueRange& a, const ValueRange& b) {

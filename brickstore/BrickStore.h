@@ -34,6 +34,7 @@ constexpr std::uint32_t kBrickStored = 1u;
 
 /// Everything the header and index say about the volume.
 struct StoreInfo {
+    std::uint32_t formatVersion = 0; ///< FORMAT.md; 1 and 2 are read, 2 is written
     VolumeInfo volume;
     BrickGeometry geometry;
     double valueMin = 0.0;
@@ -79,8 +80,9 @@ class BrickStore {
     /// never a SIGBUS.
     void readBrick(const BrickKey& key, std::span<std::byte> out) const;
     /// Per-leaf value ranges (leafCount() entries, x fastest), checksum verified, without
-    /// touching voxels. @throw StoreCorrupt naming the brick, or the store when it changed
-    /// since open; StoreIoError on a short read.
+    /// touching voxels. A version-2 store keeps only the leaves inside the volume; the others
+    /// are filled from the nearest one inside (detail::expandLeafTable). @throw StoreCorrupt naming
+    /// the brick, or the store when it changed since open; StoreIoError on a short read.
     std::vector<ValueRange> leafRanges(const BrickKey& key) const;
 
     /// Full scrub of every brick and leaf table on `threads` workers (0 = all cores).

@@ -108,8 +108,11 @@ void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
         rec.range = detail::brickRange(s.type, std::span(job.voxels).first(vb));
         return;
     }
-    // The leaf windows together cover the whole stored brick: its range is theirs.
-    auto leafRanges = detail::leafRanges(s.type, job.voxels, s.layout.geometry());
+    // Only the leaves inside the volume are kept (FORMAT.md "Leaf table"). Their windows
+    // still reach every value of the stored brick (what lies past the volume's far border is
+    // clamped copies of the voxels at it): the brick's range is theirs; verify checks it.
+    auto leafRanges = detail::leafRanges(s.type, job.voxels, s.layout.geometry(),
+                                         s.layout.leavesInside(s.layout.keyOf(job.index)));
     rec.range = leafRanges.front();
     for (const auto& r : leafRanges) {
         rec.range.min = std::min(rec.range.min, r.min);

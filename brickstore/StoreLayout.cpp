@@ -46,6 +46,15 @@ std::uint32_t StoreLayout::leavesPerAxis() const {
     return (mGeometry.brickVoxels + mGeometry.leafVoxels - 1) / mGeometry.leafVoxels;
 }
 
+std::array<std::uint32_t, 3> StoreLayout::leavesInside(const BrickKey& key) const {
+    const auto extent = payloadExtent(key);
+    std::array<std::uint32_t, 3> n{};
+    for (int a = 0; a < 3; ++a)
+        n[a] = static_cast<std::uint32_t>((extent[a] + mGeometry.leafVoxels - 1) /
+                                          mGeometry.leafVoxels);
+    return n;
+}
+
 bool StoreLayout::contains(const BrickKey& key) const {
     if (key.level >= mLevels.size()) return false;
     const auto& l = mLevels[key.level];

@@ -49,6 +49,9 @@ class StoreLayout {
     }
     std::uint32_t leavesPerAxis() const;
     std::uint32_t leafCount() const { return leavesPerAxis() * leavesPerAxis() * leavesPerAxis(); }
+    /// Leaves along x, y, z whose payload voxels meet the volume: all leavesPerAxis() except in
+    /// the partial bricks at the far borders (FORMAT.md "Leaf table", version 2).
+    std::array<std::uint32_t, 3> leavesInside(const BrickKey& key) const;
 
     /// Position of a brick in the store's brick list (level-major, then z, y, x).
     std::uint64_t indexOf(const BrickKey& key) const;

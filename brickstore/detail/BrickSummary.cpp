@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstring>
 #include <limits>
+#include <stdexcept>
+#include <string>
 #include <type_traits>
 
 namespace bc::brickstore::detail {
@@ -50,41 +52,46 @@ template <typename T> MinMax<T> rowRange(const T* v, std::uint32_t begin, std::u
 
 /// Leaf ranges by separable reduction: windows along x per row, then along y, then along z.
 /// Leaf i's window along an axis is stored [i*l, min((i+1)*l, b) + 2a): its payload voxels
-/// widened by the apron reach `a` on each side.
+/// widened by the apron reach `a` on each side. Only the first `inside` leaves per axis are
+/// reduced, and only the rows and planes their windows read.
 template <typename T>
 void leafRangesT(const T* v, std::uint32_t edge, const BrickGeometry& g,
-                 std::vector<ValueRange>& out) {
+                 const std::array<std::uint32_t, 3>& inside, std::vector<ValueRange>& out) {
     const std::uint32_t b = g.brickVoxels, a = g.apronVoxels, l = g.leafVoxels;
-    const std::uint32_t n = (b + l - 1) / l;
+    const std::uint32_t nx = inside[0], ny = inside[1], nz = inside[2];
     auto lo = [&](std::uint32_t i) { return i * l; };
     auto hi = [&](std::uint32_t i) { return std::min((i + 1) * l, b) + 2 * a; };
     auto merge = [](MinMax<T>& m, const MinMax<T>& o) {
         m.min = std::min(m.min, o.min);
         m.max = std::max(m.max, o.max);
     };
-    // x: per (z, y) row, n windows.
-    std::vector<MinMax<T>> rows(std::size_t(edge) * edge * n);
-    for (std::size_t zy = 0; zy < std::size_t(edge) * edge; ++zy)
-        for (std::uint32_t lx = 0; lx < n; ++lx)
-            rows[zy * n + lx] = rowRange(v + zy * edge, lo(lx), hi(lx));
-    // y: per z, n x n.
-    std::vector<MinMax<T>> planes(std::size_t(edge) * n * n);
-    for (std::uint32_t z = 0; z < edge; ++z)
-        for (std::uint32_t ly = 0; ly < n; ++ly)
-            for (std::uint32_t lx = 0; lx < n; ++lx) {
-                MinMax<T> m = rows[(std::size_t(z) * edge + lo(ly)) * n + lx];
+    const std::uint32_t rowsY = hi(ny - 1), planesZ = hi(nz - 1);
+    // x: per (z, y) row the windows read, nx windows.
+    std::vector<MinMax<T>> rows(std::size_t(planesZ) * rowsY * nx);
+    for (std::uint32_t z = 0; z < planesZ; ++z)
+        for (std::uint32_t y = 0; y < rowsY; ++y) {
+            const T* row = v + (std::size_t(z) * edge + y) * edge;
+            for (std::uint32_t lx = 0; lx < nx; ++lx)
+                rows[(std::size_t(z) * rowsY + y) * nx + lx] = rowRange(row, lo(lx), hi(lx));
+        }
+    // y: per z, ny x nx.
+    std::vector<MinMax<T>> planes(std::size_t(planesZ) * ny * nx);
+    for (std::uint32_t z = 0; z < planesZ; ++z)
+        for (std::uint32_t ly = 0; ly < ny; ++ly)
+            for (std::uint32_t lx = 0; lx < nx; ++lx) {
+                MinMax<T> m = rows[(std::size_t(z) * rowsY + lo(ly)) * nx + lx];
                 for (std::uint32_t y = lo(ly) + 1; y < hi(ly); ++y)
-                    merge(m, rows[(std::size_t(z) * edge + y) * n + lx]);
-                planes[(std::size_t(z) * n + ly) * n + lx] = m;
+                    merge(m, rows[(std::size_t(z) * rowsY + y) * nx + lx]);
+                planes[(std::size_t(z) * ny + ly) * nx + lx] = m;
             }
-    // z: n x n x n.
-    out.resize(std::size_t(n) * n * n);
-    for (std::uint32_t lz = 0; lz < n; ++lz)
-        for (std::uint32_t j = 0; j < n * n; ++j) {
-            MinMax<T> m = planes[std::size_t(lo(lz)) * n * n + j];
+    // z: nz x ny x nx.
+    out.resize(std::size_t(nz) * ny * nx);
+    for (std::uint32_t lz = 0; lz < nz; ++lz)
+        for (std::uint32_t j = 0; j < ny * nx; ++j) {
+            MinMax<T> m = planes[std::size_t(lo(lz)) * ny * nx + j];
             for (std::uint32_t z = lo(lz) + 1; z < hi(lz); ++z)
-                merge(m, planes[std::size_t(z) * n * n + j]);
-            out[std::size_t(lz) * n * n + j] = {float(m.min), float(m.max)};
+                merge(m, planes[std::size_t(z) * ny * nx + j]);
+            out[std::size_t(lz) * ny * nx + j] = {float(m.min), float(m.max)};
         }
 }
 
@@ -130,14 +137,49 @@ ValueRange brickRange(VoxelType type, std::span<const std::byte> brick) {
 }
 
 std::vector<ValueRange> leafRanges(VoxelType type, std::span<const std::byte> brick,
-                                   const BrickGeometry& g) {
+                                   const BrickGeometry& g,
+                                   const std::array<std::uint32_t, 3>& inside) {
     std::vector<ValueRange> out;
     const std::uint32_t edge = g.brickVoxels + 2 * g.apronVoxels;
+    const std::uint32_t n = (g.brickVoxels + g.leafVoxels - 1) / g.leafVoxels;
+    for (auto i : inside)
+        if (i == 0 || i > n)
+            throw std::invalid_argument("leafRanges: " + std::to_string(i) + " leaves of " +
+                                        std::to_string(n) + " along an axis");
     dispatch(type, [&](auto t) {
         using T = decltype(t);
-        leafRangesT(as<T>(brick.data()), edge, g, out);
+        leafRangesT(as<T>(brick.data()), edge, g, inside, out);
         return 0;
     });
+    return out;
+}
+
+std::vector<ValueRange> leafRanges(VoxelType type, std::span<const std::byte> brick,
+                                   const BrickGeometry& g) {
+    const std::uint32_t n = (g.brickVoxels + g.leafVoxels - 1) / g.leafVoxels;
+    return leafRanges(type, brick, g, {n, n, n});
+}
+
+std::vector<ValueRange> expandLeafTable(std::span<const ValueRange> clipped, std::uint32_t n,
+                                        const std::array<std::uint32_t, 3>& inside) {
+    if (clipped.size() != std::size_t(inside[0]) * inside[1] * inside[2] || inside[0] == 0 ||
+        inside[1] == 0 || inside[2] == 0)
+        throw std::invalid_argument("leaf table of " + std::to_string(clipped.size()) +
+                                    " entries for " + std::to_string(inside[0]) + "x" +
+                                    std::to_string(inside[1]) + "x" + std::to_string(inside[2]) +
+                                    " leaves");
+    std::vector<ValueRange> out(std::size_t(n) * n * n);
+    for (std::uint32_t z = 0; z < n; ++z) {
+        const std::uint32_t cz = std::min(z, inside[2] - 1);
+        for (std::uint32_t y = 0; y < n; ++y) {
+            const std::uint32_t cy = std::min(y, inside[1] - 1);
+            for (std::uint32_t x = 0; x < n; ++x) {
+                const std::uint32_t cx = std::min(x, inside[0] - 1);
+                out[(std::size_t(z) * n + y) * n + x] =
+                    clipped[(std::size_t(cz) * inside[1] + cy) * inside[0] + cx];
+            }
+        }
+    }
     return out;
 }
 

@@ -4,6 +4,7 @@
 // scrub recomputes summaries exactly as they were written.
 #include "brickstore/BrickStore.h"
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -17,9 +18,23 @@ bool isConstant(std::span<const std::byte> data, std::size_t voxelBytes);
 /// Min/max over all voxels of a stored brick.
 ValueRange brickRange(VoxelType type, std::span<const std::byte> brick);
 
-/// Per-leaf ranges of a stored brick (FORMAT.md "Leaf table"), x fastest.
+/// Per-leaf ranges of a stored brick (FORMAT.md "Leaf table"), x fastest: every leaf.
 std::vector<ValueRange> leafRanges(VoxelType type, std::span<const std::byte> brick,
                                    const BrickGeometry& geometry);
+/// The same for the first `inside` leaves along each axis only (StoreLayout::leavesInside:
+/// the leaves a version-2 store keeps), in the same order; reads only the voxels their
+/// windows cover. @throw std::invalid_argument on 0 or more than ⌈B/L⌉ leaves on an axis.
+std::vector<ValueRange> leafRanges(VoxelType type, std::span<const std::byte> brick,
+                                   const BrickGeometry& geometry,
+                                   const std::array<std::uint32_t, 3>& inside);
+
+/// A full n³ table from a clipped one: a leaf outside the volume takes the range of the
+/// nearest leaf inside (index clamped per axis). That range contains the outside leaf's own
+/// (its window reads clamped copies of voxels the inside leaf's window reads), so skipping
+/// by it stays conservative; and no sample lies outside the volume.
+/// @throw std::invalid_argument when `clipped` is not inside[0]·inside[1]·inside[2] long.
+std::vector<ValueRange> expandLeafTable(std::span<const ValueRange> clipped, std::uint32_t n,
+                                        const std::array<std::uint32_t, 3>& inside);
 
 /// Leaf table bytes (min f32, max f32 per leaf).
 std::vector<std::byte> encodeLeafTable(std::span<const ValueRange> leaves);

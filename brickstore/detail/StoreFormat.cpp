@@ -72,7 +72,7 @@ void ByteWriter::f64(double v) {
 std::vector<std::byte> encodeHeader(const StoreHeader& h) {
     ByteWriter w;
     w.bytes(kMagic, 8);
-    w.u32(kFormatVersion);
+    w.u32(h.version);
     w.u32(static_cast<std::uint32_t>(kHeaderBytes));
     for (auto d : h.volume.dims)
         w.u64(d);
@@ -112,10 +112,12 @@ StoreHeader decodeHeader(std::span<const std::byte> bytes, const std::string& st
     ByteReader r(bytes.first(kHeaderBytes), store + ": header");
     r.take(8);
     StoreHeader h;
-    std::uint32_t version = r.u32();
-    if (version != kFormatVersion)
-        throw StoreCorrupt(store + ": format version " + std::to_string(version) +
-                           " is not supported (this build reads version 1)");
+    h.version = r.u32();
+    if (h.version < kOldestFormatVersion || h.version > kFormatVersion)
+        throw StoreCorrupt(store + ": format version " + std::to_string(h.version) +
+                           " is not supported (this build reads versions " +
+                           std::to_string(kOldestFormatVersion) + " to " +
+                           std::to_string(kFormatVersion) + ")");
     if (r.u32() != kHeaderBytes) throw StoreCorrupt(store + ": header: unexpected header size");
     for (auto& d : h.volume.dims)
         d = r.u64();
@@ -190,8 +192,14 @@ std::vector<std::byte> encodeIndex(const StoreLayout& layout, std::span<const Br
     return std::move(w.data());
 }
 
+std::uint64_t leafEntries(const StoreLayout& layout, const BrickKey& key, std::uint32_t version) {
+    if (version < 2) return layout.leafCount();
+    const auto n = layout.leavesInside(key);
+    return std::uint64_t(n[0]) * n[1] * n[2];
+}
+
 static void checkRecord(const BrickRecord& r, const StoreLayout& layout, std::uint64_t index,
-                        const std::string& store) {
+                        std::uint32_t version, const std::string& store) {
     auto fail = [&](const std::string& why) {
         throw StoreCorrupt(store + ": brick " + layout.keyOf(index).toString() + ": " + why);
     };
@@ -204,9 +212,11 @@ static void checkRecord(const BrickRecord& r, const StoreLayout& layout, std::ui
     std::uint64_t brickBytes = layout.storedVoxels() * 4; // bound for any type
     if (r.compressedBytes == 0 || r.compressedBytes > ZSTD_compressBound(brickBytes))
         fail("compressed size " + std::to_string(r.compressedBytes) + " out of range");
-    if (r.leafBytes != layout.leafCount() * kLeafEntryBytes)
+    const std::uint64_t leafBytes =
+        leafEntries(layout, layout.keyOf(index), version) * kLeafEntryBytes;
+    if (r.leafBytes != leafBytes)
         fail("leaf table of " + std::to_string(r.leafBytes) + " bytes, expected " +
-             std::to_string(layout.leafCount() * kLeafEntryBytes));
+             std::to_string(leafBytes));
 }
 
 DecodedIndex decodeIndex(std::span<const std::byte> bytes, const StoreHeader& h,
@@ -240,7 +250,7 @@ DecodedIndex decodeIndex(std::span<const std::byte> bytes, const StoreHeader& h,
         r.u32();
         rec.payloadChecksum = r.u64();
         rec.leafChecksum = r.u64();
-        checkRecord(rec, layout, i, store);
+        checkRecord(rec, layout, i, h.version, store);
     }
     out.histogram.resize(h.histogramBins);
     for (auto& c : out.histogram)

@@ -12,7 +12,10 @@
 namespace bc::brickstore::detail {
 
 constexpr char kMagic[8] = {'B', 'C', 'S', 'T', 'O', 'R', 'E', '\0'};
-constexpr std::uint32_t kFormatVersion = 1;
+/// What this build writes. Version 1 (read still) kept a leaf table of every leaf of a brick;
+/// version 2 keeps only the leaves whose payload meets the volume (StoreLayout::leavesInside).
+constexpr std::uint32_t kFormatVersion = 2;
+constexpr std::uint32_t kOldestFormatVersion = 1;
 constexpr std::uint64_t kHeaderBytes = 4096;
 constexpr std::uint64_t kLevelEntryBytes = 40;
 constexpr std::uint64_t kRecordBytes = 48;
@@ -22,6 +25,7 @@ constexpr std::uint64_t kLeafEntryBytes = 8;
 
 /// The fixed header fields (offsets in FORMAT.md).
 struct StoreHeader {
+    std::uint32_t version = kFormatVersion;
     VolumeInfo volume;
     BrickGeometry geometry;
     std::uint32_t levelCount = 0;
@@ -34,7 +38,10 @@ struct StoreHeader {
 std::uint64_t checksum(std::span<const std::byte> bytes);
 std::uint64_t checksum(const void* data, std::size_t bytes);
 
-/// Exactly kHeaderBytes bytes, checksum included.
+/// Leaf table entries a stored brick of a store of `version` carries.
+std::uint64_t leafEntries(const StoreLayout& layout, const BrickKey& key, std::uint32_t version);
+
+/// Exactly kHeaderBytes bytes, checksum included (header.version is written as given).
 std::vector<std::byte> encodeHeader(const StoreHeader& header);
 /// @throw StoreCorrupt (prefixed by `storeName`) on a bad checksum, magic, version or field.
 StoreHeader decodeHeader(std::span<const std::byte> bytes, const std::string& storeName);

@@ -177,11 +177,12 @@ void runIngest(const IngestOptions& o) {
     std::printf("  memory: %s estimated for the buffers, budget %s\n",
                 tools::formatBytes(double(report.memoryBytes)).c_str(),
                 tools::formatBytes(double(report.memoryBudgetBytes)).c_str());
-    // A thin volume fills each stored brick with few voxels but a whole leaf table.
+    // Leaf tables hold the leaves inside the volume only (FORMAT.md, version 2); they still
+    // outweigh the frames when the leaves are small against what the frames compress to.
     if (report.leafTableBytes * 2 > report.storedBytes)
-        std::printf("  note: %s of the store are leaf tables (a fixed table per stored brick, "
-                    "however few voxels it holds; --leaf sets their size)\n",
-                    tools::formatBytes(double(report.leafTableBytes)).c_str());
+        std::printf("  note: %s of the store are leaf tables (8 bytes per %u³ leaf inside the "
+                    "volume; --leaf sets their size)\n",
+                    tools::formatBytes(double(report.leafTableBytes)).c_str(), o.leaf);
 }
 
 } // namespace
