@@ -50,30 +50,47 @@ struct Plane {
     glm::dvec3 point, normal; ///< inside where dot(p - point, normal) >= 0
 };
 
-std::vector<Plane> viewPlanes(const ViewBasis& v) {
+/// The planes bounding the rays through the image rectangle [sx0, sx1] x [sy0, sy1] of `v`,
+/// in its screen coordinates (-1..1, y up; ViewBasis::ray), and the eye plane.
+std::vector<Plane> viewPlanes(const ViewBasis& v, double sx0, double sx1, double sy0, double sy1) {
     std::vector<Plane> planes{{v.eye, v.forward}};
+    const glm::dvec3 r = v.right, u = v.upScaled;
     if (v.orthographic) {
-        planes.push_back({v.eye + v.right, -glm::normalize(v.right)});
-        planes.push_back({v.eye - v.right, glm::normalize(v.right)});
-        planes.push_back({v.eye + v.upScaled, -glm::normalize(v.upScaled)});
-        planes.push_back({v.eye - v.upScaled, glm::normalize(v.upScaled)});
+        planes.push_back({v.eye + sx1 * r, -glm::normalize(r)});
+        planes.push_back({v.eye + sx0 * r, glm::normalize(r)});
+        planes.push_back({v.eye + sy1 * u, -glm::normalize(u)});
+        planes.push_back({v.eye + sy0 * u, glm::normalize(u)});
         return planes;
     }
-    const glm::dvec3 f = v.forward, r = v.right, u = v.upScaled;
-    const glm::dvec3 corners[4] = {f + r + u, f - r + u, f - r - u, f + r - u};
+    const glm::dvec3 f = v.forward;
+    const glm::dvec3 corners[4] = {f + sx1 * r + sy1 * u, f + sx0 * r + sy1 * u,
+                                   f + sx0 * r + sy0 * u, f + sx1 * r + sy0 * u};
+    const glm::dvec3 centre = f + 0.5 * (sx0 + sx1) * r + 0.5 * (sy0 + sy1) * u;
     for (int i = 0; i < 4; ++i) {
         glm::dvec3 n = glm::normalize(glm::cross(corners[i], corners[(i + 1) % 4]));
-        if (glm::dot(n, f) < 0.0) n = -n;
+        if (glm::dot(n, centre) < 0.0) n = -n;
         planes.push_back({v.eye, n});
     }
     return planes;
 }
 
-} // namespace
+std::vector<Plane> viewPlanes(const ViewBasis& v) {
+    return viewPlanes(v, -1.0, 1.0, -1.0, 1.0);
+}
 
-bool outsideView(const Box& box, const ViewBasis& view) {
+/// The planes of the rays through `region` of a width x height image: its pixels' outer
+/// edges, so every ray of the region (through a pixel centre) is strictly inside.
+std::vector<Plane> regionPlanes(const ViewBasis& v, const PixelRect& region, std::uint32_t width,
+                                std::uint32_t height) {
+    if (region.whole()) return viewPlanes(v);
+    const double w = width, h = height;
+    return viewPlanes(v, 2.0 * region.x / w - 1.0, 2.0 * (region.x + region.width) / w - 1.0,
+                      1.0 - 2.0 * (region.y + region.height) / h, 1.0 - 2.0 * region.y / h);
+}
+
+bool outsidePlanes(const Box& box, const ViewBasis& view, const std::vector<Plane>& planes) {
     const double slack = 1e-9 * (1.0 + glm::length(box.size()) + glm::length(box.min - view.eye));
-    for (const Plane& p : viewPlanes(view)) {
+    for (const Plane& p : planes) {
         bool allOut = true;
         for (int c = 0; c < 8 && allOut; ++c) {
             const glm::dvec3 q{(c & 1) ? box.max.x : box.min.x, (c & 2) ? box.max.y : box.min.y,
@@ -83,6 +100,17 @@ bool outsideView(const Box& box, const ViewBasis& view) {
         if (allOut) return true;
     }
     return false;
+}
+
+} // namespace
+
+bool outsideView(const Box& box, const ViewBasis& view) {
+    return outsidePlanes(box, view, viewPlanes(view));
+}
+
+bool outsideRegion(const Box& box, const View& view, const PixelRect& region) {
+    return outsidePlanes(box, view.basis,
+                         regionPlanes(view.basis, region, view.width, view.height));
 }
 
 namespace {
@@ -108,9 +136,15 @@ std::int64_t visibilityKey(const std::array<std::uint32_t, 3>& pos, const LevelG
 
 } // namespace
 
-BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
-                     const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
-                     const OccupancyTrees* occupancy) {
+namespace {
+
+enum class Verdict { Cull, Skip, Draw };
+
+/// Every brick of the level that `verdict(key, index, record)` keeps, sorted front to back
+/// (stable: index order among equal keys), with the counts of those culled and skipped.
+template <typename VerdictOf>
+BrickPlan planLevel(const brickstore::BrickStore& store, const LevelGeometry& g,
+                    const ViewBasis& view, const VerdictOf& verdict) {
     BrickPlan plan;
     plan.total = g.brickCount();
     std::uint64_t index = 0;
@@ -118,17 +152,16 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
         for (std::uint32_t y = 0; y < g.bricks[1]; ++y)
             for (std::uint32_t x = 0; x < g.bricks[0]; ++x, ++index) {
                 const brickstore::BrickKey key{g.level, {x, y, z}};
-                if (outsideView(g.brickBox(key.pos), view)) {
+                const auto& record = store.record(key);
+                switch (verdict(key, index, record)) {
+                case Verdict::Cull:
                     ++plan.culled;
                     continue;
-                }
-                const auto& record = store.record(key);
-                const bool leavesEmpty = skip == SkipMode::All && occupancy && record.stored() &&
-                                         !occupancy->occupied(index, 0, {});
-                if (leavesEmpty || (skip != SkipMode::None &&
-                                    table.transparent(record.range.min, record.range.max))) {
+                case Verdict::Skip:
                     ++plan.skipped;
                     continue;
+                case Verdict::Draw:
+                    break;
                 }
                 PlannedBrick b{index, key,
                                record.stored() ? BrickDraw::Sampled : BrickDraw::Constant,
@@ -142,26 +175,44 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
     return plan;
 }
 
+BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
+                     const TransferFunctionTable& table, const ViewBasis& view,
+                     const std::vector<Plane>& cull, SkipMode skip,
+                     const OccupancyTrees* occupancy) {
+    return planLevel(store, g, view,
+                     [&](const brickstore::BrickKey& key, std::uint64_t index,
+                         const brickstore::BrickRecord& record) {
+                         if (outsidePlanes(g.brickBox(key.pos), view, cull)) return Verdict::Cull;
+                         const bool leavesEmpty = skip == SkipMode::All && occupancy &&
+                                                  record.stored() &&
+                                                  !occupancy->occupied(index, 0, {});
+                         if (leavesEmpty || (skip != SkipMode::None &&
+                                             table.transparent(record.range.min, record.range.max)))
+                             return Verdict::Skip;
+                         return Verdict::Draw;
+                     });
+}
+
+} // namespace
+
+BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
+                     const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
+                     const OccupancyTrees* occupancy) {
+    return planBricks(store, g, table, view, viewPlanes(view), skip, occupancy);
+}
+
+BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
+                     const TransferFunctionTable& table, const View& view, const PixelRect& region,
+                     SkipMode skip, const OccupancyTrees* occupancy) {
+    return planBricks(store, g, table, view.basis,
+                      regionPlanes(view.basis, region, view.width, view.height), skip, occupancy);
+}
+
 BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometry& g,
                          const ViewBasis& view) {
-    BrickPlan plan;
-    plan.total = g.brickCount();
-    std::uint64_t index = 0;
-    for (std::uint32_t z = 0; z < g.bricks[2]; ++z)
-        for (std::uint32_t y = 0; y < g.bricks[1]; ++y)
-            for (std::uint32_t x = 0; x < g.bricks[0]; ++x, ++index) {
-                const brickstore::BrickKey key{g.level, {x, y, z}};
-                const auto& record = store.record(key);
-                PlannedBrick b{index, key,
-                               record.stored() ? BrickDraw::Sampled : BrickDraw::Constant,
-                               record.range.min, visibilityKey(key.pos, g, view)};
-                ++(b.draw == BrickDraw::Sampled ? plan.sampled : plan.constant);
-                plan.drawn.push_back(b);
-            }
-    std::stable_sort(
-        plan.drawn.begin(), plan.drawn.end(),
-        [](const PlannedBrick& a, const PlannedBrick& b) { return a.order < b.order; });
-    return plan;
+    return planLevel(store, g, view,
+                     [](const brickstore::BrickKey&, std::uint64_t,
+                        const brickstore::BrickRecord&) { return Verdict::Draw; });
 }
 
 std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,

@@ -5,6 +5,7 @@
 #include "brickstore/StoreLayout.h"
 #include "render/Camera.h"
 #include "render/RenderTypes.h"
+#include "render/View.h"
 
 #include <array>
 #include <cstddef>
@@ -61,6 +62,13 @@ BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g
                      const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
                      const OccupancyTrees* occupancy = nullptr);
 
+/// The same for the rays of one region of the view's image alone (a slice of a frame the
+/// daemon draws in slices): bricks outside the region's own frustum are culled too, so a
+/// slice pins and loads only what its rays can reach. A whole() region is the whole view.
+BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& geometry,
+                     const TransferFunctionTable& table, const View& view, const PixelRect& region,
+                     SkipMode skip, const OccupancyTrees* occupancy = nullptr);
+
 /// Every brick of the level, front to back, nothing culled or skipped (for the reference, which
 /// samples wherever a ray goes).
 BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometry& geometry,
@@ -81,5 +89,8 @@ void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats);
 /// True when `box` lies wholly outside the view of `view` (side planes through the image
 /// corners, and behind the eye plane).
 bool outsideView(const Box& box, const ViewBasis& view);
+/// True when `box` lies wholly outside the rays through `region` of the view's image (side
+/// planes through the region's outer pixel edges, and behind the eye plane).
+bool outsideRegion(const Box& box, const View& view, const PixelRect& region);
 
 } // namespace bc::render

@@ -400,7 +400,10 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     const TransferFunctionTable& table = *classified.table;
     const OccupancyTrees* occupancy = classified.occupancy;
     const bool octree = occupancy != nullptr;
-    const BrickPlan plan = planBricks(store, g, table, view.basis, options.skip, occupancy);
+    // A slice (options.region) plans the bricks its own rays reach: under a host budget the
+    // frame's slices then load each brick about once, not once per slice.
+    const BrickPlan plan =
+        planBricks(store, g, table, view, options.region, options.skip, occupancy);
     recordPlan(plan, level, stats);
 
     // Batches of the front-to-back order whose bricks fit the host budget, drawn one after

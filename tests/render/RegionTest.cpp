@@ -7,6 +7,8 @@
 #include "render/ReferenceRenderer.h"
 #include "render/RendererRegistry.h"
 
+#include <random>
+
 namespace bc::render {
 namespace {
 
@@ -84,6 +86,51 @@ TEST(Region, ARegionOutsideTheImageOrFromAWholeFrameRendererIsRefused) {
     } catch (const std::invalid_argument& e) {
         EXPECT_NE(std::string(e.what()).find("region"), std::string::npos) << e.what();
     }
+}
+
+// Culling by a region's own frustum is conservative: a box that any ray through a pixel of the
+// region meets (ahead of the eye) is never outside it; and it culls what a whole-view plan
+// keeps. Random boxes, regions and cameras, wide angles and orthographic included.
+TEST(Region, ARegionsFrustumNeverCullsABoxOneOfItsRaysMeets) {
+    std::mt19937 rng(16);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::uint64_t met = 0, culledByRegion = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        Camera camera;
+        camera.eye = {unit(rng) * 4 - 2, unit(rng) * 4 - 2, unit(rng) * 4 - 2};
+        camera.target = {unit(rng) - 0.5, unit(rng) - 0.5, unit(rng) - 0.5};
+        camera.up = {0, 0, 1};
+        camera.fovYDeg = 10 + 160 * unit(rng);
+        camera.orthographic = trial % 3 == 0;
+        camera.orthoHeight = 0.5 + 3 * unit(rng);
+        const std::uint32_t w = 8 + rng() % 40, h = 8 + rng() % 40;
+        const View view = View::of(camera, w, h);
+        PixelRect region;
+        region.x = rng() % w;
+        region.y = rng() % h;
+        region.width = 1 + rng() % (w - region.x);
+        region.height = 1 + rng() % (h - region.y);
+        for (int b = 0; b < 40; ++b) {
+            Box box;
+            box.min = {unit(rng) * 3 - 1.5, unit(rng) * 3 - 1.5, unit(rng) * 3 - 1.5};
+            box.max = box.min + glm::dvec3(0.05 + 0.5 * unit(rng), 0.05 + 0.5 * unit(rng),
+                                           0.05 + 0.5 * unit(rng));
+            bool meets = false;
+            for (std::uint32_t y = region.y; y < region.y + region.height && !meets; ++y)
+                for (std::uint32_t x = region.x; x < region.x + region.width && !meets; ++x) {
+                    const auto t = intersectBox(view.basis.ray(x, y, w, h), box);
+                    meets = t[1] >= std::max(t[0], 0.0);
+                }
+            const bool outside = outsideRegion(box, view, region);
+            if (meets) {
+                ++met;
+                ASSERT_FALSE(outside) << "trial " << trial << ", box " << b;
+            }
+            culledByRegion += outside && !outsideView(box, view.basis);
+        }
+    }
+    EXPECT_GT(met, 500u);
+    EXPECT_GT(culledByRegion, 500u) << "a region's frustum should cull more than the view's";
 }
 
 } // namespace
