@@ -37,6 +37,10 @@ std::unique_ptr<VolumeSource> openNifti(const std::string& path);
 
 /// A folder holding one DICOM series: slices sorted along the slice normal, rescale
 /// slope/intercept applied, spacing from the headers. Mixed series or missing slices throw.
+/// GDCM (built with assertions by Debian) reads the headers and decodes the pixels in a
+/// child process under ParserSandboxLimits, as openVdb does: a file that makes it abort,
+/// crash or exceed a limit is a FormatError naming that file, under 1 kB. Call it before
+/// the caller starts threads of its own (fork).
 std::unique_ptr<VolumeSource> openDicomSeries(const std::string& folder);
 
 /// A scalar grid (float, double, half on disk) of an OpenVDB file, by name (empty = the

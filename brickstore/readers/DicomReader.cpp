@@ -5,9 +5,15 @@
 // a slice is ever in memory. Rescale slope/intercept keep the stored type when they are the
 // identity, give i16 when integer rescaling maps every storable value into i16 (CT in HU), and
 // f32 otherwise.
+//
+// All of it runs in the parser sandbox (readers/detail/SandboxedSource.h): Debian builds GDCM
+// with assertions, and fuzzed files still make it abort where the length pre-walk does not
+// reach (gdcmFileMetaInformation.cxx:375 on a file cut inside its meta header). The child
+// reports each file before GDCM reads it, so an abort is named by file.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "brickstore/readers/detail/DicomLengths.h"
+#include "brickstore/readers/detail/DicomSeries.h"
 
 #include <gdcmImage.h>
 #include <gdcmImageReader.h>
@@ -317,7 +323,7 @@ std::optional<SliceHeader> readSliceHeader(const std::string& path) {
     return slice;
 }
 
-std::vector<SliceHeader> readFolder(const std::string& folder) {
+std::vector<SliceHeader> readFolder(const std::string& folder, const detail::ReadingFile& reading) {
     std::error_code ec;
     if (!std::filesystem::is_directory(folder, ec))
         throw FormatError(folder, "folder", "not a folder");
@@ -327,8 +333,10 @@ std::vector<SliceHeader> readFolder(const std::string& folder) {
     if (ec) throw FormatError(folder, "folder", "cannot list it: " + ec.message());
     std::sort(files.begin(), files.end());
     std::vector<SliceHeader> slices;
-    for (const std::string& file : files)
+    for (const std::string& file : files) {
+        if (reading) reading(file);
         if (auto slice = readSliceHeader(file)) slices.push_back(std::move(*slice));
+    }
     if (slices.empty())
         throw FormatError(folder, "slices",
                           "no DICOM image slices among its " + std::to_string(files.size()) +
@@ -481,8 +489,9 @@ void decodeSlice(const std::byte* in, std::size_t count, const SliceHeader& s, V
 
 class DicomSeries final : public VolumeSource {
   public:
-    DicomSeries(const std::string& folder, std::vector<SliceHeader> slices)
-        : mFolder(folder), mSlices(std::move(slices)) {
+    DicomSeries(const std::string& folder, std::vector<SliceHeader> slices,
+                const detail::ReadingFile& reading)
+        : mFolder(folder), mSlices(std::move(slices)), mReading(reading) {
         checkConsistent(folder, mSlices);
         const double sliceSpacing = sortAndSpace(folder, mSlices);
         const SliceHeader& first = mSlices.front();
@@ -523,6 +532,7 @@ class DicomSeries final : public VolumeSource {
     }
 
     void readSlice(const SliceHeader& slice, std::span<std::byte> out) {
+        if (mReading) mReading(slice.path);
         gdcm::ImageReader reader;
         reader.SetFileName(slice.path.c_str());
         if (!reader.Read())
@@ -570,14 +580,27 @@ class DicomSeries final : public VolumeSource {
 
     std::string mFolder;
     std::vector<SliceHeader> mSlices; ///< sorted along the slice normal
+    detail::ReadingFile mReading;
     VolumeInfo mInfo;
     std::vector<std::byte> mPixels; ///< one decoded slice, reused
 };
 
 } // namespace
 
+namespace detail {
+
+std::unique_ptr<VolumeSource> openDicomSeriesInProcess(const std::string& folder,
+                                                       const ReadingFile& reading) {
+    return std::make_unique<DicomSeries>(folder, readFolder(folder, reading), reading);
+}
+
+} // namespace detail
+
 std::unique_ptr<VolumeSource> openDicomSeries(const std::string& folder) {
-    return std::make_unique<DicomSeries>(folder, readFolder(folder));
+    return detail::openSandboxed({folder, "DICOM", "per file"}, parserSandboxLimits(),
+                                 [folder](const detail::ReadingFile& reading) {
+                                     return detail::openDicomSeriesInProcess(folder, reading);
+                                 });
 }
 
 } // namespace bc::brickstore
