@@ -116,7 +116,7 @@ void applyLimits(const ParserSandboxLimits& limits) {
     ::sigprocmask(SIG_UNBLOCK, &limitSignals, nullptr); // a parent's mask is inherited
 }
 
-/// Opens the volume and streams it; returns only by throwing.
+/// Opens the volume, streams it and ends the child; returns only by throwing.
 void streamVolume(ChildWriter& w, const ParserSandboxLimits& limits, std::string& readingFile,
                   const detail::SandboxedOpener& open) {
     const detail::ReadingFile reading = [&](const std::string& path) {
