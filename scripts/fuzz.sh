@@ -73,8 +73,9 @@ nifti_header)
     ;;
 dicom)
     harness=DicomFuzz
-    sources=(brickstore/readers/DicomReader.cpp brickstore/readers/detail/DicomLengths.cpp
-        brickstore/readers/detail/SandboxedSource.cpp "${reader_common[@]}")
+    sources=(brickstore/readers/DicomReader.cpp brickstore/readers/detail/DicomHeaders.cpp
+        brickstore/readers/detail/DicomLengths.cpp brickstore/readers/detail/SandboxedSource.cpp
+        "${reader_common[@]}")
     folders=(brickstore brickstore/readers brickstore/readers/detail)
     cflags=(-isystem "$(ls -d /usr/include/gdcm-* | tail -1)")
     libs=(-lgdcmMSFF -lgdcmDSED -lgdcmCommon)
