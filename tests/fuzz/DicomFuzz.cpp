@@ -143,12 +143,17 @@ std::string runSandboxed(const std::filesystem::path& dir, bool& contained) {
     const std::string folder = dir.string();
     try {
         // Not exerciseVolume: it takes a FormatError while reading for a refusal, and a child
-        // that dies while decoding must be seen here.
+        // that dies while decoding must be seen here. The same slices as it reads, so that the
+        // in-process run decodes none the child has not.
         auto source = brickstore::openDicomSeries(folder);
-        const std::uint64_t sliceBytes = source->info().sliceBytes();
+        const brickstore::VolumeInfo& info = source->info();
+        const std::uint64_t sliceBytes = info.sliceBytes();
         if (sliceBytes > fuzz::kMaxFuzzSliceBytes) return {};
+        const bool whole = sliceBytes * info.dims[2] <= fuzz::kMaxFuzzVolumeBytes;
+        const std::uint64_t slices =
+            whole ? info.dims[2] : std::min<std::uint64_t>(3, info.dims[2]);
         std::vector<std::byte> slice(sliceBytes);
-        for (std::uint64_t z = 0; z < std::min<std::uint64_t>(3, source->info().dims[2]); ++z)
+        for (std::uint64_t z = 0; z < slices; ++z)
             source->readSlices(1, slice);
         return {};
     } catch (const brickstore::FormatError& e) {

@@ -9,8 +9,9 @@
 //
 // Why fork is safe here: the child only runs code that the parent never started (the parser's
 // library is initialized in the child), glibc resets its malloc locks across fork, and the
-// readers are opened before ingest starts its workers; the child leaves with _exit, running
-// no parent destructors.
+// readers are opened before ingest starts its workers (a mosaic reopens its input while they
+// run: its child still needs only malloc and the parser's own state); the child leaves with
+// _exit, running no parent destructors.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "brickstore/VolumeSource.h"
@@ -40,7 +41,8 @@ struct SandboxedParser {
 /// and field; any other end names `parser.path` (or the file last reported through
 /// ReadingFile) with field "file". The alarm runs from the fork until `open` returns and
 /// again during each ReadingFile call's file, never while the child waits on the pipe.
-/// Not thread-safe against other forks of the caller (see the header comment).
+/// Call it before starting threads of your own where you can (fork copies only the calling
+/// thread; see the header comment).
 /// @throw FormatError when the child cannot be started or ends before the description.
 std::unique_ptr<VolumeSource> openSandboxed(const SandboxedParser& parser,
                                             const ParserSandboxLimits& limits,
