@@ -37,26 +37,43 @@ std::unique_ptr<VolumeSource> openNifti(const std::string& path);
 
 /// A folder holding one DICOM series: slices sorted along the slice normal, rescale
 /// slope/intercept applied, spacing from the headers. Mixed series or missing slices throw.
+/// GDCM (built with assertions by Debian) reads the headers and decodes the pixels in a
+/// child process under ParserSandboxLimits, as openVdb does: a file that makes it abort,
+/// crash or exceed a limit is a FormatError naming that file, under 1 kB. Call it before
+/// the caller starts threads of its own (fork).
 std::unique_ptr<VolumeSource> openDicomSeries(const std::string& folder);
 
 /// A scalar grid (float, double, half on disk) of an OpenVDB file, by name (empty = the
 /// only/first scalar grid). The volume is the grid's active bounding box; inactive voxels
 /// read as the background value, so empty bricks compress to nothing and are not stored.
 /// The file is parsed in a child process (OpenVDB's parser may hang or exhaust memory on a
-/// hostile file) under VdbSandboxLimits; the child streams the slices back over a pipe, so
+/// hostile file) under ParserSandboxLimits; the child streams the slices back over a pipe, so
 /// memory stays bounded. A child that fails, is killed or exceeds a limit is a FormatError
 /// naming the file, under 1 kB. Call it before the caller starts threads of its own (fork).
 std::unique_ptr<VolumeSource> openVdb(const std::string& path, const std::string& gridName);
 
-/// Limits of the child that parses an OpenVDB file.
-struct VdbSandboxLimits {
+/// Limits of the child process that parses an OpenVDB file or a DICOM series (one set for
+/// both: what they bound, a hostile file, is the same).
+struct ParserSandboxLimits {
     std::uint64_t addressSpaceBytes = 2ull << 30; ///< RLIMIT_AS of the child
-    std::uint32_t parseSeconds = 10; ///< wall clock from fork until the grid is described
-    std::uint32_t cpuSeconds = 600;  ///< RLIMIT_CPU of the child, streaming included
+    /// Wall clock of the parse: from fork until the volume is described, restarted at each
+    /// file the parser reads (a DICOM series: every header, every slice's decoding).
+    std::uint32_t parseSeconds = 10;
+    std::uint32_t cpuSeconds = 600; ///< RLIMIT_CPU of the child, streaming included
 };
-/// Sets the limits of later openVdb calls (process-wide; the command line's --vdb-* options).
-void setVdbSandboxLimits(const VdbSandboxLimits& limits);
-VdbSandboxLimits vdbSandboxLimits();
+/// Sets the limits of later openVdb and openDicomSeries calls (process-wide; the command
+/// line's --parser-memory-mb and --parser-parse-s).
+void setParserSandboxLimits(const ParserSandboxLimits& limits);
+ParserSandboxLimits parserSandboxLimits();
+
+/// The names these limits had when only OpenVDB was sandboxed.
+using VdbSandboxLimits = ParserSandboxLimits;
+inline void setVdbSandboxLimits(const VdbSandboxLimits& limits) {
+    setParserSandboxLimits(limits);
+}
+inline VdbSandboxLimits vdbSandboxLimits() {
+    return parserSandboxLimits();
+}
 
 enum class SynthKind { Phantom, Vessels, Checker };
 /// Edge of one checkerboard cell of the Checker generator.

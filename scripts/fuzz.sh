@@ -43,6 +43,7 @@ command -v ccache >/dev/null && launcher=(ccache)
 cd "$src"
 reader_common=(brickstore/VolumeSource.cpp brickstore/VoxelType.cpp)
 cflags=()
+asan_options=detect_leaks=1
 rss_mb=2048
 malloc_mb=1024
 case $target in
@@ -72,12 +73,16 @@ nifti_header)
     ;;
 dicom)
     harness=DicomFuzz
-    sources=(brickstore/readers/DicomReader.cpp brickstore/readers/detail/DicomLengths.cpp
+    sources=(brickstore/readers/DicomReader.cpp brickstore/readers/detail/DicomHeaders.cpp
+        brickstore/readers/detail/DicomLengths.cpp brickstore/readers/detail/SandboxedSource.cpp
         "${reader_common[@]}")
     folders=(brickstore brickstore/readers brickstore/readers/detail)
     cflags=(-isystem "$(ls -d /usr/include/gdcm-* | tail -1)")
     libs=(-lgdcmMSFF -lgdcmDSED -lgdcmCommon)
     max_len=65536
+    # The harness forks the parser sandbox per input; fork and exit cost grows with the
+    # resident size, which ASan's 256 MiB quarantine mostly is (69 -> 88 inputs/s).
+    asan_options=detect_leaks=1:quarantine_size_mb=16
     ;;
 brick_store)
     harness=BrickStoreFuzz
@@ -169,7 +174,7 @@ BC_FUZZ_SCRATCH=$(mktemp -d "$scratch_parent/bc-fuzz-$target.XXXXXX")
 export BC_FUZZ_SCRATCH
 trap 'rm -rf "$BC_FUZZ_SCRATCH"' EXIT
 # LeakSanitizer on; UBSan reports are fatal (-fno-sanitize-recover above).
-export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1}
+export ASAN_OPTIONS=${ASAN_OPTIONS:-$asan_options}
 # shellcheck disable=SC2086
 "$fuzzer" -max_total_time="$seconds" -max_len="$max_len" -timeout=10 -rss_limit_mb="$rss_mb" \
     -malloc_limit_mb="$malloc_mb" -print_final_stats=1 -print_funcs=0 -artifact_prefix="$out/" \

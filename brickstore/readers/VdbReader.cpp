@@ -3,36 +3,23 @@
 // paints only the leaves and active tiles that cross the requested slab, so the dense volume
 // never exists in memory.
 //
-// All of that runs in a child process (fork), because OpenVDB's own security notes say its
-// parser may hang or exhaust memory on a hostile file: a truncated gaffer_smoke.vdb took
-// 5-6 GB and 6-14 s before failing. The child lowers RLIMIT_AS and RLIMIT_CPU, arms an alarm
-// for the parse, and streams the volume's description and then its slabs over a pipe; the
-// parent (SandboxedVdb) is the VolumeSource ingest sees. Why fork is safe here: the child only
-// runs code that the parent never started (OpenVDB and TBB are initialized in the child, never
-// in the parent), glibc resets its malloc locks across fork, and openVdb is called before
-// ingest starts its workers; the child leaves with _exit, running no parent destructors.
+// All of that runs in the parser sandbox (readers/detail/SandboxedSource.h), because
+// OpenVDB's own security notes say its parser may hang or exhaust memory on a hostile file:
+// a truncated gaffer_smoke.vdb took 5-6 GB and 6-14 s before failing. OpenVDB and TBB are
+// initialized in the child only, never in the parent.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/readers/detail/SandboxedSource.h"
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
-#include <atomic>
-#include <cerrno>
-#include <climits>
 #include <cmath>
-#include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <mutex>
-#include <new>
 #include <vector>
-
-#include <fcntl.h>
-#include <sys/resource.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 namespace bc::brickstore {
 namespace {
@@ -266,282 +253,12 @@ std::unique_ptr<VolumeSource> openInProcess(const std::string& path, const std::
                       "grid \"" + grid->getName() + "\" is not a float or double scalar grid");
 }
 
-// ---- the sandbox: child and pipe --------------------------------------------------------------
-
-/// Messages on the pipe, child to parent: 'I' info, then 'S' slab (u64 slices, bytes) ...;
-/// 'E' (field, why) ends the stream with an error. Integers in host order (same machine).
-constexpr char kInfo = 'I', kSlab = 'S', kError = 'E';
-constexpr std::size_t kMaxErrorText = 400; ///< per string: the parent's error stays < 1 kB
-constexpr std::uint64_t kSlabBytes = 64ull << 20;
-
-std::atomic<std::uint64_t> gAddressSpaceBytes{VdbSandboxLimits{}.addressSpaceBytes};
-std::atomic<std::uint32_t> gParseSeconds{VdbSandboxLimits{}.parseSeconds};
-std::atomic<std::uint32_t> gCpuSeconds{VdbSandboxLimits{}.cpuSeconds};
-
-constexpr std::size_t kMaxDescriptionText = 4096; ///< as a store's description
-
-std::string clip(const std::string& text, std::size_t maxBytes = kMaxErrorText) {
-    return text.size() <= maxBytes ? text : text.substr(0, maxBytes) + "...";
-}
-
-/// The child's side: blocking writes; a parent gone (EPIPE) ends the child.
-class ChildWriter {
-  public:
-    explicit ChildWriter(int fd) : mFd(fd) {}
-    void bytes(const void* data, std::size_t n) {
-        const auto* p = static_cast<const char*>(data);
-        while (n > 0) {
-            const ssize_t w = ::write(mFd, p, n);
-            if (w < 0 && errno == EINTR) continue;
-            if (w <= 0) ::_exit(3);
-            p += w;
-            n -= std::size_t(w);
-        }
-    }
-    template <class T> void value(T v) { bytes(&v, sizeof v); }
-    void text(const std::string& s, std::size_t maxBytes = kMaxErrorText) {
-        const std::string c = clip(s, maxBytes);
-        value(std::uint32_t(c.size()));
-        bytes(c.data(), c.size());
-    }
-
-  private:
-    int mFd;
-};
-
-void sendInfo(ChildWriter& w, const VolumeInfo& i) {
-    w.value(kInfo);
-    for (int a = 0; a < 3; ++a)
-        w.value(i.dims[a]);
-    w.value(std::uint8_t(i.type));
-    for (int a = 0; a < 3; ++a)
-        w.value(i.spacingMm[a]);
-    for (int a = 0; a < 3; ++a)
-        w.value(i.originMm[a]);
-    w.value(i.background);
-    w.value(i.valueScale);
-    w.value(i.valueOffset);
-    w.text(i.description, kMaxDescriptionText);
-}
-
-/// Runs in the child: limits, parse, stream. Never returns.
-[[noreturn]] void childMain(int fd, const std::string& path, const std::string& gridName,
-                            std::uint64_t addressSpaceBytes, std::uint32_t parseSeconds,
-                            std::uint32_t cpuSeconds) {
-    const rlimit as{addressSpaceBytes, addressSpaceBytes};
-    const rlimit cpu{cpuSeconds, cpuSeconds + 1};
-    ::setrlimit(RLIMIT_AS, &as);
-    ::setrlimit(RLIMIT_CPU, &cpu);
-    ::signal(SIGALRM, SIG_DFL);
-    ::signal(SIGXCPU, SIG_DFL);
-    sigset_t limitSignals;
-    sigemptyset(&limitSignals);
-    sigaddset(&limitSignals, SIGALRM);
-    sigaddset(&limitSignals, SIGXCPU);
-    ::sigprocmask(SIG_UNBLOCK, &limitSignals, nullptr); // a parent's mask is inherited
-    ::alarm(parseSeconds);
-    ChildWriter w(fd);
-    try {
-        auto source = openInProcess(path, gridName);
-        ::alarm(0); // parsed: from here the parent's pace sets the time, RLIMIT_CPU the bound
-        const VolumeInfo& info = source->info();
-        sendInfo(w, info);
-        const std::uint64_t sliceBytes = info.sliceBytes();
-        const std::uint64_t perSlab = std::max<std::uint64_t>(1, kSlabBytes / sliceBytes);
-        std::vector<std::byte> slab;
-        for (std::uint64_t z = 0; z < info.dims[2];) {
-            const std::uint64_t n = std::min(perSlab, info.dims[2] - z);
-            slab.resize(n * sliceBytes);
-            source->readSlices(n, slab);
-            w.value(kSlab);
-            w.value(n);
-            w.bytes(slab.data(), slab.size());
-            z += n;
-        }
-        ::_exit(0);
-    } catch (const FormatError& e) {
-        // what() is "FILE: FIELD: why"; only the why crosses, bounded (never copied whole).
-        const char* what = e.what();
-        const std::size_t prefix = e.file().size() + e.field().size() + 4;
-        const std::size_t skip = ::strnlen(what, prefix);
-        w.value(kError);
-        w.text(e.field());
-        w.text(std::string(what + skip, ::strnlen(what + skip, kMaxErrorText + 1)));
-    } catch (const std::bad_alloc&) {
-        w.value(kError);
-        w.text("file");
-        w.text("out of memory under the parser's " + std::to_string(addressSpaceBytes >> 20) +
-               " MiB address-space limit (a damaged or hostile file?)");
-    } catch (const std::exception& e) {
-        w.value(kError);
-        w.text("file");
-        w.text(std::string("OpenVDB cannot read it: ") +
-               std::string(e.what(), ::strnlen(e.what(), kMaxErrorText)));
-    }
-    ::_exit(2);
-}
-
-/// The parent's side: the VolumeSource ingest reads, fed by the child.
-class SandboxedVdb final : public VolumeSource {
-  public:
-    SandboxedVdb(const std::string& path, const std::string& gridName) : mPath(path) {
-        mLimitText = std::to_string(gAddressSpaceBytes.load() >> 20) + " MiB, " +
-                     std::to_string(gParseSeconds.load()) + " s to parse";
-        int fds[2];
-        if (::pipe2(fds, O_CLOEXEC) != 0)
-            throw FormatError(path, "file",
-                              std::string("cannot create a pipe: ") + std::strerror(errno));
-        const std::uint64_t as = gAddressSpaceBytes.load();
-        const std::uint32_t parse = gParseSeconds.load(), cpu = gCpuSeconds.load();
-        mPid = ::fork();
-        if (mPid < 0) {
-            ::close(fds[0]);
-            ::close(fds[1]);
-            throw FormatError(path, "file",
-                              std::string("cannot fork the parser: ") + std::strerror(errno));
-        }
-        if (mPid == 0) {
-            ::close(fds[0]);
-            childMain(fds[1], path, gridName, as, parse, cpu);
-        }
-        ::close(fds[1]);
-        mFd = fds[0];
-        readInfo();
-    }
-    ~SandboxedVdb() override {
-        if (mFd >= 0) ::close(mFd);
-        reap(true);
-    }
-    const VolumeInfo& info() const override { return mInfo; }
-
-  private:
-    void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
-        const std::uint64_t sliceBytes = mInfo.sliceBytes();
-        std::uint64_t done = 0;
-        while (done < count) {
-            if (mPendingSlices == 0) nextSlab();
-            const std::uint64_t n = std::min(count - done, mPendingSlices);
-            read(out.data() + done * sliceBytes, n * sliceBytes);
-            mPendingSlices -= n;
-            done += n;
-        }
-    }
-
-    void readInfo() {
-        expectTag(kInfo);
-        for (int a = 0; a < 3; ++a)
-            mInfo.dims[a] = value<std::uint64_t>();
-        const auto type = value<std::uint8_t>();
-        if (type != std::uint8_t(VoxelType::F32)) fail("the parser sent an unknown voxel type");
-        mInfo.type = VoxelType::F32;
-        for (int a = 0; a < 3; ++a)
-            mInfo.spacingMm[a] = value<double>();
-        for (int a = 0; a < 3; ++a)
-            mInfo.originMm[a] = value<double>();
-        mInfo.background = value<double>();
-        mInfo.valueScale = value<double>();
-        mInfo.valueOffset = value<double>();
-        mInfo.description = text();
-        validateVolumeInfo(mInfo, mPath);
-    }
-
-    void nextSlab() {
-        expectTag(kSlab);
-        const auto n = value<std::uint64_t>();
-        if (n == 0 || n > mInfo.dims[2] - nextSlice())
-            fail("the parser sent a slab of " + std::to_string(n) + " slices");
-        mPendingSlices = n;
-    }
-
-    /// Reads the next tag; an 'E' from the child becomes its FormatError.
-    void expectTag(char want) {
-        const char tag = value<char>();
-        if (tag == want) return;
-        if (tag == kError) {
-            const std::string field = text(), why = text();
-            reap(false);
-            throw FormatError(mPath, field.empty() ? "file" : field,
-                              why + " [sandboxed parser: " + mLimitText + "]");
-        }
-        fail("the parser sent an unexpected message");
-    }
-
-    template <class T> T value() {
-        T v{};
-        read(&v, sizeof v);
-        return v;
-    }
-    std::string text() {
-        const auto n = value<std::uint32_t>();
-        if (n > kMaxDescriptionText + 3) fail("the parser sent a text too long");
-        std::string s(n, '\0');
-        read(s.data(), n);
-        return s;
-    }
-
-    void read(void* data, std::size_t n) {
-        auto* p = static_cast<char*>(data);
-        while (n > 0) {
-            const ssize_t r = ::read(mFd, p, n);
-            if (r < 0 && errno == EINTR) continue;
-            if (r <= 0) fail(childEnd());
-            p += r;
-            n -= std::size_t(r);
-        }
-    }
-
-    /// Why the stream ended early: how the child ended (waited for).
-    std::string childEnd() {
-        const int status = reap(false);
-        if (WIFSIGNALED(status)) {
-            const int sig = WTERMSIG(status);
-            if (sig == SIGALRM)
-                return "the parser took longer than its time limit (" + mLimitText + ")";
-            if (sig == SIGXCPU) return "the parser used more than its CPU-time limit";
-            if (sig == SIGKILL) return "the parser was killed (SIGKILL; out of memory?)";
-            return std::string("the parser crashed: ") + ::strsignal(sig) + " (limits " +
-                   mLimitText + ")";
-        }
-        if (WIFEXITED(status))
-            return "the parser ended early with status " + std::to_string(WEXITSTATUS(status));
-        return "the parser ended early";
-    }
-
-    [[noreturn]] void fail(const std::string& why) {
-        throw FormatError(mPath, "file", "sandboxed OpenVDB parser: " + clip(why));
-    }
-
-    /// Waits for the child (killing it first when `kill`); its wait status, once.
-    int reap(bool kill) {
-        if (mPid <= 0) return mStatus;
-        if (kill) ::kill(mPid, SIGKILL);
-        while (::waitpid(mPid, &mStatus, 0) < 0 && errno == EINTR) {
-        }
-        mPid = -1;
-        return mStatus;
-    }
-
-    std::string mPath, mLimitText;
-    VolumeInfo mInfo;
-    pid_t mPid = -1;
-    int mFd = -1, mStatus = 0;
-    std::uint64_t mPendingSlices = 0;
-};
-
 } // namespace
 
 std::unique_ptr<VolumeSource> openVdb(const std::string& path, const std::string& gridName) {
-    return std::make_unique<SandboxedVdb>(path, gridName);
-}
-
-void setVdbSandboxLimits(const VdbSandboxLimits& limits) {
-    gAddressSpaceBytes = limits.addressSpaceBytes;
-    gParseSeconds = limits.parseSeconds;
-    gCpuSeconds = limits.cpuSeconds;
-}
-
-VdbSandboxLimits vdbSandboxLimits() {
-    return {gAddressSpaceBytes.load(), gParseSeconds.load(), gCpuSeconds.load()};
+    return detail::openSandboxed(
+        {path, "OpenVDB", "to parse"}, parserSandboxLimits(),
+        [path, gridName](const detail::ReadingFile&) { return openInProcess(path, gridName); });
 }
 
 } // namespace bc::brickstore

@@ -261,6 +261,21 @@ TEST(HostileInput, DicomSliceCutShortFails) {
     EXPECT_TRUE(contains(r.out.text, "truncated")) << r.out.text;
 }
 
+// Issue 16: a slice cut inside its file meta group makes Debian's GDCM assert (abort); GDCM
+// runs in the sandboxed child, so ingest fails with a short error naming that file.
+TEST(HostileInput, DicomSliceThatMakesGdcmAssertFailsNamingIt) {
+    if (!bc::test::haveData(kPancreas)) return bc::test::missingData(kPancreas);
+    bc::test::TempDir dir;
+    Bytes slice = pancreasSlice();
+    const std::vector<std::uint8_t> implementationClassUid = {0x02, 0x00, 0x12, 0x00, 'U', 'I'};
+    const std::size_t at = find(slice, implementationClassUid, slice.size());
+    ASSERT_NE(at, std::string::npos);
+    slice.resize(at + 8 + (slice[at + 6] | slice[at + 7] << 8));
+    auto r = ingestLimited(seriesWith(dir, kSlice, slice) + " -o " + dir.file("out.bcs"));
+    expectFastNamedFailure(r, kSlice, "file", dir);
+    EXPECT_TRUE(contains(r.out.text, "DICOM parser aborted")) << r.out.text;
+}
+
 /// Starts `program ARGS...` as a child; returns its pid (-1 when it cannot).
 pid_t spawn(const std::string& program, const std::vector<std::string>& args) {
     std::vector<std::string> all = {program};

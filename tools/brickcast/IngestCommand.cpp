@@ -24,8 +24,8 @@ struct IngestOptions {
     unsigned threads = 0;
     int zstdLevel = 3;
     std::uint64_t memoryBudgetMb = 0;
-    std::uint64_t vdbMemoryMb = brickstore::VdbSandboxLimits{}.addressSpaceBytes >> 20;
-    std::uint32_t vdbParseS = brickstore::VdbSandboxLimits{}.parseSeconds;
+    std::uint64_t parserMemoryMb = brickstore::ParserSandboxLimits{}.addressSpaceBytes >> 20;
+    std::uint32_t parserTimeS = brickstore::ParserSandboxLimits{}.parseSeconds;
     bool quiet = false;
 };
 
@@ -109,10 +109,10 @@ brickstore::SourceSpec toSpec(const IngestOptions& o) {
 }
 
 std::unique_ptr<brickstore::VolumeSource> openInput(const IngestOptions& o) {
-    brickstore::VdbSandboxLimits limits;
-    limits.addressSpaceBytes = o.vdbMemoryMb << 20;
-    limits.parseSeconds = o.vdbParseS;
-    brickstore::setVdbSandboxLimits(limits);
+    brickstore::ParserSandboxLimits limits;
+    limits.addressSpaceBytes = o.parserMemoryMb << 20;
+    limits.parseSeconds = o.parserTimeS;
+    brickstore::setParserSandboxLimits(limits);
     try {
         return brickstore::openSource(toSpec(o));
     } catch (const std::bad_alloc&) {
@@ -208,12 +208,14 @@ void addIngestCommand(CLI::App& app) {
     cmd->add_option("--leaf", o->leaf, "Leaf block edge of the per-brick min/max summaries")
         ->capture_default_str();
     cmd->add_option("--grid", o->grid, "OpenVDB grid name (default: the first scalar grid)");
-    cmd->add_option("--vdb-memory-mb", o->vdbMemoryMb,
-                    "Address-space limit of the process that parses an OpenVDB file (MiB)")
+    cmd->add_option("--parser-memory-mb,--vdb-memory-mb", o->parserMemoryMb,
+                    "Address-space limit of the sandboxed process that parses an OpenVDB file "
+                    "or a DICOM series (MiB)")
         ->capture_default_str()
         ->check(CLI::Range(std::uint64_t(64), std::uint64_t(1) << 30));
-    cmd->add_option("--vdb-parse-s", o->vdbParseS,
-                    "Seconds the OpenVDB parser may take before it is killed")
+    cmd->add_option("--parser-time-s,--vdb-parse-s", o->parserTimeS,
+                    "Seconds the sandboxed parser may take (OpenVDB: to parse the file; DICOM: "
+                    "per file read) before it is killed")
         ->capture_default_str()
         ->check(CLI::Range(1u, 86400u));
     cmd->add_option("--mosaic", o->mosaic, "I,J,K: tile the input I x J x K times");

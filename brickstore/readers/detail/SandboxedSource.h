@@ -1,0 +1,67 @@
+#pragma once
+// A reader run in a forked child process under resource limits, for parsers that may hang,
+// exhaust memory or abort on a hostile file (OpenVDB; GDCM, which Debian builds with
+// assertions). The child lowers RLIMIT_AS and RLIMIT_CPU, arms an alarm while it parses, opens
+// the volume with the caller's opener and streams its description and then slabs of slices
+// over a pipe; the parent side is the VolumeSource ingest sees. Whatever ends the child early
+// (an exception, an abort or crash, a limit) becomes one FormatError naming the file, under
+// 1 kB.
+//
+// Why fork is safe here: the child only runs code that the parent never started (the parser's
+// library is initialized in the child), glibc resets its malloc locks across fork, and the
+// readers are opened before ingest starts its workers (a mosaic reopens its input while they
+// run: its child still needs only malloc and the parser's own state); the child leaves with
+// _exit, running no parent destructors.
+#include "brickstore/Error.h"
+#include "brickstore/Readers.h"
+#include "brickstore/VolumeSource.h"
+
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace bc::brickstore::detail {
+
+/// Called by the parser, in the child, before it reads a file (a header, a slice's pixels):
+/// it restarts the parse alarm, and the parent names that file if the child then dies.
+using ReadingFile = std::function<void(const std::string& path)>;
+
+/// Opens the volume in the child; `reading` stays valid for the source's whole life there.
+using SandboxedOpener = std::function<std::unique_ptr<VolumeSource>(const ReadingFile& reading)>;
+
+/// How the sandbox names the parser in its errors.
+struct SandboxedParser {
+    std::string path;       ///< the file or folder the errors name when no file was reported
+    std::string parserName; ///< "OpenVDB", "DICOM"
+    std::string alarmWords; ///< what parseSeconds bounds, as errors say it: "to parse"
+};
+
+/// Forks a child that runs `open` under `limits` and returns the parent's side, with the
+/// volume's description already received. A FormatError thrown in the child keeps its file
+/// and field; any other end names `parser.path` (or the file last reported through
+/// ReadingFile) with field "file". The alarm runs from the fork until `open` returns and
+/// again during each ReadingFile call's file, never while the child waits on the pipe.
+/// Call it before starting threads of your own where you can (fork copies only the calling
+/// thread; see the header comment).
+/// @throw FormatError when the child cannot be started or ends before the description.
+std::unique_ptr<VolumeSource> openSandboxed(const SandboxedParser& parser,
+                                            const ParserSandboxLimits& limits,
+                                            SandboxedOpener open);
+
+/// How a sandboxed parser's child ended, for callers (the fuzz harness) that must tell a
+/// contained abort from a finding. Thrown as the FormatError of a child that ended early.
+class ParserDied : public FormatError {
+  public:
+    ParserDied(const std::string& file, const std::string& why, int signal, int exitStatus)
+        : FormatError(file, "file", why), mSignal(signal), mExitStatus(exitStatus) {}
+    /// The signal that ended the child (SIGABRT for a failed assertion), 0 when it exited.
+    int signal() const { return mSignal; }
+    /// Its exit status when it exited (a sanitizer's report exits with 1), else -1.
+    int exitStatus() const { return mExitStatus; }
+
+  private:
+    int mSignal;
+    int mExitStatus;
+};
+
+} // namespace bc::brickstore::detail
