@@ -5,10 +5,9 @@
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/RenderService.h"
+#include "server/detail/Asio.h"
 #include "server/detail/MetricsEndpoint.h"
 #include "server/detail/Session.h"
-
-#include <asio.hpp>
 
 #include <csignal>
 #include <map>

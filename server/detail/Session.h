@@ -10,7 +10,7 @@
 #include "server/DaemonConfig.h"
 #include "server/RenderService.h"
 
-#include <asio.hpp>
+#include "server/detail/Asio.h"
 
 #include <array>
 #include <cstdint>
