@@ -98,10 +98,11 @@ struct Daemon::Impl {
         return next == config;
     }
 
-    std::uint32_t capabilities() {
+    /// What every Hello announces; the GPU bit is added per Hello (Session::onHello) while
+    /// nothing is known against the GPU renderers.
+    std::uint32_t capabilities() const {
         std::uint32_t caps = protocol::kCapCpuRenderer | protocol::kCapContinuous;
         if (!config.token.empty()) caps |= protocol::kCapAuthRequired;
-        if (render.gpuAvailable()) caps |= protocol::kCapGpuRenderer;
         return caps;
     }
 

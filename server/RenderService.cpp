@@ -312,6 +312,7 @@ struct RenderService::Counters {
     std::map<std::string, double> frameUploads, prefetchUploads, prefetchBytes;
     std::map<std::string, double> deferred, requested; ///< ray-guided residency, per volume
     double prefetchMs = 0;
+    double gpuContext = 0; ///< 1 once the render thread has made its GL context
 };
 
 namespace {
@@ -370,10 +371,28 @@ std::shared_ptr<RenderSlot> RenderService::open(RenderSlot::Deliver deliver,
     return slot;
 }
 
-bool RenderService::gpuAvailable() {
-    std::unique_lock lock(mMutex);
-    mStartedCv.wait(lock, [&] { return mStarted; });
-    return mGpu;
+std::optional<std::string> RenderService::gpuUnavailable() {
+    std::lock_guard lock(mMutex);
+    return mGpuUnavailable;
+}
+
+void RenderService::makeContext() {
+    if (mRenderers->context) return;
+    if (auto why = gpuUnavailable()) throw std::runtime_error(*why);
+    try {
+        mRenderers->context = std::make_unique<render::EglContext>();
+    } catch (const std::exception& e) {
+        const std::string why = std::string("this server has no OpenGL 4.5 context: ") + e.what();
+        mLog.error("render: no GPU renderer (GPU frames are refused, the CPU renderers serve): " +
+                   std::string(e.what()));
+        std::lock_guard lock(mMutex);
+        mGpuUnavailable = why;
+        throw std::runtime_error(why);
+    }
+    mLog.info("render: " + mRenderers->context->renderer() + " (" +
+              mRenderers->context->platform() + "), made for the first GPU frame");
+    std::lock_guard lock(mMutex);
+    mCounters->gpuContext = 1;
 }
 
 void RenderService::collect(MetricSet& m) {
@@ -440,6 +459,10 @@ void RenderService::collect(MetricSet& m) {
             double(cs.residentBytes));
     m.gauge("classifications", "Classifications held", double(cs.entries));
     m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn", double(waiting));
+    m.gauge("gpu_context",
+            "The render thread's OpenGL context: 0 not made (no GPU frame asked for yet), 1 "
+            "made, -1 unavailable (GPU frames are refused)",
+            mGpuUnavailable ? -1.0 : c.gpuContext);
     std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
     for (const auto& [name, live] : c.poolLive)
         pools[name] += live;
@@ -563,19 +586,6 @@ void RenderService::notify() {
 
 void RenderService::run() {
     mRenderers = std::make_unique<Renderers>();
-    try {
-        mRenderers->context = std::make_unique<render::EglContext>();
-        mLog.info("render: " + mRenderers->context->renderer() + " (" +
-                  mRenderers->context->platform() + ")");
-    } catch (const std::exception& e) {
-        mLog.error(std::string("render: no GPU renderer: ") + e.what());
-    }
-    {
-        std::lock_guard lock(mMutex);
-        mStarted = true;
-        mGpu = mRenderers->context != nullptr;
-    }
-    mStartedCv.notify_all();
     std::unique_lock lock(mMutex);
     while (!mStop) {
         // Sessions gone go first (their frames in progress with them), before any wait.
@@ -723,8 +733,7 @@ void RenderService::prepare(FrameDrawing& d) {
     const std::string_view name = rendererName(o.renderer);
     d.kind = render::RendererRegistry::builtin().find(name);
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
-    if (d.kind->needsGl && !mRenderers->context)
-        throw std::runtime_error("this server has no OpenGL 4.5 context");
+    if (d.kind->needsGl) makeContext();
 
     // Cost: an upper bound of the samples (every ray as long as the level's diagonal), or the
     // voxels a splatter projects.

@@ -133,8 +133,10 @@ struct FrameDrawing;
 
 class RenderService {
   public:
-    /// Starts the render thread (it creates the GL context; without one, GPU requests fail
-    /// with RenderFailed and the CPU renderers still serve).
+    /// Starts the render thread. It makes its GL context when the first frame of a GPU
+    /// renderer asks for one, never before (a server that draws on the CPU only never loads
+    /// the driver); when it cannot, that frame and every later GPU frame fail with RenderFailed
+    /// saying why, and the CPU renderers still serve.
     RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log);
     /// Stops and joins the thread (within about one slice); frames not yet drawn are not drawn.
     ~RenderService();
@@ -144,8 +146,9 @@ class RenderService {
     /// A slot for a new session.
     std::shared_ptr<RenderSlot> open(RenderSlot::Deliver deliver, std::uint32_t queueFrames,
                                      std::uint64_t queueBytes);
-    /// Whether the GL context came up (waits for the thread's start-up).
-    bool gpuAvailable();
+    /// Why the GPU renderers cannot serve (the GL context could not be made), or nullopt when
+    /// nothing is known against them (the context is made, or not asked for yet). Thread-safe.
+    std::optional<std::string> gpuUnavailable();
     /// Frames (per renderer), errors, time and bytes; per-frame histograms of latency
     /// (oldest change answered -> encoded), render, upload and encode ms, working set and
     /// encoded bytes; the host -> GPU tier per volume (hits, uploads, evictions, bytes,
@@ -163,6 +166,9 @@ class RenderService {
         double bricksDeferred = 0, bricksRequested = 0; ///< ray-guided residency
     };
     void run();
+    /// Makes the GL context on the first call (render thread); later calls return at once.
+    /// @throw std::runtime_error saying why when it cannot be made (then and every time after).
+    void makeContext();
     void notify();
     /// The next slot due, or nullptr after waiting (not at all when `mayWait` is false) for one.
     std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock, bool mayWait);
@@ -191,8 +197,8 @@ class RenderService {
     std::condition_variable mWake;
     std::vector<std::weak_ptr<RenderSlot>> mSlots;
     std::size_t mNextSlot = 0;
-    bool mStop = false, mStarted = false, mGpu = false;
-    std::condition_variable mStartedCv;
+    bool mStop = false;
+    std::optional<std::string> mGpuUnavailable; ///< set once by makeContext()
     std::unique_ptr<Renderers> mRenderers; // render thread only
     /// Measured speed of each renderer in cost units (upper bounds of samples) per millisecond,
     /// from the whole frames it drew: whether a frame is sliced (render thread only).

@@ -213,6 +213,7 @@ void Session::onHello(const protocol::Hello& hello, std::uint32_t request) {
     }
     protocol::Hello reply;
     reply.capabilities = mContext.capabilities;
+    if (!mContext.render.gpuUnavailable()) reply.capabilities |= protocol::kCapGpuRenderer;
     reply.codecs = {protocol::Codec::Raw, protocol::Codec::Zstd, protocol::Codec::ZstdDelta,
                     protocol::Codec::Jpeg};
     reply.software = "brickcastd 0.1";
@@ -285,11 +286,14 @@ void Session::onSetTransferFunction(const protocol::SetTransferFunction& m, std:
 }
 
 void Session::onSetRenderOptions(const protocol::SetRenderOptions& m, std::uint32_t request) {
-    if (m.options.renderer == protocol::Renderer::GpuRaycaster &&
-        !(mContext.capabilities & protocol::kCapGpuRenderer)) {
-        sendError(ErrorCode::OutOfRange, false, std::uint8_t(MessageType::SetRenderOptions),
-                  request, "SetRenderOptions.renderer: this server has no GPU renderer");
-        return;
+    const bool gpu = m.options.renderer == protocol::Renderer::GpuRaycaster ||
+                     m.options.renderer == protocol::Renderer::GpuSplatter;
+    if (gpu) {
+        if (const auto why = mContext.render.gpuUnavailable()) {
+            sendError(ErrorCode::OutOfRange, false, std::uint8_t(MessageType::SetRenderOptions),
+                      request, "SetRenderOptions.renderer: " + *why);
+            return;
+        }
     }
     toRenderOptions(m.options, false).validate();
     mOptions = m.options;

@@ -33,7 +33,7 @@ struct SessionContext {
     Catalog& catalog;
     RenderService& render;
     Log& log;
-    std::uint32_t capabilities = 0;
+    std::uint32_t capabilities = 0; ///< but the GPU bit (RenderService::gpuUnavailable)
     std::function<void(std::uint64_t id)> onClosed; ///< on the network thread
     /// The whole server's metrics (what GET /metrics serves), on the network thread.
     std::function<void(MetricSet&)> collect;
