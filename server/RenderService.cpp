@@ -176,6 +176,8 @@ using RendererMap = std::map<std::string, std::unique_ptr<render::Renderer>, std
 /// What the sessions of one volume share (render thread only): the bricks resident on the GPU
 /// and the renderers that hold nothing of one viewer (RendererKind::sharedPerVolume).
 struct VolumeRenderers {
+    /// Held until pruned: the map is keyed by its address, which must not be reused meanwhile.
+    std::shared_ptr<Volume> volume;
     std::shared_ptr<render::BrickPool> pool;
     std::uint64_t poolBudgetBytes = 0;
     RendererMap shared;
@@ -248,7 +250,7 @@ struct RenderService::Renderers {
             return true;
         });
         std::erase_if(volumes, [&](const auto& e) {
-            if (e.first->sessions.load() != 0) return false;
+            if (e.second.volume->sessions.load() != 0) return false;
             for (const auto& [key, s] : sessions) // a frame in progress keeps its renderers
                 if (s.drawing && s.drawing->job.state.volume.get() == e.first) return false;
             if (e.second.pool) retired(e.first->name);
@@ -774,6 +776,7 @@ render::Renderer& RenderService::rendererFor(const std::shared_ptr<RenderSlot>& 
                                              FrameDrawing& d) {
     const auto& s = d.job.state;
     auto& v = mRenderers->volumes[s.volume.get()];
+    v.volume = s.volume;
     auto& mine = mRenderers->of(slot);
     RendererMap& owner = d.kind->sharedPerVolume ? v.shared : mine.own;
     auto it = owner.find(d.kind->name);
