@@ -24,7 +24,10 @@ struct Daemon::Impl {
                                      .maxFrameSamples = config.maxFrameSamples,
                                      .maxUnslicedSamples = config.maxUnslicedSamples,
                                      .sliceMs = config.sliceMs},
-                 catalog, log),
+                 catalog, log,
+                 [this](std::shared_ptr<Volume> v) {
+                     asio::post(io, [this, v = std::move(v)] { volumeFailed(v); });
+                 }),
           acceptor(io), signals(io),
           drainTimer(io), context{config, catalog, render, log, capabilities(), {}, {}, 0} {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };
@@ -62,7 +65,8 @@ struct Daemon::Impl {
     }
 
     /// Re-reads the config file and applies its volumes and presets; a config that fails to
-    /// load is logged and the catalog kept. Network thread.
+    /// load is logged and the catalog kept. Sessions follow (moved or sent an Error). Network
+    /// thread.
     void reload() {
         if (draining) return;
         if (config.file.empty()) {
@@ -80,10 +84,15 @@ struct Daemon::Impl {
         if (!onlyCatalogDiffers(next))
             log.info("reload: settings outside [[volume]] and [[preset]] changed in " +
                      config.file + "; they apply at the next restart");
-        const auto gone = catalog.reload(next, log);
-        if (gone.empty()) return;
+        const CatalogUpdate update = catalog.reload(next, log);
         for (auto& [id, s] : std::map(sessions))
-            s->leaveIfGone(gone);
+            s->followReload(update);
+    }
+
+    /// A volume was taken out of service: its sessions are told. Network thread.
+    void volumeFailed(const std::shared_ptr<Volume>& volume) {
+        for (auto& [id, s] : std::map(sessions))
+            s->volumeFailed(volume);
     }
 
     /// Whether `next` equals the running config but for volumes and presets (and the

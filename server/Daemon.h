@@ -3,7 +3,10 @@
 // sessions and one render thread for all frames. stop() (or SIGTERM/SIGINT when
 // handleSignals) drains: no new clients, every session gets Bye, run() returns once they are
 // written or the write deadline passes. reload() (or SIGHUP) re-reads the config file and
-// applies its catalog (Catalog::reload); sessions on removed or reopened volumes get an Error.
+// applies its catalog (Catalog::reload): sessions on a volume reopened with the same shape move
+// to the new store unasked (VolumeOpened, request id 0), sessions on removed volumes or ones
+// reopened with another shape get UnknownVolume. A volume whose store changed on disk while
+// served is out of service until a reload reopens it; its sessions get RenderFailed once.
 #include "server/DaemonConfig.h"
 
 #include <cstdint>

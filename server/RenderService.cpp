@@ -1,5 +1,6 @@
 #include "server/RenderService.h"
 
+#include "brickstore/Error.h"
 #include "render/BrickPlan.h"
 #include "render/BrickPool.h"
 #include "render/Classification.h"
@@ -43,6 +44,21 @@ void RenderSlot::setVolume(std::shared_ptr<Volume> volume) {
         mState.camera.reset(); // a camera for the old volume means nothing for the new one
         mDirty = true;
         mResetDelta = true;
+    }
+    changed();
+}
+
+void RenderSlot::moveTo(std::shared_ptr<Volume> volume,
+                        std::shared_ptr<const render::TransferFunction> tf,
+                        const protocol::SetTransferFunction& message) {
+    {
+        std::lock_guard lock(mMutex);
+        markChanged();
+        mState.volume = std::move(volume); // the camera stays: the volume has the same shape
+        mState.tf = std::move(tf);
+        mState.tfMessage = message;
+        mDirty = true;
+        mResetDelta = true; // the next delta frame is a keyframe
     }
     changed();
 }
@@ -349,8 +365,9 @@ const char* rendererName(protocol::Renderer r) {
 
 } // namespace
 
-RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log)
-    : mConfig(config), mCatalog(catalog), mLog(log),
+RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log,
+                             VolumeFailed volumeFailed)
+    : mConfig(config), mCatalog(catalog), mLog(log), mVolumeFailed(std::move(volumeFailed)),
       mClassifications(std::make_unique<render::ClassificationCache>(
           render::ClassificationCacheConfig{config.classificationBudgetBytes})),
       mCounters(std::make_unique<Counters>()), mThread([this] { run(); }) {}
@@ -543,6 +560,7 @@ void RenderService::runPrefetch() {
             mCounters->poolLive[job.volume->name] = pool.stats();
         } catch (const std::exception& e) { // a guess that failed costs nothing but the log line
             mLog.error("prefetch: " + job.volume->name + ": " + e.what());
+            checkStore(job.volume, e);
         }
     }
     std::lock_guard lock(mMutex);
@@ -579,6 +597,14 @@ void RenderService::retirePool(const std::string& volume) {
         c.poolRetired[volume] += it->second;
         c.poolLive.erase(it);
     }
+}
+
+void RenderService::checkStore(const std::shared_ptr<Volume>& volume, const std::exception& e) {
+    const bool storeError = dynamic_cast<const brickstore::StoreCorrupt*>(&e) != nullptr ||
+                            dynamic_cast<const brickstore::StoreIoError*>(&e) != nullptr;
+    // A bad brick in an unchanged file is that brick's error only: the rest keeps serving.
+    if (!storeError || volume->failure() || !volume->store->fileChange()) return;
+    if (mCatalog.markFailed(*volume, e.what(), mLog) && mVolumeFailed) mVolumeFailed(volume);
 }
 
 void RenderService::notify() {
@@ -656,6 +682,11 @@ struct FrameRefused : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
+/// A frame of a volume out of service: answered RenderFailed at once, not logged again.
+struct VolumeOutOfService : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
 /// Cost units per millisecond assumed of a renderer before it has drawn anything: low, so a
 /// first frame that turns out heavy is sliced rather than drawn whole.
 constexpr double kFirstCostPerMs = 20000.0;
@@ -728,6 +759,8 @@ void RenderService::prepare(FrameDrawing& d) {
     const auto& s = d.job.state;
     const auto& o = s.options;
     d.start = Clock::now();
+    if (const auto why = s.volume->failure())
+        throw VolumeOutOfService("volume '" + s.volume->name + "' is out of service: " + *why);
     d.options = toRenderOptions(o, !d.job.refined);
     d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
@@ -891,7 +924,10 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
                               protocol::fitText(e.what(), protocol::kMaxErrorMessageBytes)};
         bytes.clear();
         protocol::encode(error, requestId, bytes);
-        mLog.error("render: " + volume + ": " + e.what());
+        if (!dynamic_cast<const VolumeOutOfService*>(&e)) {
+            mLog.error("render: " + volume + ": " + e.what());
+            checkStore(d.job.state.volume, e);
+        }
         std::lock_guard lock(mMutex);
         (refused ? mCounters->refused : mCounters->errors) += 1;
     }
