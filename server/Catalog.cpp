@@ -186,12 +186,6 @@ void Catalog::apply(const CatalogUpdate& update, Log& log) {
     rebalance();
 }
 
-CatalogUpdate Catalog::reload(const DaemonConfig& config, Log& log) {
-    CatalogUpdate update = prepareReload(config, log);
-    apply(update, log);
-    return update;
-}
-
 bool Catalog::markFailed(Volume& volume, const std::string& why, Log& log) {
     {
         std::lock_guard lock(volume.mFailureMutex);

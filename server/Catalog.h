@@ -3,9 +3,9 @@
 // start-up: brick stores as they are, generated entries ingested once into the store folder
 // and reused after. An entry that fails to open stops the start (ConfigError naming it),
 // except a store marked optional that is missing: logged and left out. A reload (SIGHUP)
-// applies a new config: volumes added, removed, reopened when their store file changed. A
-// volume whose store changes on disk while served is taken out of service (markFailed) until
-// a reload.
+// applies a new config: volumes added, removed, reopened when their store file changed, in two
+// halves: the stores are opened off the network thread, then swapped in on it. A volume whose
+// store changes on disk while served is taken out of service (markFailed) until a reload.
 // Sessions hold a VolumeLease while they view a volume: the host budget is split among the
 // volumes in proportion to their sessions, so every session gets a fair share.
 #include "brickstore/BrickCache.h"
@@ -51,7 +51,8 @@ struct Volume {
 /// name, voxel type, dims and spacing, so its camera and transfer function still fit.
 bool sameShape(const Volume& from, const Volume& to);
 
-/// A reload's volumes, opened (Catalog::prepareReload), then swapped in (Catalog::apply).
+/// A reload's volumes, opened off the network thread (Catalog::prepareReload) and swapped in on
+/// it (Catalog::apply).
 struct CatalogUpdate {
     std::vector<std::shared_ptr<Volume>> volumes; ///< in config order
     std::vector<std::shared_ptr<Volume>> removed; ///< no longer served (or failed to reopen)
@@ -92,15 +93,14 @@ class Catalog {
     /// restart): opens added volumes and reopens those whose entry or store file changed or
     /// that are out of service (a new store instance); logs one line per volume added,
     /// reopened, removed or left out. A volume that fails to open is left out (logged); the others
-    /// still apply. Touches nothing served. One reload at a time.
+    /// still apply. Touches nothing served: call it off the network thread (opening a store
+    /// reads its index; a generated one may be ingested). One reload at a time.
     CatalogUpdate prepareReload(const DaemonConfig& config, Log& log) const;
     /// The second half: serves `update`'s volumes and presets from now on; logs one line
     /// with the counts. Sessions on update.removed and on the old side
     /// of update.reopened must be told (moved or sent an Error). Network thread (the one that
     /// leases).
     void apply(const CatalogUpdate& update, Log& log);
-    /// prepareReload, then apply, on the calling thread.
-    CatalogUpdate reload(const DaemonConfig& config, Log& log);
 
     /// Takes `volume` out of service: its store changed on disk while served (`why` names the
     /// store and the change). OpenVolume of it is refused and ListVolumes leaves it out until

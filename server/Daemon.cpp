@@ -11,6 +11,8 @@
 
 #include <csignal>
 #include <map>
+#include <thread>
+#include <utility>
 
 namespace bc::server {
 
@@ -64,9 +66,13 @@ struct Daemon::Impl {
         });
     }
 
-    /// Re-reads the config file and applies its volumes and presets; a config that fails to
-    /// load is logged and the catalog kept. Sessions follow (moved or sent an Error). Network
-    /// thread.
+    ~Impl() {
+        if (reloader.joinable()) reloader.join(); // before io goes: it posts its result there
+    }
+
+    /// Starts a reload: the config file is re-read and its stores opened on a worker thread,
+    /// so a slow store stalls no client; the result is applied here (applyReload). A reload
+    /// asked for while one runs follows it. Network thread.
     void reload() {
         if (draining) return;
         if (config.file.empty()) {
@@ -74,19 +80,46 @@ struct Daemon::Impl {
                       "); catalog unchanged");
             return;
         }
-        DaemonConfig next;
-        try {
-            next = DaemonConfig::load(config.file);
-        } catch (const std::exception& e) {
-            log.error(std::string("reload: ") + e.what() + "; the old catalog is kept");
+        if (reloading) {
+            reloadAgain = true;
             return;
         }
-        if (!onlyCatalogDiffers(next))
-            log.info("reload: settings outside [[volume]] and [[preset]] changed in " +
-                     config.file + "; they apply at the next restart");
-        const CatalogUpdate update = catalog.reload(next, log);
-        for (auto& [id, s] : std::map(sessions))
-            s->followReload(update);
+        reloading = true;
+        if (reloader.joinable()) reloader.join(); // it has posted its result: done
+        reloader = std::thread([this] {
+            auto result = std::make_shared<PreparedReload>();
+            try {
+                result->config = DaemonConfig::load(config.file);
+                result->update = catalog.prepareReload(result->config, log);
+            } catch (const std::exception& e) {
+                result->error = e.what();
+            }
+            asio::post(io, [this, result] { applyReload(*result); });
+        });
+    }
+
+    /// What the reload worker hands the network thread.
+    struct PreparedReload {
+        DaemonConfig config;
+        CatalogUpdate update;
+        std::string error; ///< the config failed to load: nothing changes
+    };
+
+    /// Swaps a prepared reload in and tells the sessions (moved or sent an Error). A config
+    /// that failed to load is logged and the catalog kept. Network thread.
+    void applyReload(const PreparedReload& r) {
+        reloading = false;
+        if (!r.error.empty()) {
+            log.error("reload: " + r.error + "; the old catalog is kept");
+        } else if (!draining) {
+            if (!onlyCatalogDiffers(r.config))
+                log.info("reload: settings outside [[volume]] and [[preset]] changed in " +
+                         config.file + "; they apply at the next restart");
+            catalog.apply(r.update, log);
+            for (auto& [id, s] : std::map(sessions))
+                s->followReload(r.update);
+        }
+        if (std::exchange(reloadAgain, false)) reload();
     }
 
     /// A volume was taken out of service: its sessions are told. Network thread.
@@ -223,7 +256,8 @@ struct Daemon::Impl {
     std::map<std::uint64_t, std::shared_ptr<detail::Session>> sessions;
     std::unique_ptr<detail::MetricsEndpoint> metrics;
     std::uint64_t nextId = 0, accepted = 0, refused = 0;
-    bool draining = false;
+    bool draining = false, reloading = false, reloadAgain = false;
+    std::thread reloader; ///< the last reload's worker (opens stores off this thread)
 };
 
 Daemon::Daemon(DaemonConfig config, Log& log, bool handleSignals)
