@@ -117,7 +117,7 @@ Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config
 }
 
 std::shared_ptr<Volume> Catalog::reopen(const CatalogEntry& entry, const std::string& storeDir,
-                                        const std::string& verb, Log& log) {
+                                        const std::string& verb, Log& log) const {
     if (entry.optional && !entry.store.empty() && !std::filesystem::exists(entry.store)) {
         log.error("catalog reload: " + entry.name + " left out: optional store " + entry.store +
                   " is missing");
@@ -133,10 +133,8 @@ std::shared_ptr<Volume> Catalog::reopen(const CatalogEntry& entry, const std::st
     }
 }
 
-std::vector<std::shared_ptr<Volume>> Catalog::reload(const DaemonConfig& config, Log& log) {
-    std::vector<std::shared_ptr<Volume>> volumes, gone;
-    std::map<std::string, std::shared_ptr<Volume>> byName;
-    std::size_t unchanged = 0;
+CatalogUpdate Catalog::prepareReload(const DaemonConfig& config, Log& log) const {
+    CatalogUpdate update;
     std::map<std::string, std::shared_ptr<Volume>> old;
     {
         std::lock_guard lock(mMutex);
@@ -148,38 +146,71 @@ std::vector<std::shared_ptr<Volume>> Catalog::reload(const DaemonConfig& config,
         if (it == old.end()) {
             volume = reopen(entry, config.storeDir, "added", log);
         } else {
-            const auto change = it->second->store->fileChange();
-            if (it->second->entry == entry && !change) {
+            const auto failure = it->second->failure();
+            const auto change = failure ? std::nullopt : it->second->store->fileChange();
+            if (it->second->entry == entry && !change && !failure) {
                 volume = it->second;
-                ++unchanged;
+                ++update.unchanged;
             } else {
-                const std::string why = change ? "store " + *change : "entry changed";
+                const std::string why = failure  ? "it was out of service"
+                                        : change ? "store " + *change
+                                                 : "entry changed";
                 volume = reopen(entry, config.storeDir, "reopened (" + why + ")", log);
-                gone.push_back(it->second);
+                if (volume)
+                    update.reopened.emplace_back(it->second, volume);
+                else
+                    update.removed.push_back(it->second);
             }
             old.erase(it);
         }
-        if (!volume) continue;
-        byName[entry.name] = volume;
-        volumes.push_back(std::move(volume));
+        if (volume) update.volumes.push_back(std::move(volume));
     }
     for (auto& [name, volume] : old) {
         log.info("catalog reload: " + name + " removed");
-        gone.push_back(std::move(volume));
+        update.removed.push_back(std::move(volume));
     }
-    log.info("catalog reload: " + std::to_string(unchanged) + " volume(s) unchanged, " +
-             std::to_string(volumes.size()) + " served");
-    std::lock_guard lock(mMutex);
-    mVolumes = std::move(volumes);
-    mByName = std::move(byName);
-    mPresets.clear();
     for (const auto& preset : config.presets)
-        mPresets.emplace(preset.name, preset.json);
-    rebalance();
-    return gone;
+        update.presets.emplace(preset.name, preset.json);
+    return update;
 }
 
-std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry, const std::string& storeDir) {
+void Catalog::apply(const CatalogUpdate& update, Log& log) {
+    log.info("catalog reload: " + std::to_string(update.unchanged) + " volume(s) unchanged, " +
+             std::to_string(update.volumes.size()) + " served");
+    std::lock_guard lock(mMutex);
+    mVolumes = update.volumes;
+    mByName.clear();
+    for (const auto& v : mVolumes)
+        mByName[v->name] = v;
+    mPresets = update.presets;
+    rebalance();
+}
+
+bool Catalog::markFailed(Volume& volume, const std::string& why, Log& log) {
+    {
+        std::lock_guard lock(volume.mFailureMutex);
+        if (volume.mFailure) return false;
+        volume.mFailure = why;
+    }
+    log.error("catalog: volume '" + volume.name + "' is out of service: " + why +
+              " (its sessions are told; OpenVolume of it is refused until a reload (SIGHUP) "
+              "reopens it)");
+    return true;
+}
+
+std::optional<std::string> Volume::failure() const {
+    std::lock_guard lock(mFailureMutex);
+    return mFailure;
+}
+
+bool sameShape(const Volume& from, const Volume& to) {
+    const auto &a = from.info, &b = to.info;
+    return a.name == b.name && a.voxelType == b.voxelType && a.dims == b.dims &&
+           a.spacingMm == b.spacingMm;
+}
+
+std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry,
+                                      const std::string& storeDir) const {
     const std::string path = entry.store.empty() ? generatedStore(entry, storeDir) : entry.store;
     auto v = std::make_shared<Volume>();
     v->name = entry.name;
@@ -201,7 +232,7 @@ std::vector<protocol::VolumeInfo> Catalog::list() const {
     std::lock_guard lock(mMutex);
     std::vector<protocol::VolumeInfo> out;
     for (const auto& v : mVolumes)
-        out.push_back(v->info);
+        if (!v->failure()) out.push_back(v->info);
     return out;
 }
 
@@ -249,6 +280,11 @@ std::vector<std::string> Catalog::presetNames() const {
 
 void Catalog::collect(MetricSet& m) const {
     std::lock_guard lock(mMutex);
+    m.gauge("volumes_failed",
+            "Volumes out of service: their store changed on disk while served (a reload "
+            "reopens them)",
+            double(std::count_if(mVolumes.begin(), mVolumes.end(),
+                                 [](const auto& v) { return v->failure().has_value(); })));
     for (const auto& v : mVolumes) {
         const auto c = v->cache->stats();
         const std::vector<std::pair<std::string, std::string>> l{{"volume", v->name}};

@@ -5,13 +5,14 @@
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/RenderService.h"
+#include "server/detail/Asio.h"
 #include "server/detail/MetricsEndpoint.h"
 #include "server/detail/Session.h"
 
-#include <asio.hpp>
-
 #include <csignal>
 #include <map>
+#include <thread>
+#include <utility>
 
 namespace bc::server {
 
@@ -25,7 +26,10 @@ struct Daemon::Impl {
                                      .maxFrameSamples = config.maxFrameSamples,
                                      .maxUnslicedSamples = config.maxUnslicedSamples,
                                      .sliceMs = config.sliceMs},
-                 catalog, log),
+                 catalog, log,
+                 [this](std::shared_ptr<Volume> v) {
+                     asio::post(io, [this, v = std::move(v)] { volumeFailed(v); });
+                 }),
           acceptor(io), signals(io),
           drainTimer(io), context{config, catalog, render, log, capabilities(), {}, {}, 0} {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };
@@ -62,8 +66,13 @@ struct Daemon::Impl {
         });
     }
 
-    /// Re-reads the config file and applies its volumes and presets; a config that fails to
-    /// load is logged and the catalog kept. Network thread.
+    ~Impl() {
+        if (reloader.joinable()) reloader.join(); // before io goes: it posts its result there
+    }
+
+    /// Starts a reload: the config file is re-read and its stores opened on a worker thread,
+    /// so a slow store stalls no client; the result is applied here (applyReload). A reload
+    /// asked for while one runs follows it. Network thread.
     void reload() {
         if (draining) return;
         if (config.file.empty()) {
@@ -71,20 +80,52 @@ struct Daemon::Impl {
                       "); catalog unchanged");
             return;
         }
-        DaemonConfig next;
-        try {
-            next = DaemonConfig::load(config.file);
-        } catch (const std::exception& e) {
-            log.error(std::string("reload: ") + e.what() + "; the old catalog is kept");
+        if (reloading) {
+            reloadAgain = true;
             return;
         }
-        if (!onlyCatalogDiffers(next))
-            log.info("reload: settings outside [[volume]] and [[preset]] changed in " +
-                     config.file + "; they apply at the next restart");
-        const auto gone = catalog.reload(next, log);
-        if (gone.empty()) return;
+        reloading = true;
+        if (reloader.joinable()) reloader.join(); // it has posted its result: done
+        reloader = std::thread([this] {
+            auto result = std::make_shared<PreparedReload>();
+            try {
+                result->config = DaemonConfig::load(config.file);
+                result->update = catalog.prepareReload(result->config, log);
+            } catch (const std::exception& e) {
+                result->error = e.what();
+            }
+            asio::post(io, [this, result] { applyReload(*result); });
+        });
+    }
+
+    /// What the reload worker hands the network thread.
+    struct PreparedReload {
+        DaemonConfig config;
+        CatalogUpdate update;
+        std::string error; ///< the config failed to load: nothing changes
+    };
+
+    /// Swaps a prepared reload in and tells the sessions (moved or sent an Error). A config
+    /// that failed to load is logged and the catalog kept. Network thread.
+    void applyReload(const PreparedReload& r) {
+        reloading = false;
+        if (!r.error.empty()) {
+            log.error("reload: " + r.error + "; the old catalog is kept");
+        } else if (!draining) {
+            if (!onlyCatalogDiffers(r.config))
+                log.info("reload: settings outside [[volume]] and [[preset]] changed in " +
+                         config.file + "; they apply at the next restart");
+            catalog.apply(r.update, log);
+            for (auto& [id, s] : std::map(sessions))
+                s->followReload(r.update);
+        }
+        if (std::exchange(reloadAgain, false)) reload();
+    }
+
+    /// A volume was taken out of service: its sessions are told. Network thread.
+    void volumeFailed(const std::shared_ptr<Volume>& volume) {
         for (auto& [id, s] : std::map(sessions))
-            s->leaveIfGone(gone);
+            s->volumeFailed(volume);
     }
 
     /// Whether `next` equals the running config but for volumes and presets (and the
@@ -99,10 +140,11 @@ struct Daemon::Impl {
         return next == config;
     }
 
-    std::uint32_t capabilities() {
+    /// What every Hello announces; the GPU bit is added per Hello (Session::onHello) while
+    /// nothing is known against the GPU renderers.
+    std::uint32_t capabilities() const {
         std::uint32_t caps = protocol::kCapCpuRenderer | protocol::kCapContinuous;
         if (!config.token.empty()) caps |= protocol::kCapAuthRequired;
-        if (render.gpuAvailable()) caps |= protocol::kCapGpuRenderer;
         return caps;
     }
 
@@ -214,7 +256,8 @@ struct Daemon::Impl {
     std::map<std::uint64_t, std::shared_ptr<detail::Session>> sessions;
     std::unique_ptr<detail::MetricsEndpoint> metrics;
     std::uint64_t nextId = 0, accepted = 0, refused = 0;
-    bool draining = false;
+    bool draining = false, reloading = false, reloadAgain = false;
+    std::thread reloader; ///< the last reload's worker (opens stores off this thread)
 };
 
 Daemon::Daemon(DaemonConfig config, Log& log, bool handleSignals)

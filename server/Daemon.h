@@ -3,7 +3,11 @@
 // sessions and one render thread for all frames. stop() (or SIGTERM/SIGINT when
 // handleSignals) drains: no new clients, every session gets Bye, run() returns once they are
 // written or the write deadline passes. reload() (or SIGHUP) re-reads the config file and
-// applies its catalog (Catalog::reload); sessions on removed or reopened volumes get an Error.
+// opens its stores on a worker thread (Catalog::prepareReload), then swaps the catalog in on
+// the network thread (Catalog::apply): sessions on a volume reopened with the same shape move
+// to the new store unasked (VolumeOpened, request id 0), sessions on removed volumes or ones
+// reopened with another shape get UnknownVolume. A volume whose store changed on disk while
+// served is out of service until a reload reopens it; its sessions get RenderFailed once.
 #include "server/DaemonConfig.h"
 
 #include <cstdint>
@@ -32,7 +36,9 @@ class Daemon {
     /// Starts the drain; thread-safe, returns at once.
     void stop();
     /// Starts a catalog reload from config.file (what SIGHUP does); thread-safe, returns at
-    /// once. A config that fails to load is logged and the catalog kept.
+    /// once, and clients keep being served while the stores are opened. A config that fails
+    /// to load is logged and the catalog kept. The destructor waits for a reload in progress
+    /// (a store whose open() hangs delays the exit, not the clients).
     void reload();
 
   private:

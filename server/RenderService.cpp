@@ -1,5 +1,6 @@
 #include "server/RenderService.h"
 
+#include "brickstore/Error.h"
 #include "render/BrickPlan.h"
 #include "render/BrickPool.h"
 #include "render/Classification.h"
@@ -43,6 +44,21 @@ void RenderSlot::setVolume(std::shared_ptr<Volume> volume) {
         mState.camera.reset(); // a camera for the old volume means nothing for the new one
         mDirty = true;
         mResetDelta = true;
+    }
+    changed();
+}
+
+void RenderSlot::moveTo(std::shared_ptr<Volume> volume,
+                        std::shared_ptr<const render::TransferFunction> tf,
+                        const protocol::SetTransferFunction& message) {
+    {
+        std::lock_guard lock(mMutex);
+        markChanged();
+        mState.volume = std::move(volume); // the camera stays: the volume has the same shape
+        mState.tf = std::move(tf);
+        mState.tfMessage = message;
+        mDirty = true;
+        mResetDelta = true; // the next delta frame is a keyframe
     }
     changed();
 }
@@ -176,6 +192,8 @@ using RendererMap = std::map<std::string, std::unique_ptr<render::Renderer>, std
 /// What the sessions of one volume share (render thread only): the bricks resident on the GPU
 /// and the renderers that hold nothing of one viewer (RendererKind::sharedPerVolume).
 struct VolumeRenderers {
+    /// Held until pruned: the map is keyed by its address, which must not be reused meanwhile.
+    std::shared_ptr<Volume> volume;
     std::shared_ptr<render::BrickPool> pool;
     std::uint64_t poolBudgetBytes = 0;
     RendererMap shared;
@@ -248,7 +266,7 @@ struct RenderService::Renderers {
             return true;
         });
         std::erase_if(volumes, [&](const auto& e) {
-            if (e.first->sessions.load() != 0) return false;
+            if (e.second.volume->sessions.load() != 0) return false;
             for (const auto& [key, s] : sessions) // a frame in progress keeps its renderers
                 if (s.drawing && s.drawing->job.state.volume.get() == e.first) return false;
             if (e.second.pool) retired(e.first->name);
@@ -312,6 +330,7 @@ struct RenderService::Counters {
     std::map<std::string, double> frameUploads, prefetchUploads, prefetchBytes;
     std::map<std::string, double> deferred, requested; ///< ray-guided residency, per volume
     double prefetchMs = 0;
+    double gpuContext = 0; ///< 1 once the render thread has made its GL context
 };
 
 namespace {
@@ -346,8 +365,9 @@ const char* rendererName(protocol::Renderer r) {
 
 } // namespace
 
-RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log)
-    : mConfig(config), mCatalog(catalog), mLog(log),
+RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log,
+                             VolumeFailed volumeFailed)
+    : mConfig(config), mCatalog(catalog), mLog(log), mVolumeFailed(std::move(volumeFailed)),
       mClassifications(std::make_unique<render::ClassificationCache>(
           render::ClassificationCacheConfig{config.classificationBudgetBytes})),
       mCounters(std::make_unique<Counters>()), mThread([this] { run(); }) {}
@@ -370,10 +390,28 @@ std::shared_ptr<RenderSlot> RenderService::open(RenderSlot::Deliver deliver,
     return slot;
 }
 
-bool RenderService::gpuAvailable() {
-    std::unique_lock lock(mMutex);
-    mStartedCv.wait(lock, [&] { return mStarted; });
-    return mGpu;
+std::optional<std::string> RenderService::gpuUnavailable() {
+    std::lock_guard lock(mMutex);
+    return mGpuUnavailable;
+}
+
+void RenderService::makeContext() {
+    if (mRenderers->context) return;
+    if (auto why = gpuUnavailable()) throw std::runtime_error(*why);
+    try {
+        mRenderers->context = std::make_unique<render::EglContext>();
+    } catch (const std::exception& e) {
+        const std::string why = std::string("this server has no OpenGL 4.5 context: ") + e.what();
+        mLog.error("render: no GPU renderer (GPU frames are refused, the CPU renderers serve): " +
+                   std::string(e.what()));
+        std::lock_guard lock(mMutex);
+        mGpuUnavailable = why;
+        throw std::runtime_error(why);
+    }
+    mLog.info("render: " + mRenderers->context->renderer() + " (" +
+              mRenderers->context->platform() + "), made for the first GPU frame");
+    std::lock_guard lock(mMutex);
+    mCounters->gpuContext = 1;
 }
 
 void RenderService::collect(MetricSet& m) {
@@ -440,6 +478,10 @@ void RenderService::collect(MetricSet& m) {
             double(cs.residentBytes));
     m.gauge("classifications", "Classifications held", double(cs.entries));
     m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn", double(waiting));
+    m.gauge("gpu_context",
+            "The render thread's OpenGL context: 0 not made (no GPU frame asked for yet), 1 "
+            "made, -1 unavailable (GPU frames are refused)",
+            mGpuUnavailable ? -1.0 : c.gpuContext);
     std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
     for (const auto& [name, live] : c.poolLive)
         pools[name] += live;
@@ -518,6 +560,7 @@ void RenderService::runPrefetch() {
             mCounters->poolLive[job.volume->name] = pool.stats();
         } catch (const std::exception& e) { // a guess that failed costs nothing but the log line
             mLog.error("prefetch: " + job.volume->name + ": " + e.what());
+            checkStore(job.volume, e);
         }
     }
     std::lock_guard lock(mMutex);
@@ -556,6 +599,14 @@ void RenderService::retirePool(const std::string& volume) {
     }
 }
 
+void RenderService::checkStore(const std::shared_ptr<Volume>& volume, const std::exception& e) {
+    const bool storeError = dynamic_cast<const brickstore::StoreCorrupt*>(&e) != nullptr ||
+                            dynamic_cast<const brickstore::StoreIoError*>(&e) != nullptr;
+    // A bad brick in an unchanged file is that brick's error only: the rest keeps serving.
+    if (!storeError || volume->failure() || !volume->store->fileChange()) return;
+    if (mCatalog.markFailed(*volume, e.what(), mLog) && mVolumeFailed) mVolumeFailed(volume);
+}
+
 void RenderService::notify() {
     { std::lock_guard lock(mMutex); } // orders this wake-up after the thread's last check
     mWake.notify_all();
@@ -563,19 +614,6 @@ void RenderService::notify() {
 
 void RenderService::run() {
     mRenderers = std::make_unique<Renderers>();
-    try {
-        mRenderers->context = std::make_unique<render::EglContext>();
-        mLog.info("render: " + mRenderers->context->renderer() + " (" +
-                  mRenderers->context->platform() + ")");
-    } catch (const std::exception& e) {
-        mLog.error(std::string("render: no GPU renderer: ") + e.what());
-    }
-    {
-        std::lock_guard lock(mMutex);
-        mStarted = true;
-        mGpu = mRenderers->context != nullptr;
-    }
-    mStartedCv.notify_all();
     std::unique_lock lock(mMutex);
     while (!mStop) {
         // Sessions gone go first (their frames in progress with them), before any wait.
@@ -641,6 +679,11 @@ namespace {
 
 /// A frame over its cost cap: answered OutOfRange, not RenderFailed.
 struct FrameRefused : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+/// A frame of a volume out of service: answered RenderFailed at once, not logged again.
+struct VolumeOutOfService : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
@@ -716,6 +759,8 @@ void RenderService::prepare(FrameDrawing& d) {
     const auto& s = d.job.state;
     const auto& o = s.options;
     d.start = Clock::now();
+    if (const auto why = s.volume->failure())
+        throw VolumeOutOfService("volume '" + s.volume->name + "' is out of service: " + *why);
     d.options = toRenderOptions(o, !d.job.refined);
     d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
@@ -723,8 +768,7 @@ void RenderService::prepare(FrameDrawing& d) {
     const std::string_view name = rendererName(o.renderer);
     d.kind = render::RendererRegistry::builtin().find(name);
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
-    if (d.kind->needsGl && !mRenderers->context)
-        throw std::runtime_error("this server has no OpenGL 4.5 context");
+    if (d.kind->needsGl) makeContext();
 
     // Cost: an upper bound of the samples (every ray as long as the level's diagonal), or the
     // voxels a splatter projects.
@@ -765,6 +809,7 @@ render::Renderer& RenderService::rendererFor(const std::shared_ptr<RenderSlot>& 
                                              FrameDrawing& d) {
     const auto& s = d.job.state;
     auto& v = mRenderers->volumes[s.volume.get()];
+    v.volume = s.volume;
     auto& mine = mRenderers->of(slot);
     RendererMap& owner = d.kind->sharedPerVolume ? v.shared : mine.own;
     auto it = owner.find(d.kind->name);
@@ -879,7 +924,10 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
                               protocol::fitText(e.what(), protocol::kMaxErrorMessageBytes)};
         bytes.clear();
         protocol::encode(error, requestId, bytes);
-        mLog.error("render: " + volume + ": " + e.what());
+        if (!dynamic_cast<const VolumeOutOfService*>(&e)) {
+            mLog.error("render: " + volume + ": " + e.what());
+            checkStore(d.job.state.volume, e);
+        }
         std::lock_guard lock(mMutex);
         (refused ? mCounters->refused : mCounters->errors) += 1;
     }

@@ -12,6 +12,9 @@
 // the sessions take turns between slices, so a heavy frame costs every other session at most
 // one slice per turn. A frame whose session has gone, or whose camera has been superseded, is
 // dropped at its next slice; stopping the service stops within one slice.
+//
+// A frame that fails on a store error while the store's file has changed on disk takes its
+// volume out of service (Catalog::markFailed): later frames of it are refused at once.
 #include "protocol/FrameCodec.h"
 #include "protocol/Messages.h"
 #include "render/TransferFunction.h"
@@ -57,6 +60,10 @@ class RenderSlot {
                std::uint64_t queueBytes);
 
     void setVolume(std::shared_ptr<Volume> volume);
+    /// The volume was reopened as `volume` (same shape, sameShape()): the camera stays, the
+    /// transfer function is `tf` placed anew, and the next delta frame is a keyframe.
+    void moveTo(std::shared_ptr<Volume> volume, std::shared_ptr<const render::TransferFunction> tf,
+                const protocol::SetTransferFunction& message);
     void setCamera(const protocol::SetCamera& camera);
     void setTransferFunction(std::shared_ptr<const render::TransferFunction> tf,
                              const protocol::SetTransferFunction& message);
@@ -133,9 +140,15 @@ struct FrameDrawing;
 
 class RenderService {
   public:
-    /// Starts the render thread (it creates the GL context; without one, GPU requests fail
-    /// with RenderFailed and the CPU renderers still serve).
-    RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log);
+    /// Told on the render thread, once per volume, that a volume was taken out of service
+    /// (Catalog::markFailed): a frame found its store changed on disk. Must not block.
+    using VolumeFailed = std::function<void(std::shared_ptr<Volume> volume)>;
+    /// Starts the render thread. It makes its GL context when the first frame of a GPU
+    /// renderer asks for one, never before (a server that draws on the CPU only never loads
+    /// the driver); when it cannot, that frame and every later GPU frame fail with RenderFailed
+    /// saying why, and the CPU renderers still serve.
+    RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log,
+                  VolumeFailed volumeFailed = {});
     /// Stops and joins the thread (within about one slice); frames not yet drawn are not drawn.
     ~RenderService();
     RenderService(const RenderService&) = delete;
@@ -144,8 +157,9 @@ class RenderService {
     /// A slot for a new session.
     std::shared_ptr<RenderSlot> open(RenderSlot::Deliver deliver, std::uint32_t queueFrames,
                                      std::uint64_t queueBytes);
-    /// Whether the GL context came up (waits for the thread's start-up).
-    bool gpuAvailable();
+    /// Why the GPU renderers cannot serve (the GL context could not be made), or nullopt when
+    /// nothing is known against them (the context is made, or not asked for yet). Thread-safe.
+    std::optional<std::string> gpuUnavailable();
     /// Frames (per renderer), errors, time and bytes; per-frame histograms of latency
     /// (oldest change answered -> encoded), render, upload and encode ms, working set and
     /// encoded bytes; the host -> GPU tier per volume (hits, uploads, evictions, bytes,
@@ -163,6 +177,9 @@ class RenderService {
         double bricksDeferred = 0, bricksRequested = 0; ///< ray-guided residency
     };
     void run();
+    /// Makes the GL context on the first call (render thread); later calls return at once.
+    /// @throw std::runtime_error saying why when it cannot be made (then and every time after).
+    void makeContext();
     void notify();
     /// The next slot due, or nullptr after waiting (not at all when `mayWait` is false) for one.
     std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock, bool mayWait);
@@ -183,17 +200,22 @@ class RenderService {
     void record(const FrameRecord& f, double bytes, const std::string& volume,
                 const render::BrickPool* pool);
     void retirePool(const std::string& volume); ///< its pool is replaced or freed
+    /// After `e` failed a frame or prefetch of `volume`: a store error while its file has
+    /// changed on disk takes the volume out of service (Catalog::markFailed) and tells
+    /// mVolumeFailed.
+    void checkStore(const std::shared_ptr<Volume>& volume, const std::exception& e);
 
     RenderServiceConfig mConfig;
     Catalog& mCatalog;
     Log& mLog;
+    VolumeFailed mVolumeFailed;
     std::mutex mMutex;
     std::condition_variable mWake;
     std::vector<std::weak_ptr<RenderSlot>> mSlots;
     std::size_t mNextSlot = 0;
-    bool mStop = false, mStarted = false, mGpu = false;
-    std::condition_variable mStartedCv;
-    std::unique_ptr<Renderers> mRenderers; // render thread only
+    bool mStop = false;
+    std::optional<std::string> mGpuUnavailable; ///< set once by makeContext()
+    std::unique_ptr<Renderers> mRenderers;      // render thread only
     /// Measured speed of each renderer in cost units (upper bounds of samples) per millisecond,
     /// from the whole frames it drew: whether a frame is sliced (render thread only).
     std::map<std::string, double, std::less<>> mCostPerMs;

@@ -4,7 +4,7 @@
 // gets a status naming what was wrong (404 path, 405 method, 400 malformed, 431 headers over
 // 8 KiB, 408 a request not complete within 2 s); at most 8 scrapes at once, more are closed
 // unanswered. It never touches the client sessions, so a bad scrape costs them nothing.
-#include <asio.hpp>
+#include "server/detail/Asio.h"
 
 #include <cstdint>
 #include <functional>

@@ -87,15 +87,52 @@ void Session::shutdown() {
     closeAfterFlush("server shutting down");
 }
 
-void Session::leaveIfGone(const std::vector<std::shared_ptr<Volume>>& gone) {
+void Session::followReload(const CatalogUpdate& update) {
     if (!mLease || mPhase == Phase::Closing || mPhase == Phase::Closed) return;
-    if (std::find(gone.begin(), gone.end(), mLease.volume()) == gone.end()) return;
-    const std::string name = mLease.volume()->name;
+    const auto& current = mLease.volume();
+    for (const auto& [old, next] : update.reopened) {
+        if (old != current) continue;
+        if (sameShape(*old, *next)) return moveTo(next);
+        return leave("volume '" + old->name +
+                     "' was reopened by a catalog reload with another voxel type, dims or "
+                     "spacing; open it again");
+    }
+    if (std::find(update.removed.begin(), update.removed.end(), current) != update.removed.end())
+        leave("volume '" + current->name +
+              "' was removed by a catalog reload (or could not be reopened); open a volume again");
+}
+
+void Session::moveTo(const std::shared_ptr<Volume>& next) {
+    VolumeLease lease = mContext.catalog.lease(next->name);
+    std::shared_ptr<const render::TransferFunction> tf;
+    try {
+        tf = toTransferFunction(mTfMessage, next->stats, mContext.catalog.configPresets());
+    } catch (const std::exception& e) { // a config preset the reload removed
+        return leave("volume '" + next->name +
+                     "' was reopened by a catalog reload and the "
+                     "session's transfer function no longer applies (" +
+                     e.what() + "); open it again");
+    }
+    if (lease.volume() != next) return leave("volume '" + next->name + "' was reopened");
+    mLease = std::move(lease);
+    mSlot->moveTo(next, std::move(tf), mTfMessage);
+    send(protocol::VolumeOpened{next->info}, 0);
+    mContext.log.info("session " + std::to_string(mId) + ": volume '" + next->name +
+                      "' was reopened by a catalog reload: the session moved to " +
+                      next->store->path());
+}
+
+void Session::leave(const std::string& why) {
     mSlot->setVolume(nullptr); // the render thread stops drawing the old store
     mLease = {};
-    sendError(ErrorCode::UnknownVolume, false, std::uint8_t(MessageType::OpenVolume), 0,
-              "volume '" + name +
-                  "' was removed or reopened by a catalog reload; open a volume again");
+    sendError(ErrorCode::UnknownVolume, false, std::uint8_t(MessageType::OpenVolume), 0, why);
+}
+
+void Session::volumeFailed(const std::shared_ptr<Volume>& volume) {
+    if (mLease.volume() != volume || mPhase == Phase::Closing || mPhase == Phase::Closed) return;
+    sendError(ErrorCode::RenderFailed, false, std::uint8_t(MessageType::RequestFrame), 0,
+              "volume '" + volume->name +
+                  "' is out of service: " + volume->failure().value_or("its store failed"));
 }
 
 // ---- reading -------------------------------------------------------------------------------
@@ -213,6 +250,7 @@ void Session::onHello(const protocol::Hello& hello, std::uint32_t request) {
     }
     protocol::Hello reply;
     reply.capabilities = mContext.capabilities;
+    if (!mContext.render.gpuUnavailable()) reply.capabilities |= protocol::kCapGpuRenderer;
     reply.codecs = {protocol::Codec::Raw, protocol::Codec::Zstd, protocol::Codec::ZstdDelta,
                     protocol::Codec::Jpeg};
     reply.software = "brickcastd 0.1";
@@ -242,6 +280,11 @@ void Session::onOpenVolume(const protocol::OpenVolume& open, std::uint32_t reque
         return;
     }
     const auto volume = lease.volume();
+    if (const auto why = volume->failure()) {
+        sendError(ErrorCode::UnknownVolume, false, std::uint8_t(MessageType::OpenVolume), request,
+                  "volume '" + open.name + "' is out of service: " + *why);
+        return;
+    }
     // The session's transfer function, placed anew for this volume's values.
     if (!mHaveTf) {
         mTfMessage = {};
@@ -285,11 +328,14 @@ void Session::onSetTransferFunction(const protocol::SetTransferFunction& m, std:
 }
 
 void Session::onSetRenderOptions(const protocol::SetRenderOptions& m, std::uint32_t request) {
-    if (m.options.renderer == protocol::Renderer::GpuRaycaster &&
-        !(mContext.capabilities & protocol::kCapGpuRenderer)) {
-        sendError(ErrorCode::OutOfRange, false, std::uint8_t(MessageType::SetRenderOptions),
-                  request, "SetRenderOptions.renderer: this server has no GPU renderer");
-        return;
+    const bool gpu = m.options.renderer == protocol::Renderer::GpuRaycaster ||
+                     m.options.renderer == protocol::Renderer::GpuSplatter;
+    if (gpu) {
+        if (const auto why = mContext.render.gpuUnavailable()) {
+            sendError(ErrorCode::OutOfRange, false, std::uint8_t(MessageType::SetRenderOptions),
+                      request, "SetRenderOptions.renderer: " + *why);
+            return;
+        }
     }
     toRenderOptions(m.options, false).validate();
     mOptions = m.options;

@@ -10,7 +10,7 @@
 #include "server/DaemonConfig.h"
 #include "server/RenderService.h"
 
-#include <asio.hpp>
+#include "server/detail/Asio.h"
 
 #include <array>
 #include <cstdint>
@@ -33,7 +33,7 @@ struct SessionContext {
     Catalog& catalog;
     RenderService& render;
     Log& log;
-    std::uint32_t capabilities = 0;
+    std::uint32_t capabilities = 0; ///< but the GPU bit (RenderService::gpuUnavailable)
     std::function<void(std::uint64_t id)> onClosed; ///< on the network thread
     /// The whole server's metrics (what GET /metrics serves), on the network thread.
     std::function<void(MetricSet&)> collect;
@@ -49,10 +49,16 @@ class Session : public std::enable_shared_from_this<Session> {
     void refuseBusy();
     /// The server is draining: Bye (shutting down), then close once written.
     void shutdown();
-    /// A catalog reload removed or reopened volumes: when this session views one of `gone`,
-    /// it stops drawing it, drops its lease and is sent Error UnknownVolume (not fatal; the
-    /// client may open a volume again).
-    void leaveIfGone(const std::vector<std::shared_ptr<Volume>>& gone);
+    /// A catalog reload was applied. When this session views a volume it reopened with the
+    /// same shape (sameShape), the session moves to the new one unasked: new lease, transfer
+    /// function placed anew, camera kept, VolumeOpened (request id 0) sent. When it views one
+    /// the reload removed, or reopened with another shape, it stops drawing it, drops its
+    /// lease and is sent Error UnknownVolume (not fatal; the client may open a volume again).
+    void followReload(const CatalogUpdate& update);
+    /// `volume` was taken out of service: when this session views it, Error RenderFailed
+    /// (request id 0, not fatal) says why. The session keeps it: its frames are refused until
+    /// a reload reopens the volume, which moves the session to the new store.
+    void volumeFailed(const std::shared_ptr<Volume>& volume);
     std::uint64_t id() const { return mId; }
     /// Messages waiting in the write queue (the one being written included).
     std::size_t queued() const { return mQueue.size(); }
@@ -77,6 +83,10 @@ class Session : public std::enable_shared_from_this<Session> {
     void onSetRenderOptions(const protocol::SetRenderOptions& options, std::uint32_t request);
     void onRequestFrame(const protocol::RequestFrame& frame, std::uint32_t request);
     void onRequestStats(std::uint32_t request);
+    /// Views `next`, the reopened volume of the same shape, in place of the current one.
+    void moveTo(const std::shared_ptr<Volume>& next);
+    /// Stops viewing the current volume and sends UnknownVolume saying `why`.
+    void leave(const std::string& why);
     void send(const protocol::Message& message, std::uint32_t request);
     void sendError(protocol::ErrorCode code, bool fatal, std::uint8_t type, std::uint32_t request,
                    const std::string& message);

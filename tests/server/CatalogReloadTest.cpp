@@ -1,19 +1,25 @@
 // SIGHUP reloads the catalog of a running daemon: the config file is read again, volumes are
 // added, removed and reopened (their store file changed), one log line each; a session on an
-// unchanged volume keeps its frames, one on a removed or reopened volume gets an Error; a
-// config that fails to parse keeps the old catalog. The daemon no longer dies of SIGHUP.
+// unchanged volume keeps its frames, one on a removed volume or one reopened with another
+// shape gets an Error, one on a volume reopened with the same name, voxel type, dims and
+// spacing moves to the new store unasked; a config that fails to parse keeps the old catalog.
+// The stores are opened off the network thread: clients are served while a store takes long
+// to open. The daemon no longer dies of SIGHUP.
 #include "ServerTestSupport.h"
 
 #include <csignal>
+#include <fcntl.h>
 #include <filesystem>
 #include <fstream>
 #include <set>
+#include <sys/stat.h>
 
 namespace bc::server::test {
 namespace {
 
-void makeStore(const std::string& path, std::uint64_t edge) {
-    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {edge, edge, edge}, 1);
+void makeStore(const std::string& path, std::uint64_t edge,
+               brickstore::SynthKind kind = brickstore::SynthKind::Phantom) {
+    auto source = brickstore::makeSynthetic(kind, {edge, edge, edge}, 1);
     brickstore::IngestConfig config;
     config.geometry = {32, 2, 8};
     brickstore::ingest(*source, path, config); // renamed into place: a new file
@@ -119,6 +125,109 @@ TEST(CatalogReload, SighupReloadsTheCatalogAndLeavesSessionsOnUnchangedVolumesAl
           "catalog reload: 1 volume(s) unchanged, 3 served", "the old catalog is kept"})
         EXPECT_NE(logText.find(line), std::string::npos) << "no log line '" << line << "' in:\n"
                                                          << logText;
+}
+
+/// A frame's pixels at azimuth `az`.
+std::vector<std::uint8_t> framePixels(client::Client& c, const protocol::VolumeInfo& v,
+                                      std::uint32_t id) {
+    c.setCamera(orbitCamera(v, 30.0, id));
+    c.requestFrame();
+    return c.nextFrame().rgba;
+}
+
+TEST(CatalogReload, ASessionOnAVolumeReopenedWithTheSameShapeMovesToTheNewStore) {
+    TempDir dir;
+    makeStore(dir.file("swap.bcs"), 32, brickstore::SynthKind::Vessels);
+    const std::string config = dir.file("brickcastd.toml");
+    writeConfig(config, {"swap"});
+    TestDaemon daemon(DaemonConfig::load(config));
+    client::ClientConfig cc = daemon.clientConfig();
+    cc.timeoutMs = 20000;
+    client::Client c(cc);
+    const auto v = c.openVolume("swap");
+    c.setRenderOptions(smallCpuFrames(32));
+    const auto before = framePixels(c, v, 1);
+
+    // Another store of the same name, voxel type (u8), dims and spacing, other voxels.
+    makeStore(dir.file("swap.bcs"), 32, brickstore::SynthKind::Checker);
+    daemon.daemon->reload();
+    std::optional<protocol::VolumeOpened> moved;
+    std::uint32_t request = 99;
+    while (!moved) {
+        auto m = c.nextMessage(&request);
+        if (auto* e = std::get_if<protocol::Error>(&m)) {
+            ADD_FAILURE() << "the session was sent " << protocol::errorName(std::uint16_t(e->code))
+                          << ": " << e->message;
+            break;
+        }
+        if (auto* o = std::get_if<protocol::VolumeOpened>(&m)) moved = *o;
+    }
+    ASSERT_TRUE(moved);
+    EXPECT_EQ(request, 0u) << "the move is unasked";
+    EXPECT_EQ(moved->info.name, "swap");
+    EXPECT_EQ(moved->info.dims, v.dims);
+    // Without opening it again: frames come, drawn from the new store with the same camera.
+    const auto after = framePixels(c, v, 2);
+    EXPECT_NE(after, before) << "the frame is still drawn from the old store";
+    client::Client fresh(cc);
+    const auto reopened = fresh.openVolume("swap");
+    fresh.setRenderOptions(smallCpuFrames(32));
+    EXPECT_EQ(framePixels(fresh, reopened, 3), after)
+        << "the moved session's frame differs from a new session's on the new store";
+}
+
+/// Opens the write end of a FIFO when it goes, so that a reader blocked in open() goes on.
+struct FifoWriter {
+    std::string path;
+    bool released = false;
+    /// Opens the write end if a reader waits; true when one did.
+    bool release() {
+        const int fd = ::open(path.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+        if (fd < 0) return false; // ENXIO: no reader (yet)
+        ::close(fd);
+        return released = true;
+    }
+    ~FifoWriter() {
+        for (int i = 0; i < 200 && !released && !release(); ++i)
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+};
+
+TEST(CatalogReload, ClientsAreServedWhileAReloadWaitsForAStoreToOpen) {
+    TempDir dir;
+    makeStore(dir.file("keep.bcs"), 32);
+    const std::string config = dir.file("brickcastd.toml");
+    writeConfig(config, {"keep"});
+    TestDaemon daemon(DaemonConfig::load(config));
+    client::ClientConfig cc = daemon.clientConfig();
+    cc.timeoutMs = 3000;
+    {
+        // A store that is a FIFO: open() blocks until a writer comes, as long as the test
+        // wants (a store on a slow or hung file system, or a large generated one).
+        ASSERT_EQ(::mkfifo(dir.file("slow.bcs").c_str(), 0600), 0);
+        FifoWriter slow{dir.file("slow.bcs")}; // goes first: the reload ends before the daemon
+        client::Client keep(cc);
+        const auto vk = keep.openVolume("keep");
+        keep.setRenderOptions(smallCpuFrames(32));
+        ASSERT_TRUE(frameArrives(keep, vk, 1));
+        writeConfig(config, {"keep", "slow"});
+        daemon.daemon->reload();
+        std::this_thread::sleep_for(std::chrono::milliseconds(300)); // the reload reaches open()
+        const auto start = std::chrono::steady_clock::now();
+        std::uint32_t frames = 0;
+        try {
+            for (std::uint32_t id = 2;
+                 std::chrono::steady_clock::now() - start < std::chrono::milliseconds(1500); ++id)
+                frames += frameArrives(keep, vk, id);
+            EXPECT_EQ(served(cc.port), std::set<std::string>{"keep"});
+        } catch (const std::exception& e) {
+            ADD_FAILURE() << "a client was not served during the reload: " << e.what();
+        }
+        EXPECT_GE(frames, 3u);
+        EXPECT_TRUE(slow.release()) << "the reload was not waiting in the store's open()";
+    }
+    // The FIFO is not a store: left out, the rest of the reload applied.
+    EXPECT_TRUE(waitForCatalog(cc.port, {"keep"}));
 }
 
 } // namespace

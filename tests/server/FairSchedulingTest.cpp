@@ -184,7 +184,11 @@ TEST_F(FairScheduling, ASessionThatNeverReadsHoldsAtMostItsQueueBytes) {
     const auto v = light.openVolume("cthead");
     light.setRenderOptions(smallCpuFrames(48));
     double largest = 0;
-    for (std::uint32_t i = 1; i <= 40; ++i) { // the stuck client's camera keeps moving
+    // The stuck client's camera keeps moving, for 40 turns and, on a slow build (sanitizers:
+    // a 1024^2 CPU frame takes seconds), until its first frame has been queued.
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    for (std::uint32_t i = 1;
+         i <= 40 || (largest <= 4.0 * (1 << 20) && std::chrono::steady_clock::now() < until); ++i) {
         stuck.send(orbitCamera(v, 9.0 * i, i), 5 + i);
         light.setCamera(orbitCamera(v, 9.0 * i, i));
         light.requestFrame();

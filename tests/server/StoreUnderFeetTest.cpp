@@ -1,7 +1,10 @@
 // A store that changes under a running daemon (truncated, or overwritten in place by `cp`)
-// fails that volume only: its client gets an Error naming the store, the daemon lives on and
-// the client of another volume keeps receiving frames. And the start is strict: a configured
-// store that is missing or corrupt stops the daemon, naming it, unless it is optional.
+// fails that volume only: its client gets an Error naming the store, the volume is taken out
+// of service (its other sessions are told, later requests are refused at once, ListVolumes
+// leaves it out, /metrics counts it, one log line), the daemon lives on and the client of
+// another volume keeps receiving frames; a reload reopens it once the store is valid again and
+// its sessions move to it. And the start is strict: a configured store that is missing or
+// corrupt stops the daemon, naming it, unless it is optional.
 #include "ServerTestSupport.h"
 
 #include "server/Catalog.h"
@@ -27,6 +30,8 @@ std::string makeStore(const TempDir& dir, const std::string& name, std::uint64_t
 DaemonConfig twoStores(const std::string& a, const std::string& b) {
     DaemonConfig c;
     c.source = "<test>";
+    c.metricsHost = "127.0.0.1";
+    c.metricsPort = 0;
     // Far below one frame's bricks: every frame reads its bricks from the store files again.
     c.hostBudgetBytes = 1ull << 20;
     for (const auto& [name, path] : {std::pair{"first", a}, std::pair{"second", b}}) {
@@ -50,44 +55,106 @@ frameOrError(client::Client& c, const protocol::VolumeInfo& v, double az, std::u
     }
 }
 
+/// The next Error this client is sent (frames and others skipped) and its request id.
+std::pair<protocol::Error, std::uint32_t> nextError(client::Client& c) {
+    for (;;) {
+        std::uint32_t request = 0;
+        auto m = c.nextMessage(&request);
+        if (auto* e = std::get_if<protocol::Error>(&m)) return {*e, request};
+    }
+}
+
+double failedVolumes(const TestDaemon& daemon) {
+    return sampleOf(scrape(daemon.daemon->metricsPort(), "GET /metrics HTTP/1.1\r\n\r\n"),
+                    "brickcast_volumes_failed");
+}
+
+std::size_t count(const std::string& text, const std::string& what) {
+    std::size_t n = 0;
+    for (auto at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
+        ++n;
+    return n;
+}
+
 /// Changes the first store with `change` while both volumes are viewed; the first client must
-/// get RenderFailed naming the store, the second keeps its frames.
+/// get RenderFailed naming the store, the second keeps its frames; the first volume is then out
+/// of service: a bystander session on it is told, later frames and OpenVolume are refused at
+/// once, ListVolumes and /metrics show it, and the log says so once.
 void expectOnlyTheFirstVolumeFails(const std::function<void(const std::string&)>& change,
                                    const std::string& expectWhy) {
     TempDir dir;
     const std::string a = makeStore(dir, "first.bcs", 96), b = makeStore(dir, "second.bcs", 64);
-    TestDaemon daemon(twoStores(a, b));
-    client::Client first(daemon.clientConfig()), second(daemon.clientConfig());
-    const auto va = first.openVolume("first"), vb = second.openVolume("second");
-    auto options = smallCpuFrames(48);
-    options.level = 0; // full resolution: more bricks than the host budget holds
-    first.setRenderOptions(options);
-    second.setRenderOptions(options);
-    ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(frameOrError(first, va, 0, 1)));
-    ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(frameOrError(second, vb, 0, 1)));
+    ::testing::internal::CaptureStderr();
+    {
+        TestDaemon daemon(twoStores(a, b));
+        client::Client first(daemon.clientConfig()), second(daemon.clientConfig());
+        client::Client bystander(daemon.clientConfig());
+        const auto va = first.openVolume("first"), vb = second.openVolume("second");
+        bystander.openVolume("first");
+        auto options = smallCpuFrames(48);
+        options.level = 0; // full resolution: more bricks than the host budget holds
+        first.setRenderOptions(options);
+        second.setRenderOptions(options);
+        ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(frameOrError(first, va, 0, 1)));
+        ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(frameOrError(second, vb, 0, 1)));
+        EXPECT_EQ(failedVolumes(daemon), 0.0);
 
-    change(a);
+        change(a);
 
-    std::optional<client::ServerError> error;
-    for (std::uint32_t i = 2; i < 12 && !error; ++i) {
-        auto r = frameOrError(first, va, 30.0 * i, i);
-        if (auto* e = std::get_if<client::ServerError>(&r)) error = *e;
+        std::optional<client::ServerError> error;
+        std::uint32_t i = 2;
+        for (; i < 12 && !error; ++i) {
+            auto r = frameOrError(first, va, 30.0 * i, i);
+            if (auto* e = std::get_if<client::ServerError>(&r)) error = *e;
+        }
+        ASSERT_TRUE(error) << "the first client kept getting frames from a changed store";
+        EXPECT_EQ(error->code(), protocol::ErrorCode::RenderFailed);
+        EXPECT_FALSE(error->fatal());
+        EXPECT_NE(std::string(error->what()).find(a), std::string::npos)
+            << "the error does not name the store: " << error->what();
+        EXPECT_NE(std::string(error->what()).find(expectWhy), std::string::npos) << error->what();
+        for (std::uint32_t k = 2; k < 6; ++k) {
+            auto r = frameOrError(second, vb, 30.0 * k, k);
+            ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(r))
+                << "the other volume's client lost its frames: "
+                << std::get<client::ServerError>(r).what();
+        }
+
+        // The bystander, which asked for nothing, is told unasked (request id 0).
+        const auto [told, toldRequest] = nextError(bystander);
+        EXPECT_EQ(told.code, protocol::ErrorCode::RenderFailed);
+        EXPECT_EQ(toldRequest, 0u);
+        EXPECT_NE(told.message.find("volume 'first' is out of service"), std::string::npos)
+            << told.message;
+        EXPECT_NE(told.message.find(a), std::string::npos) << told.message;
+        // Every later frame of it is refused at once, naming why, the store left alone.
+        std::size_t refused = 0;
+        for (std::uint32_t k = 0; k < 5; ++k, ++i) {
+            auto r = frameOrError(first, va, 30.0 * i, i);
+            auto* e = std::get_if<client::ServerError>(&r);
+            ASSERT_TRUE(e) << "a frame of the failed volume was drawn";
+            if (e->code() == protocol::ErrorCode::RenderFailed &&
+                std::string(e->what()).find("volume 'first' is out of service") !=
+                    std::string::npos)
+                ++refused;
+        }
+        EXPECT_GE(refused, 4u) << "later frames were not refused as out of service";
+        // A new client: ListVolumes leaves it out, OpenVolume is refused naming why.
+        client::Client third(daemon.clientConfig());
+        const auto listed = third.listVolumes();
+        ASSERT_EQ(listed.size(), 1u);
+        EXPECT_EQ(listed[0].name, "second");
+        try {
+            third.openVolume("first");
+            ADD_FAILURE() << "a failed volume was opened";
+        } catch (const client::ServerError& e) {
+            EXPECT_EQ(e.code(), protocol::ErrorCode::UnknownVolume);
+            EXPECT_NE(std::string(e.what()).find("out of service"), std::string::npos) << e.what();
+        }
+        EXPECT_EQ(failedVolumes(daemon), 1.0);
     }
-    ASSERT_TRUE(error) << "the first client kept getting frames from a changed store";
-    EXPECT_EQ(error->code(), protocol::ErrorCode::RenderFailed);
-    EXPECT_FALSE(error->fatal());
-    EXPECT_NE(std::string(error->what()).find(a), std::string::npos)
-        << "the error does not name the store: " << error->what();
-    EXPECT_NE(std::string(error->what()).find(expectWhy), std::string::npos) << error->what();
-    for (std::uint32_t i = 2; i < 6; ++i) {
-        auto r = frameOrError(second, vb, 30.0 * i, i);
-        ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(r))
-            << "the other volume's client lost its frames: "
-            << std::get<client::ServerError>(r).what();
-    }
-    // The daemon still accepts clients and still lists both volumes.
-    client::Client third(daemon.clientConfig());
-    EXPECT_EQ(third.listVolumes().size(), 2u);
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(count(log, "catalog: volume 'first' is out of service"), 1u) << log;
 }
 
 TEST(StoreUnderFeet, TruncatedStoreFailsItsVolumeOnlyAndTheDaemonKeepsServing) {
@@ -106,6 +173,64 @@ TEST(StoreUnderFeet, StoreOverwrittenByCpFailsItsVolumeOnlyAndTheDaemonKeepsServ
             ASSERT_EQ(r.exitCode, 0) << r.text;
         },
         "changed on disk since it was opened");
+}
+
+TEST(StoreUnderFeet, AReloadReopensAFailedVolumeOnceItsStoreIsValidAndItsSessionsMoveToIt) {
+    TempDir dir;
+    const std::string a = makeStore(dir, "first.bcs", 96), b = makeStore(dir, "second.bcs", 64);
+    const std::string file = dir.file("brickcastd.toml");
+    bc::test::writeFile(file, "[budgets]\nhost_mb = 1\n[[volume]]\nname = \"first\"\nstore = \"" +
+                                  a + "\"\n[[volume]]\nname = \"second\"\nstore = \"" + b + "\"\n");
+    DaemonConfig config = DaemonConfig::load(file);
+    config.metricsHost = "127.0.0.1";
+    config.metricsPort = 0;
+    ::testing::internal::CaptureStderr();
+    {
+        TestDaemon daemon(config);
+        client::Client first(daemon.clientConfig());
+        const auto va = first.openVolume("first");
+        auto options = smallCpuFrames(48);
+        options.level = 0;
+        first.setRenderOptions(options);
+        ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(frameOrError(first, va, 0, 1)));
+        std::filesystem::resize_file(a, 8192);
+        bool failed = false;
+        for (std::uint32_t i = 2; i < 12 && !failed; ++i)
+            failed =
+                std::holds_alternative<client::ServerError>(frameOrError(first, va, 30.0 * i, i));
+        ASSERT_TRUE(failed);
+        ASSERT_EQ(failedVolumes(daemon), 1.0);
+
+        makeStore(dir, "first.bcs", 96); // a valid store again (renamed into place)
+        daemon.daemon->reload();
+        // The session is moved to the reopened volume unasked; Errors before the move are the
+        // out-of-service notices.
+        std::optional<protocol::VolumeInfo> moved;
+        while (!moved) {
+            std::uint32_t request = 99;
+            auto m = first.nextMessage(&request);
+            if (auto* e = std::get_if<protocol::Error>(&m)) {
+                ASSERT_EQ(e->code, protocol::ErrorCode::RenderFailed) << e->message;
+                continue;
+            }
+            if (auto* o = std::get_if<protocol::VolumeOpened>(&m)) {
+                EXPECT_EQ(request, 0u);
+                moved = o->info;
+            }
+        }
+        EXPECT_EQ(moved->dims, va.dims);
+        for (std::uint32_t i = 20; i < 23; ++i) {
+            auto r = frameOrError(first, va, 30.0 * i, i);
+            ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(r))
+                << "no frames after the reload: " << std::get<client::ServerError>(r).what();
+        }
+        client::Client other(daemon.clientConfig());
+        EXPECT_EQ(other.listVolumes().size(), 2u);
+        EXPECT_EQ(other.openVolume("first").dims, va.dims);
+        EXPECT_EQ(failedVolumes(daemon), 0.0);
+    }
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(count(log, "catalog: volume 'first' is out of service"), 1u) << log;
 }
 
 TEST(StrictStart, AMissingOrCorruptStoreStopsTheStartNamingIt) {

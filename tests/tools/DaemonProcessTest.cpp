@@ -1,6 +1,7 @@
 // SIGTERM drains a real brickcastd process with clients attached: each gets Bye (shutting
 // down) before the close, and the daemon exits 0, also in the middle of the heaviest frame
-// the protocol allows.
+// the protocol allows. Without EGL, GPU frames get an error saying why and the CPU renderers
+// serve.
 #include "tests/server/ServerTestSupport.h"
 
 #include <csignal>
@@ -107,6 +108,73 @@ TEST(DaemonProcess, SigtermDuringTheHeaviestFrameExitsWithinFiveSeconds) {
     }
     std::printf("[sigterm] brickcastd exited %.0f ms after SIGTERM, mid-frame\n", ms);
     ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+TEST(DaemonProcess, WithoutEglAGpuFrameGetsAnErrorSayingWhyAndTheCpuRenderersServe) {
+    TempDir dir;
+    const std::string config = dir.file("brickcastd.toml"), port = dir.file("port");
+    std::ofstream(config)
+        << "[server]\nlisten = \"127.0.0.1:0\"\nstore_dir = \"" << dir.path().string()
+        << "\"\n[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [32, 32, 32]\n";
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        // GLVND finds no EGL vendor: every EGL display fails, as on a host without a driver.
+        ::setenv("__EGL_VENDOR_LIBRARY_FILENAMES", "/nonexistent/egl_vendor.json", 1);
+        ::execl(BC_BRICKCASTD_EXE, BC_BRICKCASTD_EXE, "--config", config.c_str(), "--port-file",
+                port.c_str(), "--quiet", nullptr);
+        std::_Exit(127);
+    }
+    for (int i = 0; i < 300 && !std::filesystem::exists(port); ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    ASSERT_TRUE(std::filesystem::exists(port)) << "brickcastd did not start";
+    client::ClientConfig cc;
+    std::ifstream(port) >> cc.port;
+    {
+        client::Client gpu(cc), cpu(cc);
+        const auto v = gpu.openVolume("p");
+        cpu.openVolume("p");
+        auto options = smallCpuFrames(32);
+        cpu.setRenderOptions(options);
+        options.renderer = protocol::Renderer::GpuRaycaster;
+        gpu.setRenderOptions(options);
+        gpu.setCamera(orbitCamera(v, 0, 1));
+        gpu.requestFrame();
+        try {
+            gpu.nextFrame();
+            ADD_FAILURE() << "a GPU frame was drawn without EGL";
+        } catch (const client::ServerError& e) {
+            EXPECT_EQ(e.code(), protocol::ErrorCode::RenderFailed);
+            EXPECT_NE(std::string(e.what()).find("no OpenGL 4.5 context: "), std::string::npos)
+                << e.what();
+            EXPECT_NE(std::string(e.what()).find("EGL"), std::string::npos)
+                << "the error does not say what failed: " << e.what();
+        }
+        for (auto* c : {&gpu, &cpu}) { // CPU frames still come, also in the GPU session
+            c->setRenderOptions(smallCpuFrames(32));
+            c->setCamera(orbitCamera(v, 20, 2));
+            c->requestFrame();
+            EXPECT_EQ(c->nextFrame().header.cameraId, 2u);
+        }
+        // Now it is known: later Hellos leave the GPU out and GPU options are refused, saying
+        // why.
+        client::Client later(cc);
+        EXPECT_FALSE(later.server().capabilities & protocol::kCapGpuRenderer);
+        for (auto renderer : {protocol::Renderer::GpuRaycaster, protocol::Renderer::GpuSplatter}) {
+            options.renderer = renderer;
+            later.setRenderOptions(options);
+            const auto m = later.nextMessage();
+            const auto* e = std::get_if<protocol::Error>(&m);
+            ASSERT_TRUE(e) << "GPU options accepted";
+            EXPECT_EQ(e->code, protocol::ErrorCode::OutOfRange);
+            EXPECT_NE(e->message.find("no OpenGL 4.5 context"), std::string::npos) << e->message;
+        }
+    }
+    ASSERT_EQ(::kill(pid, SIGTERM), 0);
+    int status = 0;
+    for (int i = 0; i < 100 && ::waitpid(pid, &status, WNOHANG) == 0; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    ASSERT_TRUE(WIFEXITED(status)) << "brickcastd still running 5 s after SIGTERM";
     EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 
