@@ -55,6 +55,27 @@ TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
     EXPECT_EQ(c.exitCode, 0) << c.text;
 }
 
+// --reference reads bricks through the host cache in batches that fit --host-budget-mb (it used
+// to read the level whole): the same image under a budget that holds a fraction of the bricks.
+TEST_F(RenderCli, ReferenceDrawsInBatchesThatFitTheHostBudgetAndTheSameImage) {
+    const std::string big = dir.file("big.bcs");
+    // 128x128x96 u16 in bricks of 16 (20³ stored): 384 bricks, 6 MiB decompressed.
+    auto in = brickcast("ingest synth:phantom --dims 128,128,96 --brick 16 -o " + big);
+    ASSERT_EQ(in.exitCode, 0) << in.text;
+    const std::string args = " --size 64,48 --tf ct-bone --orbit 40,25 --reference";
+    const std::string whole = dir.file("whole.png"), small = dir.file("small.png"),
+                      stats = dir.file("small.json");
+    auto a = brickcast("render " + big + " -o " + whole + args);
+    ASSERT_EQ(a.exitCode, 0) << a.text;
+    auto b =
+        brickcast("render " + big + " -o " + small + args + " --host-budget-mb 1 --stats " + stats);
+    ASSERT_EQ(b.exitCode, 0) << b.text;
+    EXPECT_EQ(compareImages(readPng(whole), readPng(small)).maxAbs, 0.0);
+    std::ifstream f(stats);
+    const auto j = nlohmann::json::parse(f);
+    EXPECT_GE(j.at("batches").get<int>(), 4) << "1 MiB holds 65 of the 384 bricks";
+}
+
 // --repeat: one renderer draws the view again and again; the last (warm) image is the first's.
 TEST_F(RenderCli, RepeatDrawsWarmFramesOfTheSameImage) {
     for (const std::string renderer : {"cpu", "gpu"}) {
