@@ -866,8 +866,8 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     paste(d.image, part, options.region);
     accumulate(d.stats, stats, d.slices == 0);
     // The speed of the rays alone: loading bricks is a cost per slice, not per pixel (when the
-    // frame's bricks exceed the host budget every slice loads its batches again). Slices are
-    // made long enough that it stays at most half of each.
+    // frame's bricks exceed the host budget, a brick whose footprint spans several slices is
+    // loaded by each). Slices are made long enough that it stays at most half of each.
     const double ms = msSince(start), loadMs = std::min(stats.uploadMs, ms);
     calibrate(mSliceCostPerMs, cost, ms - loadMs);
     d.sliceTargetMs = std::max(double(mConfig.sliceMs), 2.0 * loadMs);
