@@ -687,9 +687,12 @@ struct VolumeOutOfService : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-/// Cost units per millisecond assumed of a renderer before it has drawn anything: low, so a
-/// first frame that turns out heavy is sliced rather than drawn whole.
-constexpr double kFirstCostPerMs = 20000.0;
+/// Cost units (samples) per millisecond assumed of a renderer before it has drawn anything:
+/// low (2 M samples/s, the reference renderer's order on one slow core), so that a first
+/// frame that turns out heavy is sliced rather than drawn whole, and its first slice is short
+/// on any machine (at 20 M samples/s assumed, a first slice under ThreadSanitizer took 18 s).
+/// The measured speed replaces it from the first slice on.
+constexpr double kFirstCostPerMs = 2000.0;
 
 /// Estimated cost of pixel (x, y): its ray's samples inside the box, plus one for the ray.
 double pixelCost(const FrameDrawing& d, std::uint32_t x, std::uint32_t y) {

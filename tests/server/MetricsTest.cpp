@@ -81,6 +81,9 @@ class DaemonMetrics : public ::testing::Test {
         c.metricsHost = "127.0.0.1";
         c.metricsPort = 0;
         c.hostBudgetBytes = kBrickBytes; // one brick stays resident once a frame unpins them
+        // Frames drawn whole, in one pass: the counts below are those of one plan per frame (a
+        // first frame would otherwise be sliced, its renderer's speed not yet measured).
+        c.sliceMs = 600000;
         daemon = std::make_unique<TestDaemon>(c);
         port = daemon->daemon->metricsPort();
         ASSERT_NE(port, 0);
