@@ -261,12 +261,14 @@ void Raycaster::drawPass(int pass) {
     gl::glCheck("raycasting a batch");
 }
 
-Image Raycaster::readBack(int passes, std::uint32_t width, std::uint32_t height,
+Image Raycaster::readBack(int passes, const PixelRect& region, std::uint32_t imageHeight,
                           FrameStats& stats) {
+    const std::uint32_t width = region.width, height = region.height;
     Image image(width, height);
     std::vector<float> rows(std::size_t(width) * height * 4);
     glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[passes % 2].get());
-    glReadPixels(0, 0, GLsizei(width), GLsizei(height), GL_RGBA, GL_FLOAT, rows.data());
+    glReadPixels(GLint(region.x), GLint(imageHeight - region.y - height), GLsizei(width),
+                 GLsizei(height), GL_RGBA, GL_FLOAT, rows.data());
     std::uint32_t counted[3] = {0, 0, 0};
     glGetNamedBufferSubData(mGpu->counters.get(), 0, sizeof counted, counted);
     gl::glCheck("reading the frame back");
@@ -281,8 +283,7 @@ Image Raycaster::readBack(int passes, std::uint32_t width, std::uint32_t height,
     return image;
 }
 
-void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount,
-                          const RenderOptions& options) {
+void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount, bool feedback) {
     const GLuint program = mGpu->program.get();
     if (mGpu->feedbackBricks != brickCount || !mGpu->feedback) {
         mGpu->feedback = gl::createBuffer();
@@ -296,7 +297,7 @@ void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount,
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, mGpu->feedback.get());
     glBindImageTexture(1, mGpu->resumeAt.get(), 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32I);
     glProgramUniform1i(program, glGetUniformLocation(program, "uBrickCount"), GLint(brickCount));
-    glProgramUniform1i(program, glGetUniformLocation(program, "uFeedback"), options.rayGuided);
+    glProgramUniform1i(program, glGetUniformLocation(program, "uFeedback"), feedback);
     glProgramUniform1i(program, glGetUniformLocation(program, "uGuided"), 0);
     glProgramUniform1i(program, glGetUniformLocation(program, "uResume"), 0);
     mGpu->pages = gl::createBuffer();
@@ -322,7 +323,7 @@ void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount,
                            GL_R32F);
         glBindTextureUnit(3, mGpu->occlusion->startTexture());
     }
-    glViewport(0, 0, GLsizei(options.width), GLsizei(options.height));
+    glViewport(0, 0, GLsizei(mGpu->width), GLsizei(mGpu->height));
 }
 
 void Raycaster::uploadOccupancy(const FrameClassification& classified) {
@@ -408,7 +409,7 @@ struct Raycaster::Prepared {
 Raycaster::Prepared Raycaster::prepare(const Scene& scene, const View& view,
                                        const RenderOptions& options, FrameStats& stats) {
     options.validate();
-    checkView(view, options);
+    checkView(view, options, true);
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
@@ -468,28 +469,51 @@ Image Raycaster::render(const Scene& scene, const View& view, const RenderOption
     const TransferFunctionTable& table = *p.classified.table;
     const OccupancyTrees* occupancy = p.classified.occupancy;
     const LevelGeometry g = LevelGeometry::of(store, level);
-    const BrickPlan plan = planBricks(store, g, table, view.basis, options.skip, occupancy);
+    // A slice of a frame (options.region) plans the bricks its own rays reach and draws its
+    // pixels alone (a scissor on the full-size passes, so each fragment is computed as in the
+    // whole frame). It neither reads nor writes what belongs to whole frames: occlusion
+    // frustums and ray guidance are off for it and keep the last whole frame's findings.
+    const bool slice = !options.region.whole();
+    const PixelRect drawn = options.drawn();
+    const BrickPlan plan =
+        planBricks(store, g, table, view, options.region, options.skip, occupancy);
     recordPlan(plan, level, stats);
 
     mGpu->ensureTargets(options.width, options.height);
     mGpu->uploadTable(table);
     const std::uint64_t sceneId = sceneKey(store, level, table, options);
-    const bool useStarts = prepareOcclusion(g, view.basis, sceneId, options, occupancy, stats);
+    const bool guided = options.rayGuided && !slice;
+    const bool captures = options.occlusionFrustums && !slice;
+    bool useStarts = false;
+    if (slice)
+        stats.occlusionReason = "a slice of a frame";
+    else
+        useStarts = prepareOcclusion(g, view.basis, sceneId, options, occupancy, stats);
     setFrameUniforms(mGpu->program.get(), g, view.basis, options, table, *mPool);
     setOccupancyUniforms(mGpu->program.get(), occupancy);
     const GLuint program = mGpu->program.get();
     glProgramUniform1i(program, glGetUniformLocation(program, "uUseStart"), useStarts);
-    glProgramUniform1i(program, glGetUniformLocation(program, "uWriteFirstHit"),
-                       options.occlusionFrustums);
+    glProgramUniform1i(program, glGetUniformLocation(program, "uWriteFirstHit"), captures);
     const std::uint64_t uploadsBefore = mPool->stats().uploads,
                         bytesBefore = mPool->stats().bytesUploaded;
     const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
     std::vector<std::int32_t> pages(2 * std::max<std::uint64_t>(g.brickCount(), 1),
                                     detail::kPageAbsent);
-    bindFrame(pages.size(), g.brickCount(), options);
+    bindFrame(pages.size(), g.brickCount(), guided);
+    if (slice) { // GL's rows go bottom-up
+        glEnable(GL_SCISSOR_TEST);
+        glScissor(GLint(drawn.x), GLint(options.height - drawn.y - drawn.height),
+                  GLsizei(drawn.width), GLsizei(drawn.height));
+    }
+    struct ScissorOff {
+        bool on;
+        ~ScissorOff() {
+            if (on) glDisable(GL_SCISSOR_TEST);
+        }
+    } scissorOff{slice};
     int pass = 0;
     std::vector<std::size_t> deferred;
-    if (options.rayGuided) {
+    if (guided) {
         // When the plan fits the pool, hidden bricks already resident are drawn as they are;
         // when it does not, every hidden brick waits to be asked for (a resident one costs no
         // upload then), so that no slot is held by a brick no ray reaches.
@@ -498,27 +522,27 @@ Image Raycaster::render(const Scene& scene, const View& view, const RenderOption
             return fits && mPool->resident(levelFirst + i);
         });
     }
-    mGpu->guide.reset(); // this frame's findings replace it (none if the frame throws)
+    if (!slice) mGpu->guide.reset(); // this frame's findings replace it (none if it throws)
     if (deferred.empty() || !drawGuided(plan, deferred, levelFirst, cache, pages, pass, stats)) {
         if (!deferred.empty()) { // requests overflowed the pool: draw the frame in batches
             stats.guidedFallback = true;
             std::fill(pages.begin(), pages.end(), detail::kPageAbsent);
-            bindFrame(pages.size(), g.brickCount(), options); // counters and feedback from zero
+            bindFrame(pages.size(), g.brickCount(), guided); // counters and feedback from zero
             pass = 0;
         }
         drawBatches(plan, levelFirst, cache, pages, pass, stats);
     }
 
     const auto readStart = Clock::now();
-    Image image = readBack(pass, options.width, options.height, stats);
+    Image image = readBack(pass, drawn, options.height, stats);
     stats.readbackMs = msSince(readStart);
-    if (options.occlusionFrustums) {
+    if (captures) {
         const auto captureStart = Clock::now();
         mGpu->occlusion->capture(view.basis, sceneId, msSince(frameStart), useStarts,
                                  options.occlusion);
         stats.occlusionBuildMs += msSince(captureStart);
     }
-    if (options.rayGuided) {
+    if (guided) {
         std::vector<std::uint32_t> entered(g.brickCount());
         glGetNamedBufferSubData(mGpu->feedback.get(), 0, GLsizeiptr(entered.size() * 4),
                                 entered.data());

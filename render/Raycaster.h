@@ -2,7 +2,8 @@
 // The GPU raycaster: bricks of one pyramid level, drawn front to back in batches that fit
 // the GPU brick pool, each batch one full-screen pass that marches every ray through the
 // brick grid (DDA), sampling only the batch's bricks and compositing onto the previous
-// pass's result. With a pool large enough for the view there is one pass. Needs a current
+// pass's result. With a pool large enough for the view there is one pass. A region of the
+// image (a slice of a frame the daemon draws in slices) is drawn under a scissor. Needs a current
 // EglContext on the calling thread; render thread only.
 #include "render/BrickPlan.h"
 #include "render/BrickPool.h"
@@ -81,7 +82,8 @@ class Raycaster final : public Renderer, public GpuResidency {
     std::vector<std::uint64_t> fillBatch(const BrickPlan& plan, std::size_t& next,
                                          std::uint64_t levelFirst, brickstore::BrickCache& cache,
                                          std::vector<std::int32_t>& pages);
-    void bindFrame(std::size_t pageInts, std::uint64_t brickCount, const RenderOptions& options);
+    /// Binds the frame's buffers and targets; `feedback`: rays record the bricks they enter.
+    void bindFrame(std::size_t pageInts, std::uint64_t brickCount, bool feedback);
     /// Draws `plan` in front-to-back batches that fit the pool; `pass` counts the passes.
     void drawBatches(const BrickPlan& plan, std::uint64_t levelFirst, brickstore::BrickCache& cache,
                      std::vector<std::int32_t>& pages, int& pass, FrameStats& stats);
@@ -103,7 +105,9 @@ class Raycaster final : public Renderer, public GpuResidency {
     bool prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, std::uint64_t scene,
                           const RenderOptions& options, const OccupancyTrees* octree,
                           FrameStats& stats);
-    Image readBack(int passes, std::uint32_t width, std::uint32_t height, FrameStats& stats);
+    /// The pixels of `region` (of an image `imageHeight` rows high) after `passes` passes.
+    Image readBack(int passes, const PixelRect& region, std::uint32_t imageHeight,
+                   FrameStats& stats);
     std::uint32_t chooseLevel(const brickstore::BrickStore& store,
                               const TransferFunctionTable& table, const ViewBasis& view,
                               const RenderOptions& options);

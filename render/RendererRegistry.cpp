@@ -16,6 +16,7 @@ const RendererRegistry& RendererRegistry::builtin() {
         r.add({.name = "gpu",
                .description = "GPU raycaster (OpenGL 4.5)",
                .needsGl = true,
+               .regions = true,
                .create = [] { return std::make_unique<Raycaster>(); }});
         r.add({.name = "cpu", .description = "CPU raycaster", .regions = true, .create = [] {
                    return std::make_unique<CpuRaycaster>();

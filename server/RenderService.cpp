@@ -836,12 +836,15 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     render::Renderer& renderer = rendererFor(slot, d);
     const auto start = Clock::now();
     // Speeds measured, per renderer: whole frames against their upper-bound cost (whether to
-    // slice), slices against their pixels' estimated samples (how large a slice is).
+    // slice), slices against their pixels' estimated samples (how large a slice is). The
+    // estimate is an upper bound whose truth varies across an image (skipping, early ray
+    // termination, rays that miss): a slower speed is taken at once, so that a slice that ran
+    // long is not followed by another, and a faster one is approached by halves.
     auto calibrate = [&](std::map<std::string, double, std::less<>>& rates, double cost,
                          double ms) {
         const double perMs = cost / std::max(ms, 0.01);
         auto [it, fresh] = rates.try_emplace(d.kind->name, perMs);
-        if (!fresh) it->second = 0.5 * (it->second + perMs);
+        if (!fresh) it->second = perMs < it->second ? perMs : 0.5 * (it->second + perMs);
     };
     if (!d.sliced) {
         d.image = renderer.render(scene, d.view, d.options, d.stats);

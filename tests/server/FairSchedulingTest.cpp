@@ -5,7 +5,7 @@
 #include "ServerTestSupport.h"
 
 #include "../render/RenderTestSupport.h"
-#include "render/CpuRaycaster.h"
+#include "render/RendererRegistry.h"
 #include "render/TransferFunction.h"
 #include "render/View.h"
 #include "server/ViewRequest.h"
@@ -57,9 +57,47 @@ class FairScheduling : public ::testing::Test {
             if (k == name) return v;
         return -1;
     }
+    /// A 192^2 frame of `renderer` (registry name `name`) drawn by the daemon in 10 ms slices
+    /// is the frame its renderer draws whole in one call, byte for byte.
+    static void expectSlicedFrameIsWhole(protocol::Renderer renderer, const char* name) {
+        DaemonConfig c = config();
+        c.sliceMs = 10; // many slices, some a part of a row
+        TestDaemon d(c);
+        client::Client client(d.clientConfig());
+        const auto v = client.openVolume("cthead");
+        protocol::RenderOptions o = smallCpuFrames(192);
+        o.renderer = renderer;
+        o.stepVoxels = 0.25f;
+        o.codec = protocol::Codec::Raw;
+        client.setRenderOptions(o);
+        protocol::SetTransferFunction tfMessage;
+        tfMessage.kind = protocol::TfKind::Preset;
+        tfMessage.preset = "ct-bone";
+        client.setTransferFunction(tfMessage);
+        const auto camera = orbitCamera(v, 40, 1);
+        client.setCamera(camera);
+        client.requestFrame();
+        const auto frame = client.nextFrame();
+        const double slices = counter(client, "frame_slices_total");
+        std::printf("[fair] 192^2 %s frame at step 0.25 in %.0f slices\n", name, slices);
+        EXPECT_GT(slices, 2.0) << "the frame was not sliced: raise its cost";
+
+        // The same frame in one call, as the renderer draws it for any caller.
+        const auto tf = toTransferFunction(tfMessage, sStore->stats, {});
+        render::RenderOptions options = toRenderOptions(o, false);
+        options.shading = shadingFor(o, tfMessage, *tf);
+        const auto whole = render::RendererRegistry::builtin().create(name);
+        render::FrameStats stats;
+        const auto image =
+            whole->render(*sStore->store, *sStore->cache, *tf, toCamera(camera), options, stats);
+        EXPECT_EQ(frame.rgba, render::toRgba8(image)) << "slices changed pixels";
+    }
     static bc::test::TestStore* sStore;
 };
 bc::test::TestStore* FairScheduling::sStore = nullptr;
+
+/// The same, for frames drawn through GL (label "gl").
+class FairSchedulingGl : public FairScheduling {};
 
 TEST_F(FairScheduling, AFrameOverTheCostCapIsRefusedNamingTheCap) {
     if (!sStore) return bc::test::missingData("scan cthead");
@@ -133,36 +171,58 @@ TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionG
 
 TEST_F(FairScheduling, ASlicedFrameIsTheFrameDrawnWhole) {
     if (!sStore) return bc::test::missingData("scan cthead");
-    DaemonConfig c = config();
-    c.sliceMs = 10; // many slices, some a part of a row
-    TestDaemon d(c);
-    client::Client client(d.clientConfig());
-    const auto v = client.openVolume("cthead");
-    protocol::RenderOptions o = smallCpuFrames(192);
-    o.stepVoxels = 0.25f;
-    o.codec = protocol::Codec::Raw;
-    client.setRenderOptions(o);
-    protocol::SetTransferFunction tfMessage;
-    tfMessage.kind = protocol::TfKind::Preset;
-    tfMessage.preset = "ct-bone";
-    client.setTransferFunction(tfMessage);
-    const auto camera = orbitCamera(v, 40, 1);
-    client.setCamera(camera);
-    client.requestFrame();
-    const auto frame = client.nextFrame();
-    const double slices = counter(client, "frame_slices_total");
-    std::printf("[fair] 192^2 CPU frame at step 0.25 in %.0f slices\n", slices);
-    EXPECT_GT(slices, 2.0) << "the frame was not sliced: raise its cost";
+    expectSlicedFrameIsWhole(protocol::Renderer::CpuRaycaster, "cpu");
+}
 
-    // The same frame in one call, as the renderer draws it for any caller.
-    const auto tf = toTransferFunction(tfMessage, sStore->stats, {});
-    render::RenderOptions options = toRenderOptions(o, false);
-    options.shading = shadingFor(o, tfMessage, *tf);
-    render::CpuRaycaster whole;
-    render::FrameStats stats;
-    const auto image =
-        whole.render(*sStore->store, *sStore->cache, *tf, toCamera(camera), options, stats);
-    EXPECT_EQ(frame.rgba, render::toRgba8(image)) << "slices changed pixels";
+// The GPU raycaster draws regions too (a scissor): its long frames are sliced like the CPU's.
+TEST_F(FairSchedulingGl, ASlicedGpuFrameIsTheFrameDrawnWhole) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    bc::test::glContext(); // for the frame drawn whole here
+    expectSlicedFrameIsWhole(protocol::Renderer::GpuRaycaster, "gpu");
+}
+
+TEST_F(FairSchedulingGl, AHeavyGpuFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionGoes) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    TestDaemon d(config());
+    client::Client light(d.clientConfig());
+    const auto v = light.openVolume("cthead");
+    light.setRenderOptions(smallCpuFrames(64));
+    {
+        // 2048^2 at step 0.05: about 31 Gi samples, minutes on llvmpipe, within the default
+        // cap (before the GPU raycaster drew regions, it was over the cap of whole frames).
+        client::Client heavy(d.clientConfig());
+        heavy.openVolume("cthead");
+        protocol::RenderOptions o = smallCpuFrames(2048);
+        o.renderer = protocol::Renderer::GpuRaycaster;
+        o.stepVoxels = 0.05f;
+        heavy.setRenderOptions(o);
+        heavy.setCamera(orbitCamera(v, 30, 1));
+        heavy.requestFrame();
+        std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the heavy frame starts
+        double worstGapMs = 0;
+        auto last = Clock::now();
+        std::uint32_t frames = 0;
+        for (const auto until = last + std::chrono::seconds(6); Clock::now() < until; ++frames) {
+            light.setCamera(orbitCamera(v, 5.0 * frames, frames + 1));
+            light.requestFrame();
+            light.nextFrame();
+            const auto now = Clock::now();
+            worstGapMs = std::max(worstGapMs, msBetween(last, now));
+            last = now;
+        }
+        std::printf("[fair] %u light frames in 6 s beside a 2048^2 GPU frame, worst gap %.0f ms, "
+                    "%.0f slices so far\n",
+                    frames, worstGapMs, counter(light, "frame_slices_total"));
+        EXPECT_LT(worstGapMs, 3000.0) << "the heavy frame stalled the other session";
+        EXPECT_GT(counter(light, "frame_slices_total"), 10.0) << "the heavy frame was not sliced";
+        EXPECT_EQ(counter(light, "frames_refused_total"), 0.0);
+    } // the heavy client disconnects mid-frame
+    double cancelled = 0;
+    for (int i = 0; i < 50 && cancelled < 1; ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        cancelled = counter(light, "frames_cancelled_total");
+    }
+    EXPECT_EQ(cancelled, 1.0) << "the frame of a session that has gone was not dropped";
 }
 
 TEST_F(FairScheduling, ASessionThatNeverReadsHoldsAtMostItsQueueBytes) {

@@ -1,0 +1,109 @@
+// RenderOptions::region on the GPU raycaster: a region is drawn under a scissor on the
+// full-size passes, so each of its pixels is exactly that pixel of the whole frame, with the
+// pool large or small (one pass or many); a slice neither uses nor disturbs what whole frames
+// keep (occlusion frustums, ray guidance).
+#include "RenderTestSupport.h"
+#include "render/Raycaster.h"
+
+namespace bc::render {
+namespace {
+
+/// The frame assembled from regions: whole rows, then runs of a row, as the daemon slices.
+Image gpuInRegions(Raycaster& r, test::TestStore& t, const TransferFunction& tf,
+                   const Camera& camera, RenderOptions o, std::vector<FrameStats>* perRegion) {
+    Image frame(o.width, o.height);
+    const std::vector<PixelRect> regions = {
+        {0, 0, o.width, 5}, // rows
+        {0, 5, 7, 1},
+        {7, 5, o.width - 7, 1},            // a row in two runs
+        {0, 6, o.width, o.height - 6 - 1}, // rows
+        {0, o.height - 1, 1, 1},
+        {1, o.height - 1, o.width - 1, 1}, // one pixel, then the rest
+    };
+    for (const PixelRect& rect : regions) {
+        o.region = rect;
+        FrameStats stats;
+        const Image part = r.render(*t.store, *t.cache, tf, camera, o, stats);
+        EXPECT_EQ(part.width, rect.width);
+        EXPECT_EQ(part.height, rect.height);
+        EXPECT_STREQ(stats.occlusionReason, "a slice of a frame");
+        EXPECT_EQ(stats.bricksDeferred, 0u);
+        if (perRegion) perRegion->push_back(stats);
+        for (std::uint32_t y = 0; y < part.height; ++y)
+            std::copy_n(part.pixel(0, y), std::size_t(part.width) * 4,
+                        frame.pixel(rect.x, rect.y + y));
+    }
+    return frame;
+}
+
+std::uint64_t slotBytes(const test::TestStore& t) {
+    const std::uint64_t e = t.store->layout().storedEdge();
+    return e * e * e * brickstore::voxelBytes(t.store->info().volume.type);
+}
+
+TEST(RegionGl, GpuRaycasterDrawsEachPixelOfARegionAsInTheWholeFrame) {
+    test::glContext();
+    auto spec = test::realScan("cthead");
+    if (!spec) return test::missingData("scan cthead");
+    auto t = test::ingestSpec(*spec, {32, 2, 8});
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
+    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
+    RenderOptions o;
+    o.width = 61; // odd sizes: no region lines up with anything
+    o.height = 47;
+    // A pool of every brick (one pass), and one of 3 bricks (many passes, each a batch).
+    const std::uint64_t bricks = LevelGeometry::of(*t->store, 0).brickCount();
+    for (const std::uint64_t slots : {bricks, std::uint64_t(3)}) {
+        SCOPED_TRACE(slots);
+        Raycaster gpu({slots * slotBytes(*t)});
+        FrameStats whole;
+        const Image image = gpu.render(*t->store, *t->cache, tf, camera, o, whole);
+        std::vector<FrameStats> parts;
+        const Image sliced = gpuInRegions(gpu, *t, tf, camera, o, &parts);
+        EXPECT_EQ(compareImages(sliced, image).maxAbs, 0.0) << "a region changed pixels";
+        double alpha = 0;
+        for (std::size_t i = 3; i < image.rgba.size(); i += 4)
+            alpha += image.rgba[i];
+        EXPECT_GT(alpha, 0.05 * o.width * o.height) << "the view shows almost nothing";
+        // The slices take the whole frame's samples between them, no more.
+        std::uint64_t samples = 0;
+        for (const FrameStats& s : parts)
+            samples += s.samples;
+        EXPECT_EQ(samples, whole.samples);
+        if (slots == 3) {
+            EXPECT_GT(parts[3].batches, 1u) << "the small pool drew one batch";
+        }
+        // The one-pixel region plans fewer bricks than the whole view.
+        EXPECT_LT(parts[4].bricksVisited, whole.bricksVisited);
+    }
+}
+
+// Slices between whole frames leave the whole frames as they were: the frame after them still
+// starts its rays at the previous whole frame's occlusion frustums and is the image it would
+// have been without the slices.
+TEST(RegionGl, SlicesLeaveOcclusionFrustumsToWholeFrames) {
+    test::glContext();
+    auto spec = test::realScan("cthead");
+    if (!spec) return test::missingData("scan cthead");
+    auto t = test::ingestSpec(*spec, {32, 2, 8});
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
+    const Box box = LevelGeometry::of(*t->store, 0).box;
+    RenderOptions o;
+    o.width = o.height = 128; // rays denser than the occupancy cells
+    Raycaster withSlices, without;
+    FrameStats s;
+    for (Raycaster* r : {&withSlices, &without})
+        r->render(*t->store, *t->cache, tf, Camera::orbit(box, 30, 20), o, s);
+    gpuInRegions(withSlices, *t, tf, Camera::orbit(box, 120, 20), o, nullptr);
+    FrameStats a, b;
+    const Image afterSlices =
+        withSlices.render(*t->store, *t->cache, tf, Camera::orbit(box, 32, 20), o, a);
+    const Image plain = without.render(*t->store, *t->cache, tf, Camera::orbit(box, 32, 20), o, b);
+    EXPECT_TRUE(a.occlusionUsed) << a.occlusionReason;
+    EXPECT_TRUE(b.occlusionUsed) << b.occlusionReason;
+    EXPECT_EQ(a.samples, b.samples);
+    EXPECT_EQ(compareImages(afterSlices, plain).maxAbs, 0.0);
+}
+
+} // namespace
+} // namespace bc::render
