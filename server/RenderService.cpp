@@ -209,7 +209,9 @@ struct FrameDrawing {
     std::uint64_t costPerPixel = 0; ///< estimated samples of one ray (the longest)
     std::uint64_t cost = 0;         ///< of the whole frame
     bool sliced = false;
-    render::Image image;         ///< the whole frame, filled slice by slice
+    /// The frame drawn, 8-bit RGBA (a sliced frame's slices are converted as they come: at
+    /// 4096^2 that is 64 MiB where float pixels would take 256).
+    std::vector<std::uint8_t> rgba8;
     std::uint64_t nextPixel = 0; ///< row-major cursor
     // Slices are sized by each pixel's samples: its ray's length inside the level's box over the
     // step (plus one for the ray), so rows that miss the volume are not taken for dense ones.
@@ -730,9 +732,12 @@ render::PixelRect nextSlice(FrameDrawing& d, double budget, double& cost) {
     return {x, y, n, 1};
 }
 
-void paste(render::Image& frame, const render::Image& part, const render::PixelRect& at) {
+void paste(std::vector<std::uint8_t>& frame, std::uint32_t frameWidth, const render::Image& part,
+           const render::PixelRect& at) {
+    const auto bytes = render::toRgba8(part);
+    const std::size_t row = std::size_t(part.width) * 4;
     for (std::uint32_t y = 0; y < part.height; ++y)
-        std::copy_n(part.pixel(0, y), std::size_t(part.width) * 4, frame.pixel(at.x, at.y + y));
+        std::copy_n(&bytes[y * row], row, &frame[(std::size_t(at.y + y) * frameWidth + at.x) * 4]);
 }
 
 /// What the next slice adds to the frame's statistics (the plan is the whole view's, the same
@@ -800,7 +805,7 @@ void RenderService::prepare(FrameDrawing& d) {
     const double perMs = rate == mCostPerMs.end() ? kFirstCostPerMs : rate->second;
     d.sliced = sliceable && cost / perMs > 1.5 * mConfig.sliceMs;
     if (d.sliced) {
-        d.image = render::Image(d.options.width, d.options.height);
+        d.rgba8.assign(std::size_t(d.options.width) * d.options.height * 4, 0);
         d.box = g.box;
         d.stepMm = d.options.stepVoxels * g.minSpacing();
         d.rowCost.assign(d.options.height, -1.0);
@@ -847,7 +852,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
         if (!fresh) it->second = perMs < it->second ? perMs : 0.5 * (it->second + perMs);
     };
     if (!d.sliced) {
-        d.image = renderer.render(scene, d.view, d.options, d.stats);
+        d.rgba8 = render::toRgba8(renderer.render(scene, d.view, d.options, d.stats));
         calibrate(mCostPerMs, double(d.cost), msSince(start));
         if (render::GpuResidency* gpu = renderer.gpuResidency()) {
             auto& mine = mRenderers->of(slot);
@@ -869,7 +874,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     options.region = nextSlice(d, d.sliceTargetMs * perMs, cost);
     render::FrameStats stats;
     const render::Image part = renderer.render(scene, d.view, options, stats);
-    paste(d.image, part, options.region);
+    paste(d.rgba8, d.options.width, part, options.region);
     accumulate(d.stats, stats, d.slices == 0);
     // The speed of the rays alone: loading bricks is a cost per slice, not per pixel (when the
     // frame's bricks exceed the host budget, a brick whose footprint spans several slices is
@@ -952,9 +957,9 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     const auto& s = d.job.state;
     const auto& o = s.options;
     const render::FrameStats& stats = d.stats;
-    render::Image image = std::move(d.image);
-    if (!d.job.refined) image = interactiveUpscale(image, o.width, o.height);
-    const auto rgba8 = render::toRgba8(image);
+    std::vector<std::uint8_t> rgba8 = std::move(d.rgba8);
+    if (!d.job.refined)
+        rgba8 = interactiveUpscale(rgba8, d.options.width, d.options.height, o.width, o.height);
     protocol::Frame frame;
     frame.header.renderMs = float(msSince(d.start));
     auto encoded = slot.mEncoder.encode(rgba8, o.width, o.height, o.codec, o.codecQuality);

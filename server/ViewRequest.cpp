@@ -83,15 +83,15 @@ bool shadingFor(const protocol::RenderOptions& options,
     return tf.shading().value_or(true);
 }
 
-render::Image interactiveUpscale(const render::Image& half, std::uint32_t width,
-                                 std::uint32_t height) {
-    render::Image out(width, height);
+std::vector<std::uint8_t> interactiveUpscale(const std::vector<std::uint8_t>& half,
+                                             std::uint32_t halfWidth, std::uint32_t halfHeight,
+                                             std::uint32_t width, std::uint32_t height) {
+    std::vector<std::uint8_t> out(std::size_t(width) * height * 4);
     for (std::uint32_t y = 0; y < height; ++y) {
-        const std::uint32_t sy = std::min(y / 2, half.height - 1);
-        for (std::uint32_t x = 0; x < width; ++x) {
-            const float* s = half.pixel(std::min(x / 2, half.width - 1), sy);
-            std::copy(s, s + 4, out.pixel(x, y));
-        }
+        const std::uint8_t* row = &half[std::size_t(std::min(y / 2, halfHeight - 1)) * halfWidth * 4];
+        std::uint8_t* to = &out[std::size_t(y) * width * 4];
+        for (std::uint32_t x = 0; x < width; ++x)
+            std::copy_n(row + std::size_t(std::min(x / 2, halfWidth - 1)) * 4, 4, to + 4 * x);
     }
     return out;
 }

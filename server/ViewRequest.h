@@ -12,6 +12,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace bc::server {
 
@@ -39,8 +40,10 @@ toTransferFunction(const protocol::SetTransferFunction& message,
 bool shadingFor(const protocol::RenderOptions& options,
                 const protocol::SetTransferFunction& tfMessage, const render::TransferFunction& tf);
 
-/// An interactive frame brought back to the requested size (pixel replication, exact).
-render::Image interactiveUpscale(const render::Image& half, std::uint32_t width,
-                                 std::uint32_t height);
+/// An interactive frame (8-bit RGBA, halfWidth x halfHeight) brought back to the requested
+/// size (pixel replication, exact).
+std::vector<std::uint8_t> interactiveUpscale(const std::vector<std::uint8_t>& half,
+                                             std::uint32_t halfWidth, std::uint32_t halfHeight,
+                                             std::uint32_t width, std::uint32_t height);
 
 } // namespace bc::server

@@ -58,8 +58,10 @@ class FairScheduling : public ::testing::Test {
         return -1;
     }
     /// A 192^2 frame of `renderer` (registry name `name`) drawn by the daemon in 10 ms slices
-    /// is the frame its renderer draws whole in one call, byte for byte.
-    static void expectSlicedFrameIsWhole(protocol::Renderer renderer, const char* name) {
+    /// is the frame its renderer draws whole in one call, byte for byte; an interactive one is
+    /// the half-size frame with each pixel replicated 2x2.
+    static void expectSlicedFrameIsWhole(protocol::Renderer renderer, const char* name,
+                                         bool interactive = false) {
         DaemonConfig c = config();
         c.sliceMs = 10; // many slices, some a part of a row
         TestDaemon d(c);
@@ -67,7 +69,8 @@ class FairScheduling : public ::testing::Test {
         const auto v = client.openVolume("cthead");
         protocol::RenderOptions o = smallCpuFrames(192);
         o.renderer = renderer;
-        o.stepVoxels = 0.25f;
+        o.stepVoxels = interactive ? 0.1f : 0.25f;
+        if (interactive) o.quality = protocol::Quality::Interactive;
         o.codec = protocol::Codec::Raw;
         client.setRenderOptions(o);
         protocol::SetTransferFunction tfMessage;
@@ -79,18 +82,31 @@ class FairScheduling : public ::testing::Test {
         client.requestFrame();
         const auto frame = client.nextFrame();
         const double slices = counter(client, "frame_slices_total");
-        std::printf("[fair] 192^2 %s frame at step 0.25 in %.0f slices\n", name, slices);
+        std::printf("[fair] 192^2 %s %s frame at step %.2f in %.0f slices\n", name,
+                    interactive ? "interactive" : "refined", double(o.stepVoxels), slices);
         EXPECT_GT(slices, 2.0) << "the frame was not sliced: raise its cost";
 
         // The same frame in one call, as the renderer draws it for any caller.
         const auto tf = toTransferFunction(tfMessage, sStore->stats, {});
-        render::RenderOptions options = toRenderOptions(o, false);
+        render::RenderOptions options = toRenderOptions(o, interactive);
         options.shading = shadingFor(o, tfMessage, *tf);
         const auto whole = render::RendererRegistry::builtin().create(name);
         render::FrameStats stats;
-        const auto image =
-            whole->render(*sStore->store, *sStore->cache, *tf, toCamera(camera), options, stats);
-        EXPECT_EQ(frame.rgba, render::toRgba8(image)) << "slices changed pixels";
+        const auto image = render::toRgba8(
+            whole->render(*sStore->store, *sStore->cache, *tf, toCamera(camera), options, stats));
+        if (!interactive) {
+            EXPECT_EQ(frame.rgba, image) << "slices changed pixels";
+            return;
+        }
+        ASSERT_EQ(options.width, 96u);
+        ASSERT_EQ(frame.rgba.size(), std::size_t(192) * 192 * 4);
+        std::size_t wrong = 0;
+        for (std::uint32_t y = 0; y < 192; ++y)
+            for (std::uint32_t x = 0; x < 192; ++x)
+                wrong += !std::equal(&frame.rgba[(y * 192 + x) * 4],
+                                     &frame.rgba[(y * 192 + x) * 4] + 4,
+                                     &image[((y / 2) * 96 + x / 2) * 4]);
+        EXPECT_EQ(wrong, 0u) << "pixels that are not their half-size pixel";
     }
     static bc::test::TestStore* sStore;
 };
@@ -172,6 +188,11 @@ TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionG
 TEST_F(FairScheduling, ASlicedFrameIsTheFrameDrawnWhole) {
     if (!sStore) return bc::test::missingData("scan cthead");
     expectSlicedFrameIsWhole(protocol::Renderer::CpuRaycaster, "cpu");
+}
+
+TEST_F(FairScheduling, ASlicedInteractiveFrameIsTheHalfSizeFrameScaledUp) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    expectSlicedFrameIsWhole(protocol::Renderer::CpuRaycaster, "cpu", true);
 }
 
 // The GPU raycaster draws regions too (a scissor): its long frames are sliced like the CPU's.
