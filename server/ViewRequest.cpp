@@ -88,7 +88,8 @@ std::vector<std::uint8_t> interactiveUpscale(const std::vector<std::uint8_t>& ha
                                              std::uint32_t width, std::uint32_t height) {
     std::vector<std::uint8_t> out(std::size_t(width) * height * 4);
     for (std::uint32_t y = 0; y < height; ++y) {
-        const std::uint8_t* row = &half[std::size_t(std::min(y / 2, halfHeight - 1)) * halfWidth * 4];
+        const std::uint8_t* row =
+            &half[std::size_t(std::min(y / 2, halfHeight - 1)) * halfWidth * 4];
         std::uint8_t* to = &out[std::size_t(y) * width * 4];
         for (std::uint32_t x = 0; x < width; ++x)
             std::copy_n(row + std::size_t(std::min(x / 2, halfWidth - 1)) * 4, 4, to + 4 * x);

@@ -103,9 +103,9 @@ class FairScheduling : public ::testing::Test {
         std::size_t wrong = 0;
         for (std::uint32_t y = 0; y < 192; ++y)
             for (std::uint32_t x = 0; x < 192; ++x)
-                wrong += !std::equal(&frame.rgba[(y * 192 + x) * 4],
-                                     &frame.rgba[(y * 192 + x) * 4] + 4,
-                                     &image[((y / 2) * 96 + x / 2) * 4]);
+                wrong +=
+                    !std::equal(&frame.rgba[(y * 192 + x) * 4], &frame.rgba[(y * 192 + x) * 4] + 4,
+                                &image[((y / 2) * 96 + x / 2) * 4]);
         EXPECT_EQ(wrong, 0u) << "pixels that are not their half-size pixel";
     }
     static bc::test::TestStore* sStore;
