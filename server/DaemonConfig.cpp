@@ -74,12 +74,12 @@ write_queue_mb = 16
 # (1..65536) is answered OutOfRange naming this key: 64 is about an hour of the CPU reference
 # renderer on two cores.
 max_frame_gsamples = 64
-# The same for the renderers that draw whole frames only (gpu, splat, splat-gpu), which cannot
-# be sliced (1..65536).
+# The same for a renderer that draws whole frames only and so cannot be sliced (none of the
+# built-in ones: gpu, cpu, reference, splat and splat-gpu all draw in slices) (1..65536).
 max_unsliced_gsamples = 4
-# The CPU raycasters draw a frame that would take longer than this in slices of about this
-# long (10..10000 ms); sessions take turns between slices, and a frame whose session has gone
-# or whose camera has moved on is dropped at the next slice.
+# A frame that would take longer than this is drawn in slices of about this long (10..10000
+# ms); sessions take turns between slices, and a frame whose session has gone or whose camera
+# has moved on is dropped at the next slice.
 slice_ms = 50
 # While the render thread is idle, upload the bricks of each GPU session's next view (its
 # camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick

@@ -7,8 +7,9 @@
 // variable away.
 //
 // Fairness: every frame's cost (pixels x samples per ray, an upper bound) is checked against a
-// cap before it is drawn; a frame of a renderer that draws regions (the CPU raycasters) and
-// would take longer than a slice is drawn in slices of about RenderServiceConfig::sliceMs, and
+// cap before it is drawn; a frame of a renderer that draws regions (every built-in renderer)
+// and would take longer than a slice is drawn in slices of about RenderServiceConfig::sliceMs
+// (row bands, or runs of one row: render::RenderOptions::region), and
 // the sessions take turns between slices, so a heavy frame costs every other session at most
 // one slice per turn. A frame whose session has gone, or whose camera has been superseded, is
 // dropped at its next slice; stopping the service stops within one slice.
@@ -130,7 +131,8 @@ struct RenderServiceConfig {
     std::uint64_t classificationBudgetBytes = 128ull << 20;
     /// Cost caps (samples: pixels x samples of the longest ray, or the splatters' voxels):
     /// a frame over its cap is refused with OutOfRange. Renderers that draw regions are sliced
-    /// and take `maxFrameSamples`; the others draw whole frames and take `maxUnslicedSamples`.
+    /// and take `maxFrameSamples`; a renderer that draws whole frames only (none of the
+    /// built-in ones; RendererKind::regions) takes `maxUnslicedSamples`.
     std::uint64_t maxFrameSamples = 64ull << 30;
     std::uint64_t maxUnslicedSamples = 4ull << 30;
     std::uint32_t sliceMs = 50; ///< target length of one slice of a long frame
