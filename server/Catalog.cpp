@@ -117,34 +117,42 @@ Catalog::Catalog(const DaemonConfig& config, Log& log) : mHostBudgetBytes(config
 }
 
 std::shared_ptr<Volume> Catalog::reopen(const CatalogEntry& entry, const std::string& storeDir,
-                                        const std::string& verb, Log& log) const {
+                                        const std::string& verb, CatalogUpdate& update) {
     if (entry.optional && !entry.store.empty() && !std::filesystem::exists(entry.store)) {
-        log.error("catalog reload: " + entry.name + " left out: optional store " + entry.store +
-                  " is missing");
+        update.log.emplace_back(true, "catalog reload: " + entry.name +
+                                          " left out: optional store " + entry.store +
+                                          " is missing");
         return nullptr;
     }
     try {
         auto volume = open(entry, storeDir);
-        log.info("catalog reload: " + entry.name + " " + verb + " <- " + volume->store->path());
+        update.log.emplace_back(false, "catalog reload: " + entry.name + " " + verb + " <- " +
+                                           volume->store->path());
         return volume;
     } catch (const std::exception& e) {
-        log.error("catalog reload: " + entry.name + " left out: " + e.what());
+        update.log.emplace_back(true, "catalog reload: " + entry.name + " left out: " + e.what());
         return nullptr;
     }
 }
 
-CatalogUpdate Catalog::prepareReload(const DaemonConfig& config, Log& log) const {
+void CatalogUpdate::writeLog(Log& to) const {
+    for (const auto& [error, line] : log)
+        error ? to.error(line) : to.info(line);
+}
+
+std::map<std::string, std::shared_ptr<Volume>> Catalog::snapshot() const {
+    std::lock_guard lock(mMutex);
+    return mByName;
+}
+
+CatalogUpdate Catalog::prepareReload(std::map<std::string, std::shared_ptr<Volume>> old,
+                                     const DaemonConfig& config) {
     CatalogUpdate update;
-    std::map<std::string, std::shared_ptr<Volume>> old;
-    {
-        std::lock_guard lock(mMutex);
-        old = mByName;
-    }
     for (const auto& entry : config.volumes) {
         const auto it = old.find(entry.name);
         std::shared_ptr<Volume> volume;
         if (it == old.end()) {
-            volume = reopen(entry, config.storeDir, "added", log);
+            volume = reopen(entry, config.storeDir, "added", update);
         } else {
             const auto failure = it->second->failure();
             const auto change = failure ? std::nullopt : it->second->store->fileChange();
@@ -155,7 +163,7 @@ CatalogUpdate Catalog::prepareReload(const DaemonConfig& config, Log& log) const
                 const std::string why = failure  ? "it was out of service"
                                         : change ? "store " + *change
                                                  : "entry changed";
-                volume = reopen(entry, config.storeDir, "reopened (" + why + ")", log);
+                volume = reopen(entry, config.storeDir, "reopened (" + why + ")", update);
                 if (volume)
                     update.reopened.emplace_back(it->second, volume);
                 else
@@ -166,7 +174,7 @@ CatalogUpdate Catalog::prepareReload(const DaemonConfig& config, Log& log) const
         if (volume) update.volumes.push_back(std::move(volume));
     }
     for (auto& [name, volume] : old) {
-        log.info("catalog reload: " + name + " removed");
+        update.log.emplace_back(false, "catalog reload: " + name + " removed");
         update.removed.push_back(std::move(volume));
     }
     for (const auto& preset : config.presets)
@@ -175,6 +183,7 @@ CatalogUpdate Catalog::prepareReload(const DaemonConfig& config, Log& log) const
 }
 
 void Catalog::apply(const CatalogUpdate& update, Log& log) {
+    update.writeLog(log);
     log.info("catalog reload: " + std::to_string(update.unchanged) + " volume(s) unchanged, " +
              std::to_string(update.volumes.size()) + " served");
     std::lock_guard lock(mMutex);
@@ -209,8 +218,7 @@ bool sameShape(const Volume& from, const Volume& to) {
            a.spacingMm == b.spacingMm;
 }
 
-std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry,
-                                      const std::string& storeDir) const {
+std::shared_ptr<Volume> Catalog::open(const CatalogEntry& entry, const std::string& storeDir) {
     const std::string path = entry.store.empty() ? generatedStore(entry, storeDir) : entry.store;
     auto v = std::make_shared<Volume>();
     v->name = entry.name;

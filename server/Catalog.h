@@ -60,6 +60,11 @@ struct CatalogUpdate {
     std::vector<std::pair<std::shared_ptr<Volume>, std::shared_ptr<Volume>>> reopened;
     std::map<std::string, std::string> presets;
     std::size_t unchanged = 0;
+    /// What the reload has to say (a line per volume added, reopened, removed or left out;
+    /// error: true), written to the daemon's Log by Catalog::apply: the worker that opens the
+    /// stores may outlive a daemon that stopped while it waited, and with it that Log.
+    std::vector<std::pair<bool, std::string>> log;
+    void writeLog(Log& to) const;
 };
 
 class Catalog;
@@ -94,10 +99,14 @@ class Catalog {
     /// that are out of service (a new store instance); logs one line per volume added,
     /// reopened, removed or left out. A volume that fails to open is left out (logged); the others
     /// still apply. Touches nothing served: call it off the network thread (opening a store
-    /// reads its index; a generated one may be ingested). One reload at a time.
-    CatalogUpdate prepareReload(const DaemonConfig& config, Log& log) const;
-    /// The second half: serves `update`'s volumes and presets from now on; logs one line
-    /// with the counts. Sessions on update.removed and on the old side
+    /// reads its index; a generated one may be ingested). One reload at a time. Static: it
+    /// works on `served` (a snapshot()) alone, so a worker may go on after the catalog is gone.
+    static CatalogUpdate prepareReload(std::map<std::string, std::shared_ptr<Volume>> served,
+                                       const DaemonConfig& config);
+    /// The volumes served now, by name.
+    std::map<std::string, std::shared_ptr<Volume>> snapshot() const;
+    /// The second half: serves `update`'s volumes and presets from now on; logs update.log and
+    /// one line with the counts. Sessions on update.removed and on the old side
     /// of update.reopened must be told (moved or sent an Error). Network thread (the one that
     /// leases).
     void apply(const CatalogUpdate& update, Log& log);
@@ -133,10 +142,11 @@ class Catalog {
   private:
     friend class VolumeLease;
     void changeSessions(Volume& volume, int delta);
-    std::shared_ptr<Volume> open(const CatalogEntry& entry, const std::string& storeDir) const;
-    /// A volume of `entry` for a reload, or nullptr (logged) when it cannot be opened.
-    std::shared_ptr<Volume> reopen(const CatalogEntry& entry, const std::string& storeDir,
-                                   const std::string& verb, Log& log) const;
+    static std::shared_ptr<Volume> open(const CatalogEntry& entry, const std::string& storeDir);
+    /// A volume of `entry` for a reload, or nullptr (said in update.log) when it cannot be
+    /// opened.
+    static std::shared_ptr<Volume> reopen(const CatalogEntry& entry, const std::string& storeDir,
+                                          const std::string& verb, CatalogUpdate& update);
     void rebalance(); ///< with mMutex held
 
     std::uint64_t mHostBudgetBytes;

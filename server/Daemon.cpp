@@ -9,8 +9,13 @@
 #include "server/detail/MetricsEndpoint.h"
 #include "server/detail/Session.h"
 
+#include <chrono>
+#include <condition_variable>
 #include <csignal>
+#include <functional>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <thread>
 #include <utility>
 
@@ -67,8 +72,41 @@ struct Daemon::Impl {
     }
 
     ~Impl() {
-        if (reloader.joinable()) reloader.join(); // before io goes: it posts its result there
+        if (!reloader.joinable()) return;
+        // A reload may wait in a store's open() for as long as its file system likes (a FIFO,
+        // a hung network mount): stopping waits a moment, then leaves it behind. The worker
+        // holds only what is its own (the channel, a snapshot of the volumes), so it may end
+        // after the daemon; its result is dropped.
+        std::unique_lock lock(reloadChannel->mutex);
+        if (reloadChannel->finished.wait_for(lock, kReloadWaitAtStop,
+                                             [&] { return reloadChannel->done; })) {
+            lock.unlock();
+            reloader.join();
+            return;
+        }
+        reloadChannel->deliver = nullptr;
+        lock.unlock();
+        log.error("stopping while a catalog reload still waits to open a store: the reload is "
+                  "abandoned");
+        reloader.detach();
     }
+
+    /// What the reload worker hands the network thread.
+    struct PreparedReload {
+        DaemonConfig config;
+        CatalogUpdate update;
+        std::string error; ///< the config failed to load: nothing changes
+    };
+
+    /// How a reload's worker reaches the daemon: `deliver` posts its result to the network
+    /// thread until the daemon, stopping, clears it.
+    struct ReloadChannel {
+        std::mutex mutex;
+        std::condition_variable finished;
+        bool done = false;
+        std::function<void(std::shared_ptr<PreparedReload>)> deliver;
+    };
+    static constexpr auto kReloadWaitAtStop = std::chrono::seconds(1);
 
     /// Starts a reload: the config file is re-read and its stores opened on a worker thread,
     /// so a slow store stalls no client; the result is applied here (applyReload). A reload
@@ -86,24 +124,25 @@ struct Daemon::Impl {
         }
         reloading = true;
         if (reloader.joinable()) reloader.join(); // it has posted its result: done
-        reloader = std::thread([this] {
-            auto result = std::make_shared<PreparedReload>();
-            try {
-                result->config = DaemonConfig::load(config.file);
-                result->update = catalog.prepareReload(result->config, log);
-            } catch (const std::exception& e) {
-                result->error = e.what();
-            }
+        reloadChannel = std::make_shared<ReloadChannel>();
+        reloadChannel->deliver = [this](std::shared_ptr<PreparedReload> result) {
             asio::post(io, [this, result] { applyReload(*result); });
-        });
+        };
+        reloader = std::thread(
+            [channel = reloadChannel, file = config.file, served = catalog.snapshot()]() mutable {
+                auto result = std::make_shared<PreparedReload>();
+                try {
+                    result->config = DaemonConfig::load(file);
+                    result->update = Catalog::prepareReload(std::move(served), result->config);
+                } catch (const std::exception& e) {
+                    result->error = e.what();
+                }
+                std::lock_guard lock(channel->mutex);
+                channel->done = true;
+                if (channel->deliver) channel->deliver(std::move(result));
+                channel->finished.notify_all();
+            });
     }
-
-    /// What the reload worker hands the network thread.
-    struct PreparedReload {
-        DaemonConfig config;
-        CatalogUpdate update;
-        std::string error; ///< the config failed to load: nothing changes
-    };
 
     /// Swaps a prepared reload in and tells the sessions (moved or sent an Error). A config
     /// that failed to load is logged and the catalog kept. Network thread.
@@ -258,6 +297,7 @@ struct Daemon::Impl {
     std::uint64_t nextId = 0, accepted = 0, refused = 0;
     bool draining = false, reloading = false, reloadAgain = false;
     std::thread reloader; ///< the last reload's worker (opens stores off this thread)
+    std::shared_ptr<ReloadChannel> reloadChannel; ///< the last reload's
 };
 
 Daemon::Daemon(DaemonConfig config, Log& log, bool handleSignals)

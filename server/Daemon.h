@@ -37,8 +37,9 @@ class Daemon {
     void stop();
     /// Starts a catalog reload from config.file (what SIGHUP does); thread-safe, returns at
     /// once, and clients keep being served while the stores are opened. A config that fails
-    /// to load is logged and the catalog kept. The destructor waits for a reload in progress
-    /// (a store whose open() hangs delays the exit, not the clients).
+    /// to load is logged and the catalog kept. The destructor waits up to a second for a
+    /// reload in progress, then abandons it (logged): a store whose open() hangs delays
+    /// neither the clients nor the exit.
     void reload();
 
   private:

@@ -230,5 +230,32 @@ TEST(CatalogReload, ClientsAreServedWhileAReloadWaitsForAStoreToOpen) {
     EXPECT_TRUE(waitForCatalog(cc.port, {"keep"}));
 }
 
+// A daemon told to stop while a reload waits in a store's open() (a FIFO here; a hung network
+// mount in the field) exits after a bounded wait and leaves the reload behind.
+TEST(CatalogReload, StoppingDoesNotWaitForAReloadHungInAStoresOpen) {
+    TempDir dir;
+    makeStore(dir.file("keep.bcs"), 32);
+    const std::string config = dir.file("brickcastd.toml");
+    writeConfig(config, {"keep"});
+    ASSERT_EQ(::mkfifo(dir.file("slow.bcs").c_str(), 0600), 0);
+    FifoWriter slow{dir.file("slow.bcs")}; // outlives the daemon: the worker is released after
+    double stopMs = 0;
+    {
+        auto daemon = std::make_unique<TestDaemon>(DaemonConfig::load(config));
+        writeConfig(config, {"keep", "slow"});
+        daemon->daemon->reload();
+        std::this_thread::sleep_for(std::chrono::milliseconds(300)); // the reload reaches open()
+        const auto start = std::chrono::steady_clock::now();
+        daemon.reset(); // stop(), run() returns, the daemon goes
+        stopMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                     .count();
+    }
+    std::printf("[reload] stopped in %.0f ms with a reload waiting in open()\n", stopMs);
+    EXPECT_LT(stopMs, 3000.0) << "the daemon waited for the hung reload";
+    // The reload was still waiting: released now, its worker finds no daemon and ends.
+    EXPECT_TRUE(slow.release()) << "the reload was not waiting in the store's open()";
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+}
+
 } // namespace
 } // namespace bc::server::test
