@@ -740,8 +740,9 @@ void paste(std::vector<std::uint8_t>& frame, std::uint32_t frameWidth, const ren
         std::copy_n(&bytes[y * row], row, &frame[(std::size_t(at.y + y) * frameWidth + at.x) * 4]);
 }
 
-/// What the next slice adds to the frame's statistics (the plan is the whole view's, the same
-/// every slice; samples and times add up).
+/// What the next slice adds to the frame's statistics. Work adds up (samples, uploads, passes,
+/// times); each slice plans the bricks its own rays reach, so a brick count is the largest of
+/// one slice (a lower bound of the frame's: slices share bricks).
 void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool first) {
     if (first) {
         total = slice;
@@ -750,8 +751,18 @@ void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool
     total.samples += slice.samples;
     total.oracleSamples += slice.oracleSamples;
     total.octreeLeaps += slice.octreeLeaps;
+    total.octreeBricksRebuilt += slice.octreeBricksRebuilt;
+    total.octreeRebuildMs += slice.octreeRebuildMs;
+    total.bricksUploaded += slice.bricksUploaded;
+    total.bytesUploaded += slice.bytesUploaded;
+    total.batches += slice.batches;
+    total.bricksCulled = std::min(total.bricksCulled, slice.bricksCulled);
+    total.bricksSkipped = std::max(total.bricksSkipped, slice.bricksSkipped);
+    total.bricksVisited = std::max(total.bricksVisited, slice.bricksVisited);
+    total.bricksConstant = std::max(total.bricksConstant, slice.bricksConstant);
     total.uploadMs += slice.uploadMs;
     total.renderMs += slice.renderMs;
+    total.readbackMs += slice.readbackMs;
     total.totalMs += slice.totalMs;
 }
 
