@@ -78,6 +78,22 @@ inline std::vector<std::uint8_t> readFile(const std::string& path) {
     return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(f), {});
 }
 
+/// Fills `folder` with links to `files` (files of the real scans) but for the one named
+/// `damaged`, which is written from `bytes` (`data()` and `size()`): a damaged copy of that file
+/// among the real others, e.g. one bad slice in a DICOM series. Returns the damaged file's path.
+template <typename Bytes>
+std::string linkWithDamagedFile(const std::filesystem::path& folder,
+                                const std::vector<std::filesystem::path>& files,
+                                const std::string& damaged, const Bytes& bytes) {
+    std::filesystem::create_directories(folder);
+    for (const auto& file : files)
+        if (file.filename() != damaged)
+            std::filesystem::create_symlink(file, folder / file.filename());
+    const std::string path = (folder / damaged).string();
+    writeFile(path, bytes.data(), bytes.size());
+    return path;
+}
+
 /// What a command printed (stdout and stderr together) and its exit status (-1 when it did
 /// not exit normally).
 struct CommandOutput {

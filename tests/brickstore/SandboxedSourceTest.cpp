@@ -1,7 +1,8 @@
 // The parser sandbox (brickstore/readers/detail/SandboxedSource.h) with openers written here:
 // a volume crosses the pipe byte for byte, in every voxel type; and each way a child can end
 // early (an exception, an abort while opening or while streaming, the alarm, the address-space
-// limit) is one FormatError under 1 kB naming the file the parser was reading.
+// limit) is one FormatError under 1 kB naming the file the parser was reading, and quoting the
+// end of what the child printed to its stderr instead of letting it reach ours.
 #include "brickstore/readers/detail/SandboxedSource.h"
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
@@ -11,8 +12,10 @@
 
 #include <chrono>
 #include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <thread>
 #include <vector>
 
@@ -126,6 +129,60 @@ TEST(SandboxedSource, AnAbortWhileStreamingNamesTheSliceFile) {
         [](const ReadingFile& reading) { return std::make_unique<AbortingVolume>(reading, 11); });
     EXPECT_EQ(what.rfind("/data/series/slice-11.dcm: file: the test parser aborted", 0), 0u)
         << what;
+}
+
+// As GDCM's failed assertion: the text printed before the abort ends the error, escaped into one
+// line and cut to its last 300 characters, and is not printed on the process's stderr.
+TEST(SandboxedSource, WhatAnAbortingChildPrintsEndsItsErrorAndNotOurStderr) {
+    testing::internal::CaptureStderr();
+    const std::string what =
+        sandboxError([](const ReadingFile& reading) -> std::unique_ptr<VolumeSource> {
+            reading("/data/series/1-007.dcm");
+            std::fprintf(stderr, "%s\n", std::string(5000, '.').c_str());
+            std::fprintf(stderr, "gdcmX.cxx:375: Read: Assertion `0 && \"Should not happen\"' "
+                                 "failed.\n\t\x01\n");
+            std::abort();
+            return nullptr;
+        });
+    const std::string printed = testing::internal::GetCapturedStderr();
+    EXPECT_EQ(what.rfind("/data/series/1-007.dcm: file: the test parser aborted", 0), 0u) << what;
+    EXPECT_TRUE(contains(what, "its stderr ends: \"...")) << what;
+    EXPECT_TRUE(contains(what, "Assertion `0 && \"Should not happen\"' failed.\\n\\t\\x01\" ["))
+        << what;
+    EXPECT_FALSE(contains(what, std::string(300, '.'))) << what;
+    EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+    EXPECT_FALSE(contains(printed, "Should not happen")) << printed;
+}
+
+// The child's stderr file stops at 1 MiB: a child printing 4 MiB goes on (its writes past it
+// fail) and dies of its own abort, quoted from what was kept.
+TEST(SandboxedSource, AChildPrintingWithoutEndIsBoundedAndGoesOn) {
+    const std::string what = sandboxError([](const ReadingFile&) -> std::unique_ptr<VolumeSource> {
+        const std::string line = std::string(1023, '.') + "\n";
+        for (int i = 0; i < 4096; ++i)
+            std::fputs(line.c_str(), stderr);
+        std::abort();
+    });
+    EXPECT_TRUE(contains(what, "the test parser aborted")) << what;
+    EXPECT_TRUE(contains(what, "its stderr ends: \"...")) << what;
+}
+
+std::size_t openDescriptors() {
+    const std::filesystem::directory_iterator fds("/proc/self/fd");
+    return std::size_t(std::distance(begin(fds), end(fds)));
+}
+
+// An open that fails (no destructor runs after a throwing constructor) closes the pipe and
+// the stderr file of its child.
+TEST(SandboxedSource, AFailedOpenLeavesNoDescriptorOpen) {
+    const std::size_t before = openDescriptors();
+    for (int i = 0; i < 3; ++i) {
+        sandboxError([](const ReadingFile&) -> std::unique_ptr<VolumeSource> { std::abort(); });
+        sandboxError([](const ReadingFile&) -> std::unique_ptr<VolumeSource> {
+            throw FormatError("/data/series/a.dcm", "Rows", "is 0");
+        });
+    }
+    EXPECT_EQ(openDescriptors(), before);
 }
 
 TEST(SandboxedSource, TheAlarmEndsAParseThatTakesTooLong) {

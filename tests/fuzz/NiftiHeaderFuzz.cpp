@@ -22,6 +22,7 @@ namespace {
 
 using namespace bc;
 using fuzz::Bytes;
+using fuzz::gzipBytes;
 
 /// The first `maxBytes` decompressed bytes of a gzip file.
 Bytes gunzipPrefix(const std::string& path, std::size_t maxBytes) {
@@ -32,22 +33,6 @@ Bytes gunzipPrefix(const std::string& path, std::size_t maxBytes) {
     gzclose(file);
     bytes.resize(got > 0 ? std::size_t(got) : 0);
     return bytes;
-}
-
-Bytes gzipBytes(const Bytes& raw) {
-    uLongf bound = compressBound(uLong(raw.size())) + 64;
-    Bytes out(bound);
-    z_stream z{};
-    fuzz::require(deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) == Z_OK,
-                  "deflateInit2");
-    z.next_in = const_cast<Bytes::value_type*>(raw.data());
-    z.avail_in = uInt(raw.size());
-    z.next_out = out.data();
-    z.avail_out = uInt(out.size());
-    fuzz::require(deflate(&z, Z_FINISH) == Z_STREAM_END, "deflate");
-    out.resize(z.total_out);
-    deflateEnd(&z);
-    return out;
 }
 
 template <typename T> T field(const Bytes& b, std::size_t offset) {
@@ -105,16 +90,8 @@ void writeSeeds(const std::string& seeds) {
 } // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    const std::string path = (fuzz::scratchDir() / "volume.nii").string();
-    fuzz::writeFile(path, {data, size});
-    std::unique_ptr<brickstore::VolumeSource> source;
-    try {
-        source = brickstore::openNifti(path);
-    } catch (const brickstore::FormatError&) {
-        return 0;
-    }
-    fuzz::exerciseVolume(*source, path);
-    return 0;
+    return fuzz::fuzzReader(data, size, (fuzz::scratchDir() / "volume.nii").string(),
+                            brickstore::openNifti);
 }
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {

@@ -12,27 +12,11 @@
 #include "brickstore/Readers.h"
 #include "tests/fuzz/ReaderFuzz.h"
 
-#include <zlib.h>
-
 namespace {
 
 using namespace bc;
 using fuzz::Bytes;
-
-Bytes gzipBytes(const Bytes& raw) {
-    z_stream z{};
-    fuzz::require(deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) == Z_OK,
-                  "deflateInit2");
-    Bytes out(deflateBound(&z, uLong(raw.size())) + 32);
-    z.next_in = const_cast<Bytes::value_type*>(raw.data());
-    z.avail_in = uInt(raw.size());
-    z.next_out = out.data();
-    z.avail_out = uInt(out.size());
-    fuzz::require(deflate(&z, Z_FINISH) == Z_STREAM_END, "deflate");
-    out.resize(z.total_out);
-    deflateEnd(&z);
-    return out;
-}
+using fuzz::gzipBytes;
 
 /// 16x16x8 u8 voxels: the detached data file of the seeds.
 Bytes detachedVoxels() {
@@ -112,16 +96,7 @@ void writeSeeds(const std::string& seeds) {
 } // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    const std::string path = (folder() / "volume.nrrd").string();
-    fuzz::writeFile(path, {data, size});
-    std::unique_ptr<brickstore::VolumeSource> source;
-    try {
-        source = brickstore::openNrrd(path);
-    } catch (const brickstore::FormatError&) {
-        return 0;
-    }
-    fuzz::exerciseVolume(*source, path);
-    return 0;
+    return fuzz::fuzzReader(data, size, (folder() / "volume.nrrd").string(), brickstore::openNrrd);
 }
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {

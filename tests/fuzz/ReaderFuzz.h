@@ -1,13 +1,18 @@
 #pragma once
 // What the reader targets (NRRD, NIfTI, DICOM) do with a volume that opened: what a user's
-// ingest would, bounded so one input stays fast.
+// ingest would, bounded so one input stays fast; the whole input step of a reader that opens
+// one file; and gzip for the seeds of readers that take gzip data.
 #include "brickstore/Error.h"
 #include "brickstore/VolumeSource.h"
 #include "tests/fuzz/FuzzSupport.h"
 
 #include <algorithm>
 #include <cstddef>
+#include <memory>
+#include <string>
 #include <vector>
+
+#include <zlib.h>
 
 namespace bc::fuzz {
 
@@ -38,6 +43,37 @@ inline void exerciseVolume(brickstore::VolumeSource& source, const std::string& 
         return;
     }
     require(source.nextSlice() == slices, "the slice cursor did not advance");
+}
+
+/// LLVMFuzzerTestOneInput of a reader that opens one file: the input is written to `path` and
+/// opened with `open` (a FormatError is the expected refusal), and the volume exercised.
+template <typename Open>
+int fuzzReader(const std::uint8_t* data, std::size_t size, const std::string& path, Open open) {
+    writeFile(path, {data, size});
+    std::unique_ptr<brickstore::VolumeSource> source;
+    try {
+        source = open(path);
+    } catch (const brickstore::FormatError&) {
+        return 0;
+    }
+    exerciseVolume(*source, path);
+    return 0;
+}
+
+/// `raw` compressed as one gzip member (the targets link zlib when they use it).
+inline Bytes gzipBytes(const Bytes& raw) {
+    z_stream z{};
+    require(deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) == Z_OK,
+            "deflateInit2");
+    Bytes out(deflateBound(&z, uLong(raw.size())) + 32);
+    z.next_in = const_cast<Bytes::value_type*>(raw.data());
+    z.avail_in = uInt(raw.size());
+    z.next_out = out.data();
+    z.avail_out = uInt(out.size());
+    require(deflate(&z, Z_FINISH) == Z_STREAM_END, "deflate");
+    out.resize(z.total_out);
+    deflateEnd(&z);
+    return out;
 }
 
 } // namespace bc::fuzz

@@ -6,35 +6,76 @@
 
 #include <csignal>
 #include <fstream>
+#include <optional>
+#include <string>
 #include <sys/wait.h>
+#include <utility>
+#include <vector>
 
 namespace bc::server::test {
 namespace {
 
-TEST(DaemonProcess, SigtermDrainsAttachedClientsAndExitsCleanly) {
-    TempDir dir;
+/// A brickcastd process started by startDaemon.
+struct DaemonChild {
+    pid_t pid = -1;
+    bool started = false; ///< it wrote its port file within 15 s
+    client::ClientConfig client;
+};
+
+/// Writes `configToml` to `dir`/brickcastd.toml and runs brickcastd on it as a child process
+/// (`--quiet`), with the variables `env` set in the child only; waits up to 15 s for the
+/// port file the daemon writes once it listens.
+DaemonChild startDaemon(const TempDir& dir, const std::string& configToml,
+                        const std::vector<std::pair<std::string, std::string>>& env = {}) {
     const std::string config = dir.file("brickcastd.toml"), port = dir.file("port");
-    std::ofstream(config)
-        << "[server]\nlisten = \"127.0.0.1:0\"\nstore_dir = \"" << dir.path().string()
-        << "\"\n[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [32, 32, 32]\n";
-    const pid_t pid = ::fork();
-    if (pid == 0) {
+    std::ofstream(config) << configToml;
+    DaemonChild d;
+    d.pid = ::fork();
+    if (d.pid == 0) {
+        for (const auto& [name, value] : env)
+            ::setenv(name.c_str(), value.c_str(), 1);
         ::execl(BC_BRICKCASTD_EXE, BC_BRICKCASTD_EXE, "--config", config.c_str(), "--port-file",
                 port.c_str(), "--quiet", nullptr);
         std::_Exit(127);
     }
     for (int i = 0; i < 300 && !std::filesystem::exists(port); ++i)
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    ASSERT_TRUE(std::filesystem::exists(port)) << "brickcastd did not start";
-    client::ClientConfig cc;
-    std::ifstream(port) >> cc.port;
-    client::Client a(cc), b(cc);
+    d.started = std::filesystem::exists(port);
+    if (d.started) std::ifstream(port) >> d.client.port;
+    return d;
+}
+
+/// A daemon config serving a generated 32^3 phantom "p" (ingested into `dir`).
+std::string phantomConfig(const TempDir& dir) {
+    return "[server]\nlisten = \"127.0.0.1:0\"\nstore_dir = \"" + dir.path().string() +
+           "\"\n[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [32, 32, 32]\n";
+}
+
+/// The wait status of child `pid` once it exits within `timeoutMs`; nullopt, the child
+/// killed (SIGKILL) and reaped, when it does not.
+std::optional<int> waitForExit(pid_t pid, int timeoutMs) {
+    int status = 0;
+    for (int waitedMs = 0; waitedMs < timeoutMs; waitedMs += 25) {
+        if (::waitpid(pid, &status, WNOHANG) == pid) return status;
+        std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    }
+    if (::waitpid(pid, &status, WNOHANG) == pid) return status;
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, &status, 0);
+    return std::nullopt;
+}
+
+TEST(DaemonProcess, SigtermDrainsAttachedClientsAndExitsCleanly) {
+    TempDir dir;
+    const DaemonChild daemon = startDaemon(dir, phantomConfig(dir));
+    ASSERT_TRUE(daemon.started) << "brickcastd did not start";
+    client::Client a(daemon.client), b(daemon.client);
     const auto v = a.openVolume("p");
     a.setRenderOptions(smallCpuFrames(32));
     a.setCamera(orbitCamera(v, 0, 1));
     a.requestFrame();
     a.nextFrame();
-    ASSERT_EQ(::kill(pid, SIGTERM), 0);
+    ASSERT_EQ(::kill(daemon.pid, SIGTERM), 0);
     for (auto* c : {&a, &b}) {
         bool bye = false;
         try {
@@ -49,11 +90,10 @@ TEST(DaemonProcess, SigtermDrainsAttachedClientsAndExitsCleanly) {
         }
         EXPECT_TRUE(bye) << "no Bye (shutting down) before the close";
     }
-    int status = 0;
-    for (int i = 0; i < 100 && ::waitpid(pid, &status, WNOHANG) == 0; ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    ASSERT_TRUE(WIFEXITED(status)) << "brickcastd still running 5 s after SIGTERM";
-    EXPECT_EQ(WEXITSTATUS(status), 0);
+    const std::optional<int> status = waitForExit(daemon.pid, 5000);
+    ASSERT_TRUE(status) << "brickcastd still running 5 s after SIGTERM";
+    ASSERT_TRUE(WIFEXITED(*status)) << "status " << *status;
+    EXPECT_EQ(WEXITSTATUS(*status), 0);
 }
 
 TEST(DaemonProcess, SigtermDuringTheHeaviestFrameExitsWithinFiveSeconds) {
@@ -64,23 +104,13 @@ TEST(DaemonProcess, SigtermDuringTheHeaviestFrameExitsWithinFiveSeconds) {
     const auto ingest = bc::test::runCommand(std::string(BC_BRICKCAST_EXE) + " ingest " + raw +
                                              " --spacing 1,1,2 -o " + store);
     ASSERT_EQ(ingest.exitCode, 0) << ingest.text;
-    const std::string config = dir.file("brickcastd.toml"), port = dir.file("port");
     // The cap is raised so that the frame is drawn (the default refuses it).
-    std::ofstream(config) << "[server]\nlisten = \"127.0.0.1:0\"\n[frames]\n"
-                          << "max_frame_gsamples = 65536\n[[volume]]\nname = \"cthead\"\n"
-                          << "store = \"" << store << "\"\n";
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-        ::execl(BC_BRICKCASTD_EXE, BC_BRICKCASTD_EXE, "--config", config.c_str(), "--port-file",
-                port.c_str(), "--quiet", nullptr);
-        std::_Exit(127);
-    }
-    for (int i = 0; i < 300 && !std::filesystem::exists(port); ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    ASSERT_TRUE(std::filesystem::exists(port)) << "brickcastd did not start";
-    client::ClientConfig cc;
-    std::ifstream(port) >> cc.port;
-    client::Client c(cc);
+    const std::string frames = "[frames]\nmax_frame_gsamples = 65536\n";
+    const std::string volume = "[[volume]]\nname = \"cthead\"\nstore = \"" + store + "\"\n";
+    const DaemonChild daemon =
+        startDaemon(dir, "[server]\nlisten = \"127.0.0.1:0\"\n" + frames + volume);
+    ASSERT_TRUE(daemon.started) << "brickcastd did not start";
+    client::Client c(daemon.client);
     const auto v = c.openVolume("cthead");
     protocol::RenderOptions o;
     o.width = o.height = 4096;
@@ -92,46 +122,25 @@ TEST(DaemonProcess, SigtermDuringTheHeaviestFrameExitsWithinFiveSeconds) {
     c.requestFrame();
     std::this_thread::sleep_for(std::chrono::seconds(2)); // well into the frame
     const auto start = std::chrono::steady_clock::now();
-    ASSERT_EQ(::kill(pid, SIGTERM), 0);
-    int status = 0;
-    bool exited = false;
-    for (int i = 0; i < 200 && !exited; ++i) {
-        exited = ::waitpid(pid, &status, WNOHANG) == pid;
-        if (!exited) std::this_thread::sleep_for(std::chrono::milliseconds(25));
-    }
+    ASSERT_EQ(::kill(daemon.pid, SIGTERM), 0);
+    const std::optional<int> status = waitForExit(daemon.pid, 5000);
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    if (!exited) {
-        ::kill(pid, SIGKILL);
-        ::waitpid(pid, &status, 0);
-        FAIL() << "brickcastd still running 5 s after SIGTERM";
-    }
+    if (!status) FAIL() << "brickcastd still running 5 s after SIGTERM";
     std::printf("[sigterm] brickcastd exited %.0f ms after SIGTERM, mid-frame\n", ms);
-    ASSERT_TRUE(WIFEXITED(status));
-    EXPECT_EQ(WEXITSTATUS(status), 0);
+    ASSERT_TRUE(WIFEXITED(*status));
+    EXPECT_EQ(WEXITSTATUS(*status), 0);
 }
 
 TEST(DaemonProcess, WithoutEglAGpuFrameGetsAnErrorSayingWhyAndTheCpuRenderersServe) {
     TempDir dir;
-    const std::string config = dir.file("brickcastd.toml"), port = dir.file("port");
-    std::ofstream(config)
-        << "[server]\nlisten = \"127.0.0.1:0\"\nstore_dir = \"" << dir.path().string()
-        << "\"\n[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [32, 32, 32]\n";
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-        // GLVND finds no EGL vendor: every EGL display fails, as on a host without a driver.
-        ::setenv("__EGL_VENDOR_LIBRARY_FILENAMES", "/nonexistent/egl_vendor.json", 1);
-        ::execl(BC_BRICKCASTD_EXE, BC_BRICKCASTD_EXE, "--config", config.c_str(), "--port-file",
-                port.c_str(), "--quiet", nullptr);
-        std::_Exit(127);
-    }
-    for (int i = 0; i < 300 && !std::filesystem::exists(port); ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    ASSERT_TRUE(std::filesystem::exists(port)) << "brickcastd did not start";
-    client::ClientConfig cc;
-    std::ifstream(port) >> cc.port;
+    // GLVND finds no EGL vendor: every EGL display fails, as on a host without a driver.
+    const DaemonChild daemon =
+        startDaemon(dir, phantomConfig(dir),
+                    {{"__EGL_VENDOR_LIBRARY_FILENAMES", "/nonexistent/egl_vendor.json"}});
+    ASSERT_TRUE(daemon.started) << "brickcastd did not start";
     {
-        client::Client gpu(cc), cpu(cc);
+        client::Client gpu(daemon.client), cpu(daemon.client);
         const auto v = gpu.openVolume("p");
         cpu.openVolume("p");
         auto options = smallCpuFrames(32);
@@ -158,7 +167,7 @@ TEST(DaemonProcess, WithoutEglAGpuFrameGetsAnErrorSayingWhyAndTheCpuRenderersSer
         }
         // Now it is known: later Hellos leave the GPU out and GPU options are refused, saying
         // why.
-        client::Client later(cc);
+        client::Client later(daemon.client);
         EXPECT_FALSE(later.server().capabilities & protocol::kCapGpuRenderer);
         for (auto renderer : {protocol::Renderer::GpuRaycaster, protocol::Renderer::GpuSplatter}) {
             options.renderer = renderer;
@@ -170,12 +179,11 @@ TEST(DaemonProcess, WithoutEglAGpuFrameGetsAnErrorSayingWhyAndTheCpuRenderersSer
             EXPECT_NE(e->message.find("no OpenGL 4.5 context"), std::string::npos) << e->message;
         }
     }
-    ASSERT_EQ(::kill(pid, SIGTERM), 0);
-    int status = 0;
-    for (int i = 0; i < 100 && ::waitpid(pid, &status, WNOHANG) == 0; ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    ASSERT_TRUE(WIFEXITED(status)) << "brickcastd still running 5 s after SIGTERM";
-    EXPECT_EQ(WEXITSTATUS(status), 0);
+    ASSERT_EQ(::kill(daemon.pid, SIGTERM), 0);
+    const std::optional<int> status = waitForExit(daemon.pid, 5000);
+    ASSERT_TRUE(status) << "brickcastd still running 5 s after SIGTERM";
+    ASSERT_TRUE(WIFEXITED(*status)) << "status " << *status;
+    EXPECT_EQ(WEXITSTATUS(*status), 0);
 }
 
 } // namespace

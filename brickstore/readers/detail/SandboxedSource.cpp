@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <csignal>
 #include <cstring>
@@ -11,6 +12,7 @@
 #include <vector>
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -37,6 +39,10 @@ constexpr std::size_t kMaxPathText = 300;
 constexpr std::size_t kMaxFieldText = 100;
 constexpr std::size_t kMaxDescriptionText = 4096; ///< as a store's description
 constexpr std::uint64_t kSlabBytes = 64ull << 20;
+/// The child's stderr goes to a file of its own (a memfd) sealed at this size: its writes past
+/// it fail; an error quotes at most kMaxStderrText of the end of what it wrote.
+constexpr off_t kMaxStderrBytes = 1 << 20;
+constexpr std::size_t kMaxStderrText = 300;
 
 std::atomic<std::uint64_t> gAddressSpaceBytes{ParserSandboxLimits{}.addressSpaceBytes};
 std::atomic<std::uint32_t> gParseSeconds{ParserSandboxLimits{}.parseSeconds};
@@ -97,7 +103,26 @@ void sendInfo(ChildWriter& w, const VolumeInfo& i) {
     w.text(i.description, kMaxDescriptionText);
 }
 
-void applyLimits(const ParserSandboxLimits& limits) {
+/// The file the child's stderr goes to: a memfd of kMaxStderrBytes that cannot grow (a child
+/// printing without end fills no memory; RLIMIT_FSIZE would also stop OpenVDB's temporary copy
+/// of the file it reads). The child's writes move the offset it shares with this descriptor,
+/// so lseek tells how much it wrote. -1 when there is none: the child shares our stderr.
+int openStderrFile() {
+    const int fd = ::memfd_create("bc-parser-stderr", MFD_CLOEXEC | MFD_ALLOW_SEALING);
+    if (fd < 0) return -1;
+    if (::ftruncate(fd, kMaxStderrBytes) == 0 &&
+        ::fcntl(fd, F_ADD_SEALS, F_SEAL_GROW | F_SEAL_SHRINK | F_SEAL_SEAL) == 0)
+        return fd;
+    ::close(fd);
+    return -1;
+}
+
+/// In the child: fd 2 becomes `stderrFd` (when there is one).
+void redirectStderr(int stderrFd) {
+    if (stderrFd >= 0 && ::dup2(stderrFd, STDERR_FILENO) >= 0) ::close(stderrFd);
+}
+
+void applyLimits(const ParserSandboxLimits& limits, int stderrFd) {
 #ifndef BC_ADDRESS_SANITIZED
     const rlimit as{limits.addressSpaceBytes, limits.addressSpaceBytes};
     ::setrlimit(RLIMIT_AS, &as);
@@ -114,6 +139,44 @@ void applyLimits(const ParserSandboxLimits& limits) {
     sigaddset(&limitSignals, SIGALRM);
     sigaddset(&limitSignals, SIGXCPU);
     ::sigprocmask(SIG_UNBLOCK, &limitSignals, nullptr); // a parent's mask is inherited
+    redirectStderr(stderrFd);
+}
+
+/// Byte `c` as it stands in one line of text: tab, CR and LF as \t \r \n, other bytes
+/// outside printable ASCII as \xNN.
+std::string escaped(char c) {
+    if (c == '\n') return "\\n";
+    if (c == '\r') return "\\r";
+    if (c == '\t') return "\\t";
+    const auto b = static_cast<unsigned char>(c);
+    if (b >= 0x20 && b < 0x7f) return std::string(1, c);
+    const char hex[] = "0123456789abcdef";
+    return {'\\', 'x', hex[b >> 4], hex[b & 15]};
+}
+
+/// The end of what the child wrote to its stderr file, for an error: one line of at most
+/// kMaxStderrText characters (bytes escaped), "..." in front when cut; empty when nothing.
+std::string stderrTail(int fd) {
+    const off_t written = fd < 0 ? -1 : ::lseek(fd, 0, SEEK_CUR);
+    if (written <= 0) return {};
+    const auto size = std::size_t(written);
+    std::string raw(std::min(size, kMaxStderrText), '\0');
+    const ssize_t got = ::pread(fd, raw.data(), raw.size(), off_t(size - raw.size()));
+    raw.resize(got > 0 ? std::size_t(got) : 0);
+    bool cut = size > raw.size();
+    while (!raw.empty() && std::isspace(static_cast<unsigned char>(raw.back())))
+        raw.pop_back();
+    // Built from the end: the last words before a death are the ones that say why.
+    std::string line;
+    for (std::size_t i = raw.size(); i > 0; --i) {
+        const std::string e = escaped(raw[i - 1]);
+        if (line.size() + e.size() > kMaxStderrText) {
+            cut = true;
+            break;
+        }
+        line.insert(0, e);
+    }
+    return line.empty() ? std::string() : (cut ? "..." : "") + line;
 }
 
 /// Opens the volume, streams it and ends the child; returns only by throwing.
@@ -147,10 +210,10 @@ void streamVolume(ChildWriter& w, const ParserSandboxLimits& limits, std::string
 }
 
 /// Runs in the child: limits, open, stream. Never returns.
-[[noreturn]] void childMain(int fd, const detail::SandboxedParser& parser,
+[[noreturn]] void childMain(int fd, int stderrFd, const detail::SandboxedParser& parser,
                             const ParserSandboxLimits& limits,
                             const detail::SandboxedOpener& open) {
-    applyLimits(limits);
+    applyLimits(limits, stderrFd);
     ChildWriter w(fd);
     std::string readingFile; // the file the parser read last, for errors that do not say
     try {
@@ -184,25 +247,31 @@ class SandboxedSource final : public VolumeSource {
         if (::pipe2(fds, O_CLOEXEC) != 0)
             throw FormatError(parser.path, "file",
                               std::string("cannot create a pipe: ") + std::strerror(errno));
+        // The child's stderr (GDCM's assertion text) is quoted in its error instead of reaching
+        // the user's terminal above it.
+        mStderrFd = openStderrFile();
         mPid = ::fork();
         if (mPid < 0) {
             ::close(fds[0]);
             ::close(fds[1]);
+            if (mStderrFd >= 0) ::close(mStderrFd);
             throw FormatError(parser.path, "file",
                               std::string("cannot fork the parser: ") + std::strerror(errno));
         }
         if (mPid == 0) {
             ::close(fds[0]);
-            childMain(fds[1], parser, limits, open);
+            childMain(fds[1], mStderrFd, parser, limits, open);
         }
         ::close(fds[1]);
         mFd = fds[0];
-        readInfo();
+        try {
+            readInfo();
+        } catch (...) {
+            release(); // no destructor runs after a throwing constructor
+            throw;
+        }
     }
-    ~SandboxedSource() override {
-        if (mFd >= 0) ::close(mFd);
-        reap(true);
-    }
+    ~SandboxedSource() override { release(); }
     const VolumeInfo& info() const override { return mInfo; }
 
   private:
@@ -304,8 +373,10 @@ class SandboxedSource final : public VolumeSource {
         else
             why = "ended early with status " + std::to_string(exitStatus);
         const std::string where = mReadingFile.empty() ? "" : " while reading this file";
+        const std::string tail = stderrTail(mStderrFd);
+        const std::string printed = tail.empty() ? "" : "; its stderr ends: \"" + tail + "\"";
         throw detail::ParserDied(mReadingFile.empty() ? mParser.path : mReadingFile,
-                                 "the " + mParser.parserName + " parser " + why + where +
+                                 "the " + mParser.parserName + " parser " + why + where + printed +
                                      " [sandboxed parser: " + mLimitText + "]",
                                  sig, exitStatus);
     }
@@ -313,6 +384,15 @@ class SandboxedSource final : public VolumeSource {
     [[noreturn]] void fail(const std::string& why) {
         throw FormatError(mParser.path, "file",
                           "sandboxed " + mParser.parserName + " parser: " + clip(why));
+    }
+
+    /// Closes the pipe and the stderr file and ends the child (killed and waited for).
+    void release() {
+        if (mFd >= 0) ::close(mFd);
+        mFd = -1;
+        reap(true);
+        if (mStderrFd >= 0) ::close(mStderrFd);
+        mStderrFd = -1;
     }
 
     /// Waits for the child (killing it first when `kill`); its wait status, once.
@@ -331,6 +411,7 @@ class SandboxedSource final : public VolumeSource {
     VolumeInfo mInfo;
     pid_t mPid = -1;
     int mFd = -1, mStatus = 0;
+    int mStderrFd = -1; ///< the child's stderr file (memfd); -1 when it shares ours
     std::uint64_t mPendingSlices = 0;
 };
 

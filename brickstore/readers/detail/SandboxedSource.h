@@ -5,7 +5,9 @@
 // the volume with the caller's opener and streams its description and then slabs of slices
 // over a pipe; the parent side is the VolumeSource ingest sees. Whatever ends the child early
 // (an exception, an abort or crash, a limit) becomes one FormatError naming the file, under
-// 1 kB.
+// 1 kB. The child's stderr goes to a file of its own (a sealed 1 MiB memfd), not the user's:
+// the error of a child that died ends with the last 300 characters it printed (GDCM's
+// assertion text), escaped into one line.
 //
 // Why fork is safe here: the child only runs code that the parent never started (the parser's
 // library is initialized in the child), glibc resets its malloc locks across fork, and the
