@@ -35,6 +35,7 @@ asan)
     # LeakSanitizer on; UBSan reports abort the test (-fno-sanitize-recover is in BC_SANITIZE).
     export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:detect_stack_use_after_return=1}
     export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+    export BC_TEST_TIME_SCALE=${BC_TEST_TIME_SCALE:-3}
     ;;
 tsan)
     build=${2:-$src/build-tsan}
@@ -47,7 +48,12 @@ tsan)
     # parallel_for (the CPU renderers) reports races. scripts/tsan.supp suppresses stacks
     # through oneTBB, which also hides a race inside a parallel_for body: TSAN_OPTIONS without
     # it shows everything.
-    export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=0:second_deadlock_stack=1:suppressions=$src/scripts/tsan.supp}
+    # history_size=7: the longest per-thread history, so that the stack of a TBB worker's
+    # earlier access is restored (and matched by the suppressions) rather than "failed to
+    # restore the stack". BC_TEST_TIME_SCALE: tests that bound a wait scale it (TSan runs the
+    # CPU renderers 5-15x slower).
+    export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=0:second_deadlock_stack=1:history_size=7:suppressions=$src/scripts/tsan.supp}
+    export BC_TEST_TIME_SCALE=${BC_TEST_TIME_SCALE:-10}
     ;;
 *)
     echo "sanitize.sh: unknown kind '$kind' (asan or tsan)" >&2

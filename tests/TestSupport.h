@@ -17,6 +17,15 @@
 namespace bc::test {
 
 /// Path of a file in ../shared/data (read, never copied).
+/// How much slower than a plain build this one runs (BC_TEST_TIME_SCALE, set by
+/// scripts/sanitize.sh: ThreadSanitizer runs the CPU renderers 5-15x slower); tests that bound
+/// a wait or a gap scale the bound, never drop it.
+inline double timeScale() {
+    const char* s = std::getenv("BC_TEST_TIME_SCALE");
+    const double v = s ? std::atof(s) : 1.0;
+    return v >= 1.0 ? v : 1.0;
+}
+
 inline std::string dataPath(const std::string& name) {
     std::filesystem::path p = std::filesystem::path(BC_SHARED_DATA_DIR) / name;
     return p.string();
