@@ -47,12 +47,13 @@ struct Batch {
 };
 
 /// The frame as primitives: the CPU splatter's decisions (render/HybridSplatter.cpp's Drawer),
-/// recorded in order instead of drawn.
+/// recorded in order instead of drawn. Slabs are cut as in the whole image; only primitives
+/// that meet `region` (the pixels drawn) are kept.
 class PrimitiveList {
   public:
     PrimitiveList(const Frame& f, const SplatFootprint& fp, std::uint32_t w, std::uint32_t h,
-                  HybridSplatStats& n)
-        : mF(f), mFp(fp), mW(w), mH(h), mN(n) {}
+                  const PixelRect& region, HybridSplatStats& n)
+        : mF(f), mFp(fp), mW(w), mH(h), mRegion(region), mN(n) {}
 
     std::vector<Primitive> primitives;
     std::vector<Batch> batches;
@@ -83,6 +84,7 @@ class PrimitiveList {
             mSlabOpen = true;
             mSlabEnd = depth + mF.slabMm;
         }
+        if (!detail::meetsRegion(r, mRegion)) return;
         ++mN.points;
         const PointFilter pf = detail::pointFilterOf(mF, mFp, d, mW, mH);
         Primitive p{{}, {c[0], c[1], c[2], 0.0f}, {float(pf.fx), float(pf.fy), float(1.0 / R), 0}};
@@ -93,6 +95,7 @@ class PrimitiveList {
             if (!(nx >= 0 && ny >= 0 && nx < long(mW) && ny < long(mH))) return;
             r[0] = r[2] = std::uint32_t(nx);
             r[1] = r[3] = std::uint32_t(ny);
+            if (!detail::meetsRegion(r, mRegion)) return;
             p.colour[3] = float(pf.total);
             p.shape[3] = 1.0f;
         }
@@ -107,6 +110,7 @@ class PrimitiveList {
         std::uint32_t r[4];
         if (!detail::pixelRect(e.centre - half, e.centre + half, mW, mH, r)) return;
         flushSlab(); // points in front go first
+        if (!detail::meetsRegion(r, mRegion)) return;
         ++mN.splats;
         const glm::dvec3 rel = centre - mF.view.eye;
         push({{},
@@ -135,6 +139,7 @@ class PrimitiveList {
     const Frame& mF;
     const SplatFootprint& mFp;
     std::uint32_t mW, mH;
+    PixelRect mRegion;
     HybridSplatStats& mN;
     bool mSlabOpen = false, mBatchClosed = true;
     double mSlabEnd = 0.0;
@@ -153,6 +158,17 @@ gl::Texture floatTarget(std::uint32_t w, std::uint32_t h, gl::Framebuffer& fbo) 
         throw RenderError("splatter render target " + std::to_string(w) + "x" + std::to_string(h) +
                           " is incomplete");
     return t;
+}
+
+/// Restricts drawing and clearing to the pixel rectangle r (first and last column and row; window
+/// row = image row) within `region`; false when they do not meet.
+bool scissor(const std::uint32_t r[4], const PixelRect& region) {
+    const std::uint32_t x0 = std::max(r[0], region.x), y0 = std::max(r[1], region.y);
+    const std::uint32_t x1 = std::min(r[2], region.x + region.width - 1),
+                        y1 = std::min(r[3], region.y + region.height - 1);
+    if (x0 > x1 || y0 > y1) return false;
+    glScissor(GLint(x0), GLint(y0), GLsizei(x1 - x0 + 1), GLsizei(y1 - y0 + 1));
+    return true;
 }
 
 /// dst += (1 - dst.a) * src, src premultiplied: front-to-back 'over'.
@@ -194,16 +210,15 @@ struct GpuSplatter::Gpu {
         gl::glCheck("uploading splat primitives");
     }
 
-    void drawSlab(const Batch& b) {
+    /// Scissored to `region`, as draw().
+    void drawSlab(const Batch& b, const PixelRect& region) {
         glBindFramebuffer(GL_DRAW_FRAMEBUFFER, slabFbo.get());
         glUseProgram(point.get());
         glBindVertexArray(quads.get());
         glBlendFunc(GL_ONE, GL_ONE);
         glDrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, GLsizei(b.count), b.first);
-        // Composite and clear only the slab's pixel box (scissored; window row = image row).
-        glEnable(GL_SCISSOR_TEST);
-        glScissor(GLint(b.box[0]), GLint(b.box[1]), GLsizei(b.box[2] - b.box[0] + 1),
-                  GLsizei(b.box[3] - b.box[1] + 1));
+        // Composite and clear only the slab's pixel box (every primitive kept meets the region).
+        scissor(b.box, region);
         glBindFramebuffer(GL_DRAW_FRAMEBUFFER, colourFbo.get());
         glUseProgram(composite.get());
         glBindVertexArray(empty.get());
@@ -211,12 +226,19 @@ struct GpuSplatter::Gpu {
         glDrawArrays(GL_TRIANGLES, 0, 3);
         const float zero[4] = {0, 0, 0, 0};
         glClearNamedFramebufferfv(slabFbo.get(), GL_COLOR, 0, zero);
-        glDisable(GL_SCISSOR_TEST);
+        const std::uint32_t all[4] = {region.x, region.y, region.x + region.width - 1,
+                                      region.y + region.height - 1};
+        scissor(all, region);
     }
 
-    void draw(const std::vector<Batch>& batches) {
+    /// Draws `region` of the image (the pixels drawn): the viewport and every primitive are
+    /// the whole image's, so each fragment is the whole frame's; the scissor keeps the region.
+    void draw(const std::vector<Batch>& batches, const PixelRect& region) {
         const float zero[4] = {0, 0, 0, 0};
-        glDisable(GL_SCISSOR_TEST);
+        const std::uint32_t all[4] = {region.x, region.y, region.x + region.width - 1,
+                                      region.y + region.height - 1};
+        glEnable(GL_SCISSOR_TEST);
+        scissor(all, region);
         glClearNamedFramebufferfv(colourFbo.get(), GL_COLOR, 0, zero);
         glClearNamedFramebufferfv(slabFbo.get(), GL_COLOR, 0, zero);
         glViewport(0, 0, GLsizei(width), GLsizei(height));
@@ -228,7 +250,7 @@ struct GpuSplatter::Gpu {
         glBindTextureUnit(1, slab.get());
         for (const Batch& b : batches) {
             if (b.points) {
-                drawSlab(b);
+                drawSlab(b, region);
                 continue;
             }
             glBindFramebuffer(GL_DRAW_FRAMEBUFFER, colourFbo.get());
@@ -238,16 +260,19 @@ struct GpuSplatter::Gpu {
             glDrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, GLsizei(b.count), b.first);
         }
         glDisable(GL_BLEND); // other renderers of this context expect the default state
+        glDisable(GL_SCISSOR_TEST);
         glBindFramebuffer(GL_DRAW_FRAMEBUFFER, 0);
         glBindVertexArray(0);
         glUseProgram(0);
         gl::glCheck("drawing splats");
     }
 
-    Image readBack() {
-        Image image(width, height);
-        glGetTextureImage(colour.get(), 0, GL_RGBA, GL_FLOAT, GLsizei(image.rgba.size() * 4),
-                          image.rgba.data());
+    /// The pixels of `region` (texture row = image row: no flip).
+    Image readBack(const PixelRect& region) {
+        Image image(region.width, region.height);
+        glGetTextureSubImage(colour.get(), 0, GLint(region.x), GLint(region.y), 0,
+                             GLsizei(region.width), GLsizei(region.height), 1, GL_RGBA, GL_FLOAT,
+                             GLsizei(image.rgba.size() * 4), image.rgba.data());
         gl::glCheck("reading the splatter image back");
         for (float& v : image.rgba)
             v = std::clamp(v, 0.0f, 1.0f);
@@ -332,13 +357,14 @@ Image GpuSplatter::render(const Scene& scene, const View& view, const RenderOpti
     const brickstore::BrickStore& store = scene.store;
     brickstore::BrickCache& cache = scene.cache;
     const OccupancyTrees* occupancy = splat.occupancy();
-    const BrickPlan plan =
-        planBricks(store, splat.g, splat.table(), view.basis, options.skip, occupancy);
+    const Frame f = detail::frameOf(mConfig, splat.g, view.basis, options, splat.table());
+    BrickPlan plan = planBricks(store, splat.g, splat.table(), view.basis, options.skip, occupancy);
+    detail::cullOutsideRegion(f, options.region, options.width, options.height, plan);
     recordPlan(plan, splat.level, stats);
 
     const auto prepareStart = Clock::now();
-    const Frame f = detail::frameOf(mConfig, splat.g, view.basis, options, splat.table());
-    PrimitiveList list(f, mFootprint, options.width, options.height, mLast);
+    const PixelRect region = options.drawn();
+    PrimitiveList list(f, mFootprint, options.width, options.height, region, mLast);
     const auto type = store.info().volume.type;
     const std::uint64_t brickBytes = store.brickBytes(), budget = cache.stats().budgetBytes;
     for (std::size_t first = 0, end; first < plan.drawn.size(); first = end) {
@@ -360,11 +386,11 @@ Image GpuSplatter::render(const Scene& scene, const View& view, const RenderOpti
     stats.uploadMs = msSince(prepareStart);
 
     const auto renderStart = Clock::now();
-    mGpu->draw(list.batches);
+    mGpu->draw(list.batches, region);
     glFinish();
     stats.renderMs = msSince(renderStart);
     const auto readStart = Clock::now();
-    Image image = mGpu->readBack();
+    Image image = mGpu->readBack(region);
     stats.readbackMs = msSince(readStart);
     stats.batches = std::uint32_t(list.batches.size());
     stats.samples = mLast.points + mLast.splats;

@@ -31,6 +31,10 @@
 //    ignored; lastFrame().culled and bricksCulled stay 0).
 //  - Float arithmetic in the shaders (the CPU works in double), and the footprint of a splat
 //    from the exact ray distance instead of the CPU's (index, half angle) table.
+// Regions (RenderOptions::region): the viewport, primitives and slab cuts stay the whole
+// image's, so every fragment is the whole frame's; bricks whose screen reach misses the region
+// are dropped before they are pinned, primitives that miss it are not uploaded, a scissor keeps
+// the region's pixels and only they are read back: each the whole frame's, to the bit.
 // Needs a current EglContext on the calling thread; render thread only, one frame at a time.
 #include "render/Camera.h"
 #include "render/Image.h"

@@ -24,6 +24,7 @@
 namespace bc::render {
 namespace {
 
+using detail::BrickReach;
 using detail::Frame;
 using detail::PreparedBrick;
 using detail::SplatScene;
@@ -35,37 +36,35 @@ double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-/// The image, its per-tile count of pixels still below the threshold, and the point slab.
-/// Workers draw disjoint bands of whole tile rows: each owns its rows of all three, and keeps
-/// its own list of the slab pixels it dirtied.
+/// The region's pixels of the image, their per-tile count of pixels still below the threshold
+/// (tiles counted from the region's corner), and the point slab. Pixels are addressed in
+/// whole-image coordinates. Workers draw disjoint bands of whole tile rows: each owns its rows
+/// of all three, and keeps its own list of the slab pixels it dirtied.
 class Canvas {
   public:
-    Canvas(std::uint32_t w, std::uint32_t h, std::uint32_t tile, double ert)
-        : image(w, h), mTile(tile), mTilesX((w + tile - 1) / tile), mErt(float(ert)),
-          mSlab(std::size_t(w) * h * 4, 0.0f) {
-        mOpen.assign(std::size_t(mTilesX) * ((h + tile - 1) / tile), 0);
-        for (std::uint32_t y = 0; y < h; ++y)
-            for (std::uint32_t x = 0; x < w; ++x)
+    Canvas(const PixelRect& region, std::uint32_t tile, double ert)
+        : image(region.width, region.height), mRegion(region), mTile(tile),
+          mTilesX((region.width + tile - 1) / tile), mErt(float(ert)),
+          mSlab(std::size_t(region.pixels()) * 4, 0.0f) {
+        mOpen.assign(std::size_t(mTilesX) * ((region.height + tile - 1) / tile), 0);
+        for (std::uint32_t y = 0; y < region.height; ++y)
+            for (std::uint32_t x = 0; x < region.width; ++x)
                 ++mOpen[tileOf(x, y)];
         if (mErt > 1.0f) mOpen.assign(mOpen.size(), 1u << 30); // never opaque
     }
 
-    Image image;
+    Image image; ///< the region's pixels
 
     std::uint32_t tile() const { return mTile; }
+    const PixelRect& region() const { return mRegion; }
     /// Front-to-back 'over' of straight colour `c` with opacity `a` into pixel (x, y).
     void over(std::uint32_t x, std::uint32_t y, float a, const float* c) {
-        float* p = image.pixel(x, y);
-        if (p[3] >= mErt) return;
-        const float w = (1.0f - p[3]) * a;
-        p[0] += w * c[0];
-        p[1] += w * c[1];
-        p[2] += w * c[2];
-        p[3] += w;
-        if (p[3] >= mErt) --mOpen[tileOf(x, y)];
+        overLocal(x - mRegion.x, y - mRegion.y, a, c);
     }
-    /// True when every tile meeting the pixel rectangle [x0, x1] x [y0, y1] is opaque.
+    /// True when every tile meeting the pixel rectangle [x0, x1] x [y0, y1] (inside the
+    /// region) is opaque.
     bool occluded(std::uint32_t x0, std::uint32_t y0, std::uint32_t x1, std::uint32_t y1) const {
+        x0 -= mRegion.x, x1 -= mRegion.x, y0 -= mRegion.y, y1 -= mRegion.y;
         for (std::uint32_t ty = y0 / mTile; ty <= y1 / mTile; ++ty)
             for (std::uint32_t tx = x0 / mTile; tx <= x1 / mTile; ++tx)
                 if (mOpen[std::size_t(ty) * mTilesX + tx] > 0) return false;
@@ -74,8 +73,9 @@ class Canvas {
     /// Adds coverage `cover` (area share times opacity) of colour `c` to the slab at (x, y).
     void deposit(std::uint32_t x, std::uint32_t y, float cover, const float* c,
                  std::vector<std::uint32_t>& dirty) {
-        float* s = mSlab.data() + (std::size_t(y) * image.width + x) * 4;
-        if (s[3] == 0.0f) dirty.push_back(std::uint32_t(y * image.width + x));
+        const std::uint32_t i = (y - mRegion.y) * image.width + (x - mRegion.x);
+        float* s = mSlab.data() + std::size_t(i) * 4;
+        if (s[3] == 0.0f) dirty.push_back(i);
         s[0] += cover * c[0];
         s[1] += cover * c[1];
         s[2] += cover * c[2];
@@ -88,7 +88,7 @@ class Canvas {
             float* s = mSlab.data() + std::size_t(i) * 4;
             if (s[3] > 0.0f) {
                 const float c[3] = {s[0] / s[3], s[1] / s[3], s[2] / s[3]};
-                over(i % image.width, i / image.width, std::min(s[3], 1.0f), c);
+                overLocal(i % image.width, i / image.width, std::min(s[3], 1.0f), c);
             }
             s[0] = s[1] = s[2] = s[3] = 0.0f;
         }
@@ -96,9 +96,21 @@ class Canvas {
     }
 
   private:
+    /// over() at (x, y) of the region.
+    void overLocal(std::uint32_t x, std::uint32_t y, float a, const float* c) {
+        float* p = image.pixel(x, y);
+        if (p[3] >= mErt) return;
+        const float w = (1.0f - p[3]) * a;
+        p[0] += w * c[0];
+        p[1] += w * c[1];
+        p[2] += w * c[2];
+        p[3] += w;
+        if (p[3] >= mErt) --mOpen[tileOf(x, y)];
+    }
     std::size_t tileOf(std::uint32_t x, std::uint32_t y) const {
         return std::size_t(y / mTile) * mTilesX + x / mTile;
     }
+    PixelRect mRegion;
     std::uint32_t mTile, mTilesX;
     float mErt;
     std::vector<std::uint32_t> mOpen;
@@ -141,44 +153,29 @@ inline float splatDistance2(const DrawRecord& r, float da, float db, float rowDe
            (rowDenominator + perspective2 * sx * sx);
 }
 
-/// Where a planned brick can draw: its world box grown by the sphere radius (and a point's
-/// filter) on the screen; Nowhere off the image, Unbounded when it reaches behind the eye.
-struct BrickReach {
-    enum class Kind : std::uint8_t { Nowhere, Unbounded, Rect };
-    Kind kind = Kind::Unbounded;
-    std::uint32_t rect[4] = {};
-};
-
-BrickReach brickReach(const Frame& f, const PlannedBrick& b, std::uint32_t w, std::uint32_t h) {
-    const Box box = f.g.brickBox(b.key.pos);
-    glm::dvec2 lo(1e300), hi(-1e300);
-    for (int corner = 0; corner < 8; ++corner) {
-        const glm::dvec3 c((corner & 1) ? box.max.x + f.radiusMm : box.min.x - f.radiusMm,
-                           (corner & 2) ? box.max.y + f.radiusMm : box.min.y - f.radiusMm,
-                           (corner & 4) ? box.max.z + f.radiusMm : box.min.z - f.radiusMm);
-        const glm::dvec3 rel = c - f.view.eye;
-        const double z = glm::dot(rel, f.view.forward);
-        if (!f.view.orthographic && !(z > 0.0)) return {}; // reaches behind the eye
-        const double scale = f.view.orthographic ? f.view.orthoScale : f.view.focalLength / z;
-        const glm::dvec2 p =
-            scale * glm::dvec2(glm::dot(rel, f.view.right), glm::dot(rel, f.view.up));
-        lo = glm::min(lo, p);
-        hi = glm::max(hi, p);
-    }
-    const double grow = f.pointFilter + 1.0;
-    BrickReach reach;
-    reach.kind = detail::pixelRect(lo - grow, hi + grow, w, h, reach.rect)
-                     ? BrickReach::Kind::Rect
-                     : BrickReach::Kind::Nowhere;
-    return reach;
+/// Pixel rectangle `r` clipped to the columns of `region` and rows [y0, y1] (of the region)
+/// into `clip`; false when nothing is left.
+template <class T>
+bool clipRect(const T r[4], const PixelRect& region, std::uint32_t y0, std::uint32_t y1,
+              std::uint32_t clip[4]) {
+    clip[0] = std::max<std::uint32_t>(r[0], region.x);
+    clip[1] = std::max<std::uint32_t>(r[1], y0);
+    clip[2] = std::min<std::uint32_t>(r[2], region.x + region.width - 1);
+    clip[3] = std::min<std::uint32_t>(r[3], y1);
+    return clip[0] <= clip[2] && clip[1] <= clip[3];
 }
 
-/// True when every pixel of rows [y0, y1] that the brick can touch is opaque.
+/// Pixel rectangle `r` clipped to `region` into `clip`; false when nothing is left.
+template <class T> bool clipToRegion(const T r[4], const PixelRect& region, std::uint32_t clip[4]) {
+    return clipRect(r, region, region.y, region.y + region.height - 1, clip);
+}
+
+/// True when every pixel of the region's rows [y0, y1] that the brick can touch is opaque.
 bool occludedIn(const Canvas& canvas, const BrickReach& reach, std::uint32_t y0, std::uint32_t y1) {
     if (reach.kind != BrickReach::Kind::Rect) return reach.kind == BrickReach::Kind::Nowhere;
-    const std::uint32_t* r = reach.rect;
-    const std::uint32_t lo = std::max(r[1], y0), hi = std::min(r[3], y1);
-    return lo > hi || canvas.occluded(r[0], lo, r[2], hi);
+    std::uint32_t c[4];
+    return !clipRect(reach.rect, canvas.region(), y0, y1, c) ||
+           canvas.occluded(c[0], c[1], c[2], c[3]);
 }
 
 /// The pixel rectangle of the bounding box of a sphere's screen ellipse (projectSphere's),
@@ -215,8 +212,9 @@ bool splatRect(const SplatView& view, const glm::dvec3& centre, double radius, s
     return detail::pixelRect(mid - half, mid + half, w, h, rect);
 }
 
-/// Rows [y0, y1] of the canvas (whole tile rows) and what one worker draws there: the records
-/// whose rectangles meet them, in the serial order, so each pixel sees the serial operations.
+/// Rows [y0, y1] of the region (whole tile rows from its top) and what one worker draws there:
+/// the records whose rectangles meet them within the region, in the serial order, so each pixel
+/// sees the serial operations.
 struct Band {
     std::uint32_t y0 = 0, y1 = 0;
     std::vector<std::uint32_t> records;    ///< indices of the chunk's records
@@ -231,10 +229,12 @@ struct Band {
 /// alone, as if nothing were culled) and which bands each voxel meets. Per band, in parallel:
 /// brick and voxel culling against the band's tiles and drawing its rows. A voxel (brick)
 /// counts as culled when every band it meets culled it: exactly when a serial draw would.
+/// Records and slab cuts use whole-image coordinates; bands cover the canvas's region only.
 class ChunkDrawer {
   public:
+    /// Draws into `canvas` (its region of the `width` x `height` image).
     ChunkDrawer(const Frame& f, const SplatFootprint& fp, const HybridSplatterConfig& config,
-                Canvas& canvas, HybridSplatStats& n);
+                std::uint32_t width, std::uint32_t height, Canvas& canvas, HybridSplatStats& n);
 
     /// Marks chunk[j] culled when the tiles under bricks[j] are all opaque already.
     void cullBricks(const PlannedBrick* bricks, std::vector<PreparedBrick>& chunk);
@@ -248,9 +248,10 @@ class ChunkDrawer {
     void splatRecord(const glm::dvec3& centre, double lnT, DrawRecord& r) const;
     void cutSlabs(const std::vector<PreparedBrick>& chunk);
     void drawBand(Band& band, const std::vector<PreparedBrick>& chunk);
-    void drawPoint(Band& band, const DrawRecord& r, std::uint32_t y0, std::uint32_t y1);
-    void drawSplat(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1);
-    void drawSplatByIndex(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1);
+    // Each draws record r over the pixels `clip` (its rectangle within the band).
+    void drawPoint(Band& band, const DrawRecord& r, const std::uint32_t clip[4]);
+    void drawSplat(const DrawRecord& r, const std::uint32_t clip[4]);
+    void drawSplatByIndex(const DrawRecord& r, const std::uint32_t clip[4]);
     void count(const std::vector<PreparedBrick>& chunk);
 
     const Frame& mF;
@@ -258,9 +259,10 @@ class ChunkDrawer {
     Canvas& mCanvas;
     HybridSplatStats& mN;
     const bool mExact;
-    const std::uint32_t mW, mH;
-    const float mInvFilter2;   ///< 1 / pointFilter^2
-    const float mPerspective2; ///< 1 / focalLength^2, 0 orthographic
+    const std::uint32_t mW, mH; ///< the whole image's
+    const PixelRect mRegion;    ///< the pixels drawn
+    const float mInvFilter2;    ///< 1 / pointFilter^2
+    const float mPerspective2;  ///< 1 / focalLength^2, 0 orthographic
     std::uint32_t mBandRows = 1;
     std::vector<Band> mBands;
     std::vector<BrickReach> mReach;
@@ -272,22 +274,23 @@ class ChunkDrawer {
 };
 
 ChunkDrawer::ChunkDrawer(const Frame& f, const SplatFootprint& fp,
-                         const HybridSplatterConfig& config, Canvas& canvas, HybridSplatStats& n)
-    : mF(f), mFp(fp), mCanvas(canvas), mN(n), mExact(config.exactDistanceFootprint),
-      mW(canvas.image.width), mH(canvas.image.height),
+                         const HybridSplatterConfig& config, std::uint32_t width,
+                         std::uint32_t height, Canvas& canvas, HybridSplatStats& n)
+    : mF(f), mFp(fp), mCanvas(canvas), mN(n), mExact(config.exactDistanceFootprint), mW(width),
+      mH(height), mRegion(canvas.region()),
       mInvFilter2(float(1.0 / (f.pointFilter * f.pointFilter))),
       mPerspective2(f.view.orthographic ? 0.0f
                                         : float(1.0 / (f.view.focalLength * f.view.focalLength))) {
     // A few bands per worker: the bands of a view differ in work, TBB balances them.
-    const std::uint32_t tile = canvas.tile(), tileRows = (mH + tile - 1) / tile;
+    const std::uint32_t tile = canvas.tile(), tileRows = (mRegion.height + tile - 1) / tile;
     const std::uint32_t want =
         config.parallelDraw ? 4 * std::uint32_t(tbb::this_task_arena::max_concurrency()) : 1;
     const std::uint32_t bands = std::clamp(want, 1u, tileRows);
     mBandRows = tile * ((tileRows + bands - 1) / bands);
-    for (std::uint32_t y = 0; y < mH; y += mBandRows) {
+    for (std::uint32_t y = 0; y < mRegion.height; y += mBandRows) {
         mBands.emplace_back();
-        mBands.back().y0 = y;
-        mBands.back().y1 = std::min(y + mBandRows, mH) - 1;
+        mBands.back().y0 = mRegion.y + y;
+        mBands.back().y1 = mRegion.y + std::min(y + mBandRows, mRegion.height) - 1;
     }
 }
 
@@ -295,7 +298,8 @@ void ChunkDrawer::cullBricks(const PlannedBrick* bricks, std::vector<PreparedBri
     mReach.resize(chunk.size());
     for (std::size_t j = 0; j < chunk.size(); ++j) {
         mReach[j] = brickReach(mF, bricks[j], mW, mH);
-        chunk[j].culled = mF.cull && occludedIn(mCanvas, mReach[j], 0, mH - 1);
+        chunk[j].culled =
+            mF.cull && occludedIn(mCanvas, mReach[j], mRegion.y, mRegion.y + mRegion.height - 1);
     }
 }
 
@@ -427,7 +431,10 @@ void ChunkDrawer::cutSlabs(const std::vector<PreparedBrick>& chunk) {
                 end = depth + mF.slabMm;
             }
             r.slab = cuts;
-            for (std::uint32_t b = r.rect[1] / mBandRows; b <= r.rect[3] / mBandRows; ++b)
+            std::uint32_t clip[4];
+            if (!clipToRegion(r.rect, mRegion, clip)) continue; // drawn by other slices
+            for (std::uint32_t b = (clip[1] - mRegion.y) / mBandRows;
+                 b <= (clip[3] - mRegion.y) / mBandRows; ++b)
                 mBands[b].records.push_back(i);
         }
         cuts += open; // the next brick may lie in front of this slab
@@ -454,46 +461,48 @@ void ChunkDrawer::drawBand(Band& band, const std::vector<PreparedBrick>& chunk) 
                 mCanvas.flushSlab(band.dirty);
                 slab = r.slab;
             }
-            const std::uint32_t y0 = std::max<std::uint32_t>(r.rect[1], band.y0);
-            const std::uint32_t y1 = std::min<std::uint32_t>(r.rect[3], band.y1);
-            if (mF.cull && mCanvas.occluded(r.rect[0], y0, r.rect[2], y1)) continue;
+            std::uint32_t clip[4];
+            clipRect(r.rect, mRegion, band.y0, band.y1, clip); // not empty: r meets the band
+            if (mF.cull && mCanvas.occluded(clip[0], clip[1], clip[2], clip[3])) continue;
             band.drawn[e] = 1;
             if (r.kind == DrawRecord::Kind::Point)
-                drawPoint(band, r, y0, y1);
+                drawPoint(band, r, clip);
             else if (mExact)
-                drawSplat(r, y0, y1);
+                drawSplat(r, clip);
             else
-                drawSplatByIndex(r, y0, y1);
+                drawSplatByIndex(r, clip);
         }
         mCanvas.flushSlab(band.dirty);
     }
 }
 
-void ChunkDrawer::drawPoint(Band& band, const DrawRecord& r, std::uint32_t y0, std::uint32_t y1) {
+void ChunkDrawer::drawPoint(Band& band, const DrawRecord& r, const std::uint32_t clip[4]) {
     // The slab adds coverages: an area average, as a box filter of the pixel would.
     const float* c = r.voxel->rgba.data();
     if (r.nearest) {
-        if (r.nearX >= 0 && std::uint32_t(r.nearY) >= y0 && std::uint32_t(r.nearY) <= y1)
-            mCanvas.deposit(std::uint32_t(r.nearX), std::uint32_t(r.nearY), r.scale, c, band.dirty);
+        const auto x = std::uint32_t(r.nearX), y = std::uint32_t(r.nearY);
+        if (r.nearX >= 0 && x >= mRegion.x && x - mRegion.x < mRegion.width && y >= band.y0 &&
+            y <= band.y1)
+            mCanvas.deposit(x, y, r.scale, c, band.dirty);
         return;
     }
-    for (std::uint32_t y = y0; y <= y1; ++y)
-        for (std::uint32_t x = r.rect[0]; x <= r.rect[2]; ++x) {
+    for (std::uint32_t y = clip[1]; y <= clip[3]; ++y)
+        for (std::uint32_t x = clip[0]; x <= clip[2]; ++x) {
             const float w = mFp.bySquaredDistance(
                 pointDistance2(r, int(x - r.rect[0]), int(y - r.rect[1]), mInvFilter2));
             if (w > 0.0f) mCanvas.deposit(x, y, r.scale * w, c, band.dirty);
         }
 }
 
-void ChunkDrawer::drawSplat(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1) {
+void ChunkDrawer::drawSplat(const DrawRecord& r, const std::uint32_t clip[4]) {
     // The exact ray-centre distance: the same footprint as correctedDistance(coneIndex, alpha)
     // without the 2D table's interpolation error.
     const float* c = r.voxel->rgba.data();
     const float halfW = 0.5f * float(mW), halfH = 0.5f * float(mH), g = mPerspective2;
-    for (std::uint32_t y = y0; y <= y1; ++y) {
+    for (std::uint32_t y = clip[1]; y <= clip[3]; ++y) {
         const float db = r.dy - float(y - r.rect[1]), sy = halfH - float(y) - 0.5f;
         const float rowDenominator = 1.0f + g * sy * sy;
-        for (std::uint32_t x = r.rect[0]; x <= r.rect[2]; ++x) {
+        for (std::uint32_t x = clip[0]; x <= clip[2]; ++x) {
             const float da = r.dx + float(x - r.rect[0]), sx = float(x) + 0.5f - halfW;
             const float u = splatDistance2(r, da, db, rowDenominator, sx, g);
             if (!(u < 1.0f)) continue;
@@ -503,13 +512,13 @@ void ChunkDrawer::drawSplat(const DrawRecord& r, std::uint32_t y0, std::uint32_t
     }
 }
 
-void ChunkDrawer::drawSplatByIndex(const DrawRecord& r, std::uint32_t y0, std::uint32_t y1) {
+void ChunkDrawer::drawSplatByIndex(const DrawRecord& r, const std::uint32_t clip[4]) {
     // The paper's path: the exact index, then the 2D (index, half angle) table.
     const Visible& v = *r.voxel;
     const double k = detail::classifyDraw(mF, v.centre, v.rgba[3]).lnT * mF.depthScale;
     const double alpha = projectSphere(mF.view, v.centre, mF.radiusMm).ellipse.halfAngleRad;
-    for (std::uint32_t y = y0; y <= y1; ++y)
-        for (std::uint32_t x = r.rect[0]; x <= r.rect[2]; ++x) {
+    for (std::uint32_t y = clip[1]; y <= clip[3]; ++y)
+        for (std::uint32_t x = clip[0]; x <= clip[2]; ++x) {
             const double i =
                 coneIndex(mF.view, v.centre, mF.radiusMm, SplatView::pixelCentre(x, y, mW, mH));
             if (!(i < 1.0)) continue;
@@ -536,7 +545,8 @@ void ChunkDrawer::count(const std::vector<PreparedBrick>& chunk) {
         mN.slabs += mBrickSlabs[j];
         for (std::uint32_t i = mBrickFirst[j]; i < mBrickFirst[j + 1]; ++i) {
             const DrawRecord& r = mRecords[i];
-            if (r.kind == DrawRecord::Kind::None) continue;
+            std::uint32_t clip[4];
+            if (r.kind == DrawRecord::Kind::None || !clipToRegion(r.rect, mRegion, clip)) continue;
             if (!mDrawn[i])
                 ++mN.culled;
             else if (r.kind == DrawRecord::Kind::Point)
@@ -580,14 +590,17 @@ Image HybridSplatter::render(const Scene& scene, const View& view, const RenderO
     const ViewBasis& basis = view.basis;
     const TransferFunctionTable& table = splat.table();
     const OccupancyTrees* occupancy = splat.occupancy();
-    const BrickPlan plan = planBricks(store, g, table, basis, options.skip, occupancy);
+    const Frame f = detail::frameOf(mConfig, g, basis, options, table);
+    // The whole view's plan, less the bricks that cannot reach the region: its own frustum
+    // (planBricks for a region) would lose splats that reach into it from outside.
+    BrickPlan plan = planBricks(store, g, table, basis, options.skip, occupancy);
+    detail::cullOutsideRegion(f, options.region, options.width, options.height, plan);
     recordPlan(plan, level, stats);
     stats.batches = 1;
 
-    const Frame f = detail::frameOf(mConfig, g, basis, options, table);
-    Canvas canvas(options.width, options.height, mConfig.tilePixels,
+    Canvas canvas(options.drawn(), mConfig.tilePixels,
                   options.earlyTermination ? options.ertThreshold : 2.0);
-    ChunkDrawer drawer(f, mFootprint, mConfig, canvas, mLast);
+    ChunkDrawer drawer(f, mFootprint, mConfig, options.width, options.height, canvas, mLast);
     const auto type = store.info().volume.type;
     const std::uint64_t brickBytes = store.brickBytes(), budget = cache.stats().budgetBytes;
     for (std::size_t first = 0, end; first < plan.drawn.size(); first = end) {

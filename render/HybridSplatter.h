@@ -30,6 +30,11 @@
 // the budget), then drawn in order in horizontal bands of whole tiles, one worker per band
 // (parallelDraw): slab cuts are decided once for all bands, culling per band, so every pixel
 // sees the serial operations and the image and counts are those of one band.
+// Regions (RenderOptions::region, a slice of a frame): the plan, the records and the slab cuts
+// are the whole image's; bricks whose screen reach misses the region are dropped before they
+// are pinned, and the bands, tiles and pixels drawn are the region's alone, so each pixel of a
+// region gets the whole frame's operations in the same order (the same value, to the bit) at
+// a cost that follows the bricks reaching it. Counts are of the voxels that meet the region.
 // Not thread-safe: one frame at a time per instance.
 #include "render/Renderer.h"
 #include "render/SplatConfig.h"

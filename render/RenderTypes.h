@@ -43,8 +43,9 @@ struct RenderOptions {
     std::uint32_t width = 256;
     std::uint32_t height = 256;
     /// Only these pixels are drawn, each exactly as in the whole frame, and the image returned
-    /// is the region's size. Renderers whose kind says `regions` honour it; the others refuse
-    /// a region that is not the whole image. How the daemon draws a long frame in slices.
+    /// is the region's size. Renderers whose kind says `regions` honour it (every built-in
+    /// one); others would refuse a region that is not the whole image (Renderer::checkView).
+    /// How the daemon draws a long frame in slices.
     PixelRect region;
     double stepVoxels = 1.0; ///< sample distance in units of the smallest spacing
     bool earlyTermination = true;

@@ -28,11 +28,13 @@ const RendererRegistry& RendererRegistry::builtin() {
                .create = [] { return std::make_unique<ReferenceRenderer>(); }});
         r.add({.name = "splat",
                .description = "hybrid forward splatter (CPU)",
+               .regions = true,
                .objectOrder = true,
                .create = [] { return std::make_unique<HybridSplatter>(); }});
         r.add({.name = "splat-gpu",
                .description = "hybrid forward splatter (OpenGL 4.5)",
                .needsGl = true,
+               .regions = true,
                .objectOrder = true,
                .create = [] { return std::make_unique<GpuSplatter>(); }});
         return r;

@@ -19,8 +19,9 @@ struct RendererKind {
     /// Holds nothing of one viewer (no previous frame, no camera path): one instance may serve
     /// every viewer of a volume (the reference, which holds the volume's voxels).
     bool sharedPerVolume = false;
-    /// Draws RenderOptions::region alone, at a cost in proportion to its pixels (the CPU
-    /// raycasters): the daemon draws long frames of these in slices.
+    /// Draws RenderOptions::region alone, at a cost that follows what the region shows (the
+    /// raycasters by its pixels; the splatters by the bricks that reach it): the daemon draws
+    /// long frames of these in slices. Every built-in renderer does.
     bool regions = false;
     /// Its cost follows the voxels it projects (the splatters), not pixels x samples per ray.
     bool objectOrder = false;

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <utility>
+#include <vector>
 
 #include <glm/geometric.hpp>
 
@@ -166,7 +167,7 @@ Frame frameOf(const HybridSplatterConfig& config, const LevelGeometry& g, const 
 SplatScene sceneOf(const Scene& scene, const View& view, const RenderOptions& options,
                    FrameStats& stats) {
     options.validate();
-    Renderer::checkView(view, options);
+    Renderer::checkView(view, options, true); // both splatters draw regions
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     return {level, LevelGeometry::of(scene.store, level),
@@ -185,6 +186,45 @@ bool pixelRect(const glm::dvec2& lo, const glm::dvec2& hi, std::uint32_t w, std:
     r[2] = std::uint32_t(std::min(x1, double(w) - 1));
     r[3] = std::uint32_t(std::min(y1, double(h) - 1));
     return true;
+}
+
+bool meetsRegion(const std::uint32_t r[4], const PixelRect& region) {
+    return r[0] < region.x + region.width && r[2] >= region.x && r[1] < region.y + region.height &&
+           r[3] >= region.y;
+}
+
+BrickReach brickReach(const Frame& f, const PlannedBrick& b, std::uint32_t w, std::uint32_t h) {
+    const Box box = f.g.brickBox(b.key.pos);
+    glm::dvec2 lo(1e300), hi(-1e300);
+    for (int corner = 0; corner < 8; ++corner) {
+        const glm::dvec3 c((corner & 1) ? box.max.x + f.radiusMm : box.min.x - f.radiusMm,
+                           (corner & 2) ? box.max.y + f.radiusMm : box.min.y - f.radiusMm,
+                           (corner & 4) ? box.max.z + f.radiusMm : box.min.z - f.radiusMm);
+        const glm::dvec3 rel = c - f.view.eye;
+        const double z = glm::dot(rel, f.view.forward);
+        if (!f.view.orthographic && !(z > 0.0)) return {}; // reaches behind the eye
+        const double scale = f.view.orthographic ? f.view.orthoScale : f.view.focalLength / z;
+        const glm::dvec2 p =
+            scale * glm::dvec2(glm::dot(rel, f.view.right), glm::dot(rel, f.view.up));
+        lo = glm::min(lo, p);
+        hi = glm::max(hi, p);
+    }
+    const double grow = f.pointFilter + 1.0;
+    BrickReach reach;
+    reach.kind = pixelRect(lo - grow, hi + grow, w, h, reach.rect) ? BrickReach::Kind::Rect
+                                                                   : BrickReach::Kind::Nowhere;
+    return reach;
+}
+
+void cullOutsideRegion(const Frame& f, const PixelRect& region, std::uint32_t width,
+                       std::uint32_t height, BrickPlan& plan) {
+    if (region.whole()) return;
+    std::erase_if(plan.drawn, [&](const PlannedBrick& b) {
+        if (!brickReach(f, b, width, height).misses(region)) return false;
+        ++plan.culled;
+        --(b.draw == BrickDraw::Constant ? plan.constant : plan.sampled);
+        return true;
+    });
 }
 
 std::size_t chunkEnd(const BrickPlan& plan, std::size_t first, std::uint64_t brickBytes,

@@ -74,6 +74,30 @@ SplatScene sceneOf(const Scene& scene, const View& view, const RenderOptions& op
 bool pixelRect(const glm::dvec2& lo, const glm::dvec2& hi, std::uint32_t w, std::uint32_t h,
                std::uint32_t r[4]);
 
+/// True when the pixel rectangle r (first and last column, first and last row) meets `region`.
+bool meetsRegion(const std::uint32_t r[4], const PixelRect& region);
+
+/// Where a planned brick can draw: its world box grown by the sphere radius (and a point's
+/// filter) on the screen; Nowhere off the image, Unbounded when it reaches behind the eye.
+struct BrickReach {
+    enum class Kind : std::uint8_t { Nowhere, Unbounded, Rect };
+    Kind kind = Kind::Unbounded;
+    std::uint32_t rect[4] = {};
+    /// True when no voxel of the brick can touch a pixel of `region`.
+    bool misses(const PixelRect& region) const {
+        return kind == Kind::Nowhere || (kind == Kind::Rect && !meetsRegion(rect, region));
+    }
+};
+BrickReach brickReach(const Frame& f, const PlannedBrick& b, std::uint32_t width,
+                      std::uint32_t height);
+
+/// A slice of a frame (RenderOptions::region, not whole): drops from `plan` the bricks whose
+/// reach misses `region` of the `width` x `height` image, counted as culled. Exact: they touch
+/// none of its pixels, and the bricks left keep their order, so each pixel of the region sees
+/// the operations of the whole frame; a slice prepares only the bricks it can show.
+void cullOutsideRegion(const Frame& f, const PixelRect& region, std::uint32_t width,
+                       std::uint32_t height, BrickPlan& plan);
+
 /// One visible voxel of a brick, waiting for its turn.
 struct Visible {
     double depth;

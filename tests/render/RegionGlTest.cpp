@@ -8,30 +8,16 @@
 namespace bc::render {
 namespace {
 
-/// The frame assembled from regions: whole rows, then runs of a row, as the daemon slices.
+/// The frame assembled from regions (test::drawnInRegions); each slice says it is one and
+/// defers no brick (ray guidance is whole-frame state).
 Image gpuInRegions(Raycaster& r, test::TestStore& t, const TransferFunction& tf,
-                   const Camera& camera, RenderOptions o, std::vector<FrameStats>* perRegion) {
-    Image frame(o.width, o.height);
-    const std::vector<PixelRect> regions = {
-        {0, 0, o.width, 5}, // rows
-        {0, 5, 7, 1},
-        {7, 5, o.width - 7, 1},            // a row in two runs
-        {0, 6, o.width, o.height - 6 - 1}, // rows
-        {0, o.height - 1, 1, 1},
-        {1, o.height - 1, o.width - 1, 1}, // one pixel, then the rest
-    };
-    for (const PixelRect& rect : regions) {
-        o.region = rect;
-        FrameStats stats;
-        const Image part = r.render(*t.store, *t.cache, tf, camera, o, stats);
-        EXPECT_EQ(part.width, rect.width);
-        EXPECT_EQ(part.height, rect.height);
-        EXPECT_STREQ(stats.occlusionReason, "a slice of a frame");
-        EXPECT_EQ(stats.bricksDeferred, 0u);
-        if (perRegion) perRegion->push_back(stats);
-        for (std::uint32_t y = 0; y < part.height; ++y)
-            std::copy_n(part.pixel(0, y), std::size_t(part.width) * 4,
-                        frame.pixel(rect.x, rect.y + y));
+                   const Camera& camera, const RenderOptions& o, std::vector<FrameStats>* parts) {
+    std::vector<FrameStats> own;
+    std::vector<FrameStats>& stats = parts ? *parts : own;
+    Image frame = test::drawnInRegions(r, t, tf, camera, o, &stats);
+    for (const FrameStats& s : stats) {
+        EXPECT_STREQ(s.occlusionReason, "a slice of a frame");
+        EXPECT_EQ(s.bricksDeferred, 0u);
     }
     return frame;
 }
@@ -61,10 +47,8 @@ TEST(RegionGl, GpuRaycasterDrawsEachPixelOfARegionAsInTheWholeFrame) {
         std::vector<FrameStats> parts;
         const Image sliced = gpuInRegions(gpu, *t, tf, camera, o, &parts);
         EXPECT_EQ(compareImages(sliced, image).maxAbs, 0.0) << "a region changed pixels";
-        double alpha = 0;
-        for (std::size_t i = 3; i < image.rgba.size(); i += 4)
-            alpha += image.rgba[i];
-        EXPECT_GT(alpha, 0.05 * o.width * o.height) << "the view shows almost nothing";
+        EXPECT_GT(test::alphaSum(image), 0.05 * o.width * o.height)
+            << "the view shows almost nothing";
         // The slices take the whole frame's samples between them, no more.
         std::uint64_t samples = 0;
         for (const FrameStats& s : parts)

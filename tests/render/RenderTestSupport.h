@@ -1,7 +1,7 @@
 #pragma once
 // Shared by the render tests: one EGL context for the whole test binary (GL belongs to the
 // thread that made it; GoogleTest runs every test on the main thread), stores ingested from
-// the real scans into scratch folders, and GPU-vs-reference helpers.
+// the real scans into scratch folders, GPU-vs-reference helpers, and frames drawn in regions.
 #include "../TestSupport.h"
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
@@ -14,10 +14,13 @@
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
 #include <optional>
+#include <string>
+#include <vector>
 
 namespace bc::test {
 
@@ -93,6 +96,14 @@ inline std::optional<brickstore::SourceSpec> realScan(const std::string& name) {
     return s;
 }
 
+/// A real scan ingested in bricks of 32 (apron 2, octree leaves of 8); nullptr when its data
+/// is missing.
+inline std::unique_ptr<TestStore> ingestRealScan(const std::string& name) {
+    auto spec = realScan(name);
+    if (!spec) return nullptr;
+    return ingestSpec(*spec, {32, 2, 8});
+}
+
 /// GPU frame of a test store.
 inline render::Image gpuFrame(TestStore& t, render::Raycaster& raycaster,
                               const render::TransferFunction& tf, const render::Camera& camera,
@@ -111,6 +122,72 @@ inline render::Image referenceFrame(TestStore& t, const render::TransferFunction
     render::ReferenceVolume volume(*t.store, std::uint32_t(options.level));
     render::FrameStats stats;
     return render::renderReference(*t.store, volume, tf, camera, options, stats);
+}
+
+/// The frame assembled from regions of `r`: whole rows, then runs of a row, then single pixels,
+/// as the daemon slices; each part is checked to be its region's size. `perRegion`: each
+/// part's stats.
+inline render::Image drawnInRegions(render::Renderer& r, TestStore& t,
+                                    const render::TransferFunction& tf,
+                                    const render::Camera& camera, render::RenderOptions o,
+                                    std::vector<render::FrameStats>* perRegion = nullptr) {
+    render::Image frame(o.width, o.height);
+    const std::vector<render::PixelRect> regions = {
+        {0, 0, o.width, 5}, // rows
+        {0, 5, 7, 1},
+        {7, 5, o.width - 7, 1},            // a row in two runs
+        {0, 6, o.width, o.height - 6 - 1}, // rows
+        {0, o.height - 1, 1, 1},
+        {1, o.height - 1, o.width - 1, 1}, // one pixel, then the rest
+    };
+    for (const render::PixelRect& rect : regions) {
+        o.region = rect;
+        render::FrameStats stats;
+        const render::Image part = r.render(*t.store, *t.cache, tf, camera, o, stats);
+        if (perRegion) perRegion->push_back(stats);
+        EXPECT_EQ(part.width, rect.width);
+        EXPECT_EQ(part.height, rect.height);
+        if (part.width != rect.width || part.height != rect.height) continue;
+        for (std::uint32_t y = 0; y < part.height; ++y)
+            std::copy_n(part.pixel(0, y), std::size_t(part.width) * 4,
+                        frame.pixel(rect.x, rect.y + y));
+    }
+    return frame;
+}
+
+/// A slice of 4 rows of a 64 x 64 frame costs what it covers: it draws fewer bricks than the
+/// whole frame and under half its voxels, each of its pixels the whole frame's to the bit.
+inline void expectAThinSliceDrawsLess(render::Renderer& r, TestStore& t,
+                                      const render::TransferFunction& tf,
+                                      const render::Camera& camera) {
+    render::RenderOptions o;
+    o.width = o.height = 64;
+    render::FrameStats whole, thin;
+    const render::Image all = r.render(*t.store, *t.cache, tf, camera, o, whole);
+    o.region = {0, 30, 64, 4};
+    const render::Image part = r.render(*t.store, *t.cache, tf, camera, o, thin);
+    EXPECT_LT(thin.bricksVisited, whole.bricksVisited);
+    EXPECT_GT(thin.bricksCulled, whole.bricksCulled);
+    EXPECT_LT(thin.samples, whole.samples / 2);
+    EXPECT_GT(thin.samples, 0u);
+    ASSERT_EQ(part.width, 64u);
+    ASSERT_EQ(part.height, 4u);
+    for (std::uint32_t y = 0; y < 4; ++y)
+        for (std::uint32_t x = 0; x < 64; ++x)
+            for (int c = 0; c < 4; ++c)
+                ASSERT_EQ(part.pixel(x, y)[c], all.pixel(x, 30 + y)[c]) << x << "," << y;
+    std::printf("%s: whole %llu bricks, %llu voxels; 4 rows %llu bricks, %llu voxels\n",
+                std::string(r.name()).c_str(), (unsigned long long)whole.bricksVisited,
+                (unsigned long long)whole.samples, (unsigned long long)thin.bricksVisited,
+                (unsigned long long)thin.samples);
+}
+
+/// The sum of an image's alpha: how much it shows.
+inline double alphaSum(const render::Image& image) {
+    double alpha = 0;
+    for (std::size_t i = 3; i < image.rgba.size(); i += 4)
+        alpha += image.rgba[i];
+    return alpha;
 }
 
 /// True when every channel of every pixel is finite.
