@@ -124,6 +124,15 @@ class FairScheduling : public ::testing::Test {
         }
         return {frames, worstGapMs};
     }
+    /// frames_cancelled_total once it is 1, or after 5 s.
+    static double cancelledWithin5s(client::Client& c) {
+        double cancelled = 0;
+        for (int i = 0; i < 50 && cancelled < 1; ++i) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(100));
+            cancelled = counter(c, "frames_cancelled_total");
+        }
+        return cancelled;
+    }
     static bc::test::TestStore* sStore;
 };
 bc::test::TestStore* FairScheduling::sStore = nullptr;
@@ -180,12 +189,8 @@ TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionG
             << "the heavy frame stalled the other session";
         EXPECT_GT(counter(light, "frame_slices_total"), 10.0) << "the heavy frame was not sliced";
     } // the heavy client disconnects mid-frame
-    double cancelled = 0;
-    for (int i = 0; i < 50 && cancelled < 1; ++i) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(100));
-        cancelled = counter(light, "frames_cancelled_total");
-    }
-    EXPECT_EQ(cancelled, 1.0) << "the frame of a session that has gone was not dropped";
+    EXPECT_EQ(cancelledWithin5s(light), 1.0)
+        << "the frame of a session that has gone was not dropped";
     // Nothing is left running: slices stop growing.
     const double slices = counter(light, "frame_slices_total");
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
@@ -238,12 +243,8 @@ TEST_F(FairSchedulingGl, AHeavyGpuFrameCostsOthersOneSliceAndIsDroppedWhenItsSes
         EXPECT_GT(counter(light, "frame_slices_total"), 10.0) << "the heavy frame was not sliced";
         EXPECT_EQ(counter(light, "frames_refused_total"), 0.0);
     } // the heavy client disconnects mid-frame
-    double cancelled = 0;
-    for (int i = 0; i < 50 && cancelled < 1; ++i) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(100));
-        cancelled = counter(light, "frames_cancelled_total");
-    }
-    EXPECT_EQ(cancelled, 1.0) << "the frame of a session that has gone was not dropped";
+    EXPECT_EQ(cancelledWithin5s(light), 1.0)
+        << "the frame of a session that has gone was not dropped";
 }
 
 TEST_F(FairScheduling, ASessionThatNeverReadsHoldsAtMostItsQueueBytes) {
