@@ -29,9 +29,8 @@ std::uint64_t slotBytes(const test::TestStore& t) {
 
 TEST(RegionGl, GpuRaycasterDrawsEachPixelOfARegionAsInTheWholeFrame) {
     test::glContext();
-    auto spec = test::realScan("cthead");
-    if (!spec) return test::missingData("scan cthead");
-    auto t = test::ingestSpec(*spec, {32, 2, 8});
+    auto t = test::ingestRealScan("cthead");
+    if (!t) return test::missingData("scan cthead");
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
     RenderOptions o;
@@ -67,9 +66,8 @@ TEST(RegionGl, GpuRaycasterDrawsEachPixelOfARegionAsInTheWholeFrame) {
 // have been without the slices.
 TEST(RegionGl, SlicesLeaveOcclusionFrustumsToWholeFrames) {
     test::glContext();
-    auto spec = test::realScan("cthead");
-    if (!spec) return test::missingData("scan cthead");
-    auto t = test::ingestSpec(*spec, {32, 2, 8});
+    auto t = test::ingestRealScan("cthead");
+    if (!t) return test::missingData("scan cthead");
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     RenderOptions o;
