@@ -865,17 +865,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     if (!d.sliced) {
         d.rgba8 = render::toRgba8(renderer.render(scene, d.view, d.options, d.stats));
         calibrate(mCostPerMs, double(d.cost), msSince(start));
-        if (render::GpuResidency* gpu = renderer.gpuResidency()) {
-            auto& mine = mRenderers->of(slot);
-            mine.previousCamera = mine.lastCamera;
-            mine.lastCamera = d.view.camera;
-            mine.prefetch.reset();
-            if (mConfig.prefetch && mine.previousCamera && gpu->pool())
-                mine.prefetch = SessionRenderers::Prefetch{
-                    &renderer, s.volume,
-                    s.tf,      render::predictNext(*mine.previousCamera, d.view.camera),
-                    d.options, residentBricks(d.stats)};
-        }
+        planPrefetch(slot, d, renderer);
         return true;
     }
     const auto rate = mSliceCostPerMs.find(d.kind->name);
@@ -903,7 +893,26 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     if (d.nextPixel < std::uint64_t(d.options.width) * d.options.height) return false;
     // The whole frame's speed too, so that a frame like it is sliced only when it must be.
     calibrate(mCostPerMs, double(d.cost), d.slicesMs);
+    planPrefetch(slot, d, renderer);
     return true;
+}
+
+void RenderService::planPrefetch(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d,
+                                 render::Renderer& renderer) {
+    render::GpuResidency* gpu = renderer.gpuResidency();
+    if (!gpu) return;
+    const auto& s = d.job.state;
+    auto& mine = mRenderers->of(slot);
+    mine.previousCamera = mine.lastCamera;
+    mine.lastCamera = d.view.camera;
+    mine.prefetch.reset();
+    // A sliced frame's brick count is its largest slice's (a lower bound): prefetch may then
+    // evict a few of the frame's bricks, which costs uploads later, never a wrong frame.
+    if (mConfig.prefetch && mine.previousCamera && gpu->pool())
+        mine.prefetch = SessionRenderers::Prefetch{
+            &renderer, s.volume,
+            s.tf,      render::predictNext(*mine.previousCamera, d.view.camera),
+            d.options, residentBricks(d.stats)};
 }
 
 void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,

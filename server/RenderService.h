@@ -195,6 +195,10 @@ class RenderService {
     void prepare(FrameDrawing& d);
     /// Draws the next slice; true when the frame is complete.
     bool drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
+    /// After a GPU frame `d` completed: its session's next view, predicted from its last two,
+    /// is prefetched while the render thread is idle (frames.prefetch).
+    void planPrefetch(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d,
+                      render::Renderer& renderer);
     render::Renderer& rendererFor(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
     protocol::Frame finish(RenderSlot& slot, FrameDrawing& d, FrameRecord& record);
     /// Whether `slot` has a frame in progress (render thread).
