@@ -1,0 +1,280 @@
+// protocol.js against the byte layouts of protocol/PROTOCOL.md; the golden bytes are those of
+// tests/protocol/MessagesTest.cpp where that file has the message.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import {
+  Type, ErrorCode, ProtocolError, encode, decode, decodeHeader, encodeHello, encodeSetCamera,
+  encodeSetRenderOptions, encodeSetTransferFunction, encodeAuth, encodeOpenVolume,
+  encodeRequestHistogram, encodeRequestFrame, encodeListVolumes, encodeRequestStats, encodeBye,
+  encodeError, errorName, typeName, MAX_CLIENT_PAYLOAD,
+} from '../js/protocol.js';
+
+const header = (type, length, request) => [
+  0x42, 0x43, 0x53, 0x54, 0x01, type, 0x00, 0x00,
+  length & 0xff, (length >> 8) & 0xff, (length >> 16) & 0xff, length >>> 24,
+  request & 0xff, (request >> 8) & 0xff, (request >> 16) & 0xff, request >>> 24,
+];
+const ascii = (s) => Array.from(s, (c) => c.charCodeAt(0));
+const bytes = (buffer) => Array.from(new Uint8Array(buffer));
+const f64 = (v) => { const b = new Uint8Array(8); new DataView(b.buffer).setFloat64(0, v, true); return Array.from(b); };
+const u64 = (v) => { const b = new Uint8Array(8); new DataView(b.buffer).setBigUint64(0, BigInt(v), true); return Array.from(b); };
+const u32 = (v) => { const b = new Uint8Array(4); new DataView(b.buffer).setUint32(0, v, true); return Array.from(b); };
+const buf = (arr) => new Uint8Array(arr).buffer;
+const throwsCode = (fn, code, re) => assert.throws(fn, (e) => {
+  assert.ok(e instanceof ProtocolError, `expected a ProtocolError, got ${e}`);
+  assert.equal(e.code, code);
+  if (re) assert.match(e.message, re);
+  return true;
+});
+
+test('Hello: golden bytes of MessagesTest.cpp', () => {
+  const got = encode(Type.Hello, { versionMin: 1, versionMax: 1, capabilities: 0x0e, codecs: [0, 1, 2, 3], software: 'bc-0.1' }, 0);
+  assert.deepEqual(bytes(got), [
+    ...header(0x01, 21, 0), 0x01, 0x00, 0x01, 0x00, 0x0e, 0x00, 0x00, 0x00,
+    0x04, 0x00, 0x01, 0x02, 0x03, 0x06, 0x00, ...ascii('bc-0.1'),
+  ]);
+});
+
+test('Hello: the web client\'s own Hello', () => {
+  const got = encodeHello({ versionMin: 1, versionMax: 1, capabilities: 0, codecs: [3, 4, 0], software: 'brickcast-web' }, 1);
+  assert.deepEqual(bytes(got), [
+    ...header(0x01, 27, 1), 0x01, 0x00, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x03, 0x03, 0x04, 0x00, 0x0d, 0x00, ...ascii('brickcast-web'),
+  ]);
+  assert.deepEqual(decode(got).body, { versionMin: 1, versionMax: 1, capabilities: 0, codecs: [3, 4, 0], software: 'brickcast-web' });
+});
+
+test('Auth, ListVolumes, OpenVolume, RequestFrame, RequestStats, Bye: golden bytes', () => {
+  assert.deepEqual(bytes(encodeAuth('s3cret', 1)), [...header(0x02, 8, 1), 0x06, 0x00, ...ascii('s3cret')]);
+  assert.deepEqual(bytes(encodeListVolumes(2)), header(0x04, 0, 2));
+  assert.deepEqual(bytes(encodeOpenVolume('cthead', 3)), [...header(0x06, 8, 3), 0x06, 0x00, ...ascii('cthead')]);
+  assert.deepEqual(bytes(encodeRequestFrame(1, 7)), [...header(0x0b, 1, 7), 0x01]);
+  assert.deepEqual(bytes(encodeRequestStats(8)), header(0x0d, 0, 8));
+  assert.deepEqual(bytes(encodeBye(2, 0)), [...header(0x10, 2, 0), 0x02, 0x00]);
+  assert.deepEqual(bytes(encodeRequestHistogram(9)), header(0x11, 0, 9));
+});
+
+test('request id is little-endian at offset 12', () => {
+  const got = bytes(encodeListVolumes(0x01020304));
+  assert.deepEqual(got.slice(12), [0x04, 0x03, 0x02, 0x01]);
+});
+
+test('SetCamera: golden bytes of MessagesTest.cpp', () => {
+  const cam = { cameraId: 7, eye: [0, -4, 0], target: [0, 0, 0], up: [0, 0, 1], fovYDeg: 30, orthographic: false, orthoHeight: 2 };
+  const got = encodeSetCamera(cam, 4);
+  assert.deepEqual(bytes(got), [
+    ...header(0x08, 93, 4), 0x07, 0x00, 0x00, 0x00,
+    ...f64(0), ...[0, 0, 0, 0, 0, 0, 0x10, 0xc0], ...f64(0),
+    ...f64(0), ...f64(0), ...f64(0),
+    ...f64(0), ...f64(0), ...[0, 0, 0, 0, 0, 0, 0xf0, 0x3f],
+    ...[0, 0, 0, 0, 0, 0, 0x3e, 0x40], 0x00, ...[0, 0, 0, 0, 0, 0, 0, 0x40],
+  ]);
+  assert.deepEqual(decode(got), { type: Type.SetCamera, name: 'SetCamera', flags: 0, request: 4, body: cam });
+});
+
+test('SetCamera: invalid cameras are refused before sending', () => {
+  const cam = { cameraId: 1, eye: [0, -4, 0], target: [0, 0, 0], up: [0, 0, 1], fovYDeg: 30, orthographic: false, orthoHeight: 2 };
+  throwsCode(() => encodeSetCamera({ ...cam, fovYDeg: 180 }), 'OutOfRange', /fovYDeg/);
+  throwsCode(() => encodeSetCamera({ ...cam, eye: [NaN, 0, 0] }), 'OutOfRange', /eye\[0\]/);
+  throwsCode(() => encodeSetCamera({ ...cam, orthographic: true, orthoHeight: 0 }), 'OutOfRange', /orthoHeight/);
+});
+
+test('SetTransferFunction: golden bytes for a preset and for points', () => {
+  const preset = { kind: 0, shading: true, shadingSource: 1, preset: 'ct-bone' };
+  const a = encodeSetTransferFunction(preset, 5);
+  assert.deepEqual(bytes(a), [...header(0x09, 12, 5), 0x00, 0x01, 0x01, 0x07, 0x00, ...ascii('ct-bone')]);
+  assert.deepEqual(decode(a).body, preset);
+
+  const points = {
+    kind: 1, shading: false, shadingSource: 0, points: [
+      { placement: 0, position: 100, rgba: [1, 0.5, 0.25, 0] },
+      { placement: 1, position: 0.5, rgba: [1, 1, 1, 0.75] },
+    ],
+  };
+  const b = encodeSetTransferFunction(points, 5);
+  assert.deepEqual(bytes(b), [
+    ...header(0x09, 55, 5), 0x01, 0x00, 0x00, 0x02, 0x00,
+    0x00, ...[0, 0, 0, 0, 0, 0, 0x59, 0x40],
+    0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0x3f, 0x00, 0x00, 0x80, 0x3e, 0x00, 0x00, 0x00, 0x00,
+    0x01, ...[0, 0, 0, 0, 0, 0, 0xe0, 0x3f],
+    0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x40, 0x3f,
+  ]);
+  assert.deepEqual(decode(b).body, points);
+});
+
+test('SetTransferFunction: out-of-range points are refused', () => {
+  const p = { placement: 0, position: 1, rgba: [0, 0, 0, 0] };
+  throwsCode(() => encodeSetTransferFunction({ kind: 1, shading: false, points: [] }), 'OutOfRange', /points/);
+  throwsCode(() => encodeSetTransferFunction({ kind: 1, shading: false, points: Array(257).fill(p) }), 'OutOfRange', /points/);
+  throwsCode(() => encodeSetTransferFunction({ kind: 1, shading: false, points: [{ ...p, rgba: [0, 0, 1.5, 0] }] }), 'OutOfRange', /rgba\[2\]/);
+  throwsCode(() => encodeSetTransferFunction({ kind: 1, shading: false, points: [{ ...p, position: Infinity }] }), 'OutOfRange', /position/);
+  // 256 points is the largest legal request and still fits the client's payload limit.
+  const big = encodeSetTransferFunction({ kind: 1, shading: true, points: Array(256).fill(p) });
+  assert.ok(big.byteLength - 16 <= MAX_CLIENT_PAYLOAD);
+});
+
+test('SetRenderOptions: golden bytes of MessagesTest.cpp, refinedCodec at byte 21', () => {
+  const o = {
+    width: 640, height: 480, stepVoxels: 0.5, techniques: 0x3f, ertThreshold: 0.99, renderer: 1,
+    quality: 1, codec: 3, codecQuality: 90, level: 255, refinedCodec: 0,
+  };
+  const got = encodeSetRenderOptions(o, 6);
+  assert.deepEqual(bytes(got), [
+    ...header(0x0a, 24, 6), 0x80, 0x02, 0xe0, 0x01, 0x00, 0x00, 0x00, 0x3f, 0x3f, 0x00, 0x00, 0x00,
+    0xa4, 0x70, 0x7d, 0x3f, 0x01, 0x01, 0x03, 0x5a, 0xff, 0x00, 0x00, 0x00,
+  ]);
+  const withPng = bytes(encodeSetRenderOptions({ ...o, quality: 0, refinedCodec: 5 }, 6));
+  assert.equal(withPng[16 + 21], 5);
+  assert.equal(withPng[16 + 17], 0);
+  const back = decode(got).body;
+  assert.equal(back.width, 640);
+  assert.equal(back.refinedCodec, 0);
+  assert.ok(Math.abs(back.ertThreshold - 0.99) < 1e-6);
+});
+
+test('SetRenderOptions: ranges', () => {
+  const o = { width: 64, height: 64, stepVoxels: 1, techniques: 63, ertThreshold: 0.99, renderer: 0, quality: 0, codec: 3, codecQuality: 80, level: 255, refinedCodec: 5 };
+  throwsCode(() => encodeSetRenderOptions({ ...o, width: 4097 }), 'OutOfRange', /width/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, height: 0 }), 'OutOfRange', /height/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, stepVoxels: 0 }), 'OutOfRange', /stepVoxels/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, techniques: 64 }), 'OutOfRange', /techniques/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, level: 16 }), 'OutOfRange', /level/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, renderer: 5 }), 'OutOfRange', /renderer/);
+});
+
+test('OpenVolume: names that are not catalog names are refused', () => {
+  throwsCode(() => encodeOpenVolume('../etc'), 'OutOfRange', /name/);
+  throwsCode(() => encodeOpenVolume('.hidden'), 'OutOfRange');
+  throwsCode(() => encodeOpenVolume(''), 'OutOfRange');
+  throwsCode(() => encodeOpenVolume('a'.repeat(65)), 'OutOfRange');
+  assert.equal(decode(encodeOpenVolume('CT_AVM-1.v2')).body.name, 'CT_AVM-1.v2');
+});
+
+const volumeBytes = [
+  0x06, 0x00, ...ascii('cthead'), ...u32(256), ...u32(256), ...u32(113),
+  ...f64(1), ...f64(1), ...f64(2), 0x01, 0x04, ...f64(0), ...f64(4095), ...u64(14811136),
+];
+
+test('VolumeList: decodes the golden bytes of MessagesTest.cpp', () => {
+  const m = decode(buf([...header(0x05, 72, 2), 0x01, 0x00, ...volumeBytes]));
+  assert.equal(m.name, 'VolumeList');
+  assert.equal(m.request, 2);
+  assert.deepEqual(m.body.volumes, [{
+    name: 'cthead', dims: [256, 256, 113], spacingMm: [1, 1, 2], voxelType: 1, levels: 4,
+    valueMin: 0, valueMax: 4095, storedBytes: 14811136,
+  }]);
+  assert.deepEqual(decode(buf([...header(0x05, 2, 2), 0, 0])).body.volumes, []);
+  assert.deepEqual(bytes(encode(Type.VolumeList, m.body, 2)), [...header(0x05, 72, 2), 0x01, 0x00, ...volumeBytes]);
+});
+
+test('VolumeOpened: decodes', () => {
+  const m = decode(buf([...header(0x07, 70, 3), ...volumeBytes]));
+  assert.equal(m.body.name, 'cthead');
+  assert.deepEqual(m.body.spacingMm, [1, 1, 2]);
+});
+
+const frameBytes = [
+  ...header(0x0c, 68, 7),
+  0x2a, 0, 0, 0, 0x07, 0, 0, 0, 0x02, 0x00, 0x01, 0x00, 0x00, 0x01, 0x01, 0x00,
+  0x00, 0x00, 0x00, 0x3f, 0x00, 0x00, 0x48, 0x41, 0x00, 0x00, 0x80, 0x3e,
+  0xe8, 0x03, 0, 0, 0, 0, 0, 0, 0x03, 0, 0, 0, 0x05, 0, 0, 0,
+  0x00, 0x00, 0x01, 0, 0, 0, 0, 0, 0x01, 0, 0, 0, 0x08, 0, 0, 0,
+  0xff, 0x00, 0x00, 0xff, 0x00, 0x80, 0x00, 0x80,
+];
+
+test('Frame: decodes a hand-built frame (golden bytes of MessagesTest.cpp)', () => {
+  const m = decode(buf(frameBytes));
+  const { image, ...h } = m.body;
+  assert.deepEqual(h, {
+    frameId: 42, cameraId: 7, width: 2, height: 1, codec: 0, level: 1, refined: true, keyframe: false,
+    queueMs: 0.5, renderMs: 12.5, encodeMs: 0.25, samples: 1000, bricksDrawn: 3, bricksSkipped: 5,
+    bytesUploaded: 65536, occlusionUsed: true,
+  });
+  assert.deepEqual(Array.from(image), [0xff, 0, 0, 0xff, 0, 0x80, 0, 0x80]);
+  assert.deepEqual(bytes(encode(Type.Frame, m.body, 7)), frameBytes);
+});
+
+test('Frame: imageBytes must equal what is left of the payload', () => {
+  const tooFew = frameBytes.slice();
+  tooFew[16 + 56] = 0x09; // imageBytes 9, 8 follow
+  throwsCode(() => decode(buf(tooFew)), 'BadPayload', /imageBytes 9/);
+  const bad = frameBytes.slice();
+  bad[16 + 14] = 2; // refined = 2 is no bool
+  throwsCode(() => decode(buf(bad)), 'BadPayload', /refined/);
+});
+
+test('Stats: decodes the golden bytes of MessagesTest.cpp', () => {
+  const m = decode(buf([
+    ...header(0x0e, 32, 8), 0x02, 0x00, 0x06, 0x00, ...ascii('frames'), ...f64(12),
+    0x04, 0x00, ...ascii('hits'), ...f64(0.75),
+  ]));
+  assert.deepEqual(m.body.counters, [{ name: 'frames', value: 12 }, { name: 'hits', value: 0.75 }]);
+});
+
+test('Error: decodes the golden bytes of MessagesTest.cpp and round-trips', () => {
+  const raw = [...header(0x0f, 15, 6), 0x06, 0x00, 0x00, 0x0a, 0x09, 0x00, ...ascii('bad width')];
+  const m = decode(buf(raw));
+  assert.deepEqual(m.body, { code: ErrorCode.OutOfRange, fatal: false, offendingType: 0x0a, message: 'bad width' });
+  assert.deepEqual(bytes(encodeError(m.body, 6)), raw);
+  assert.equal(errorName(17), 'NotFound');
+  assert.equal(errorName(99), 'error 99');
+  assert.equal(typeName(0x0a), 'SetRenderOptions');
+  assert.equal(typeName(0x42), 'unknown');
+});
+
+test('Histogram: decodes f64 min, f64 max, u16 binCount, u64 counts', () => {
+  const m = decode(buf([...header(0x12, 18 + 24, 0), ...f64(-1024), ...f64(3071), 0x03, 0x00, ...u64(5), ...u64(0), ...u64(2 ** 40)]));
+  assert.equal(m.name, 'Histogram');
+  assert.equal(m.body.valueMin, -1024);
+  assert.equal(m.body.valueMax, 3071);
+  assert.deepEqual(Array.from(m.body.counts), [5, 0, 2 ** 40]);
+  throwsCode(() => decode(buf([...header(0x12, 18 + 16, 0), ...f64(0), ...f64(1), 0x03, 0x00, ...u64(1), ...u64(1)])), 'BadPayload', /3 bins/);
+  throwsCode(() => decode(buf([...header(0x12, 18, 0), ...f64(0), ...f64(1), 0x00, 0x00])), 'BadPayload', /binCount 0/);
+});
+
+test('round trips: every type decodes to what was encoded', () => {
+  const cases = [
+    [Type.AuthOk, {}], [Type.ListVolumes, {}], [Type.RequestStats, {}], [Type.RequestHistogram, {}],
+    [Type.Auth, { token: 'tøken' }], [Type.RequestFrame, { mode: 2 }], [Type.Bye, { reason: 1 }],
+    [Type.Stats, { counters: [{ name: 'bricks resident', value: 3 }] }],
+    [Type.Histogram, { valueMin: 0, valueMax: 255, counts: new Float64Array([1, 2, 3, 4]) }],
+    [Type.Error, { code: 13, fatal: false, offendingType: 0x0b, message: 'no OpenGL' }],
+  ];
+  for (const [type, body] of cases) {
+    const m = decode(encode(type, body, 11));
+    assert.equal(m.type, type);
+    assert.equal(m.request, 11);
+    assert.deepEqual(m.body, body);
+  }
+});
+
+test('malformed input: wrong magic, wrong version, too large, short header', () => {
+  const ok = bytes(encodeListVolumes(1));
+  const badMagic = ok.slice(); badMagic[0] = 0x41;
+  throwsCode(() => decode(buf(badMagic)), 'BadMagic');
+  const badVersion = ok.slice(); badVersion[4] = 2;
+  throwsCode(() => decode(buf(badVersion)), 'UnsupportedVersion');
+  throwsCode(() => decodeHeader(buf(header(0x0c, 2 ** 31, 0))), 'TooLarge');
+  throwsCode(() => decode(buf(ok.slice(0, 10))), 'BadPayload', /shorter than the 16-byte header/);
+});
+
+test('malformed input: length mismatch, short payload, bytes left over, unknown type, flags', () => {
+  // the header claims more than the message holds
+  throwsCode(() => decode(buf([...header(0x10, 4, 0), 0x00, 0x00])), 'BadPayload', /4 payload bytes/);
+  // a payload too short for its type
+  throwsCode(() => decode(buf([...header(0x10, 1, 0), 0x00])), 'BadPayload', /too short/);
+  // a payload too long for its type
+  throwsCode(() => decode(buf([...header(0x03, 1, 0), 0x00])), 'BadPayload', /left over/);
+  throwsCode(() => decode(buf([...header(0x07, 69, 3), ...volumeBytes.slice(0, 69)])), 'BadPayload', /too short/);
+  throwsCode(() => decode(buf(header(0x42, 0, 0))), 'UnknownType');
+  const flagged = header(0x03, 0, 0); flagged[6] = 1;
+  throwsCode(() => decode(buf(flagged)), 'BadPayload', /flags/);
+  // strings over their limit and invalid UTF-8
+  throwsCode(() => decode(buf([...header(0x0f, 6, 0), 0x05, 0x00, 0x00, 0x00, 0x01, 0x04])), 'BadPayload', /1025 bytes, over 1024/);
+  throwsCode(() => decode(buf([...header(0x02, 3, 0), 0x01, 0x00, 0xff])), 'BadPayload', /UTF-8/);
+});
+
+test('decode accepts typed-array views at an offset', () => {
+  const raw = new Uint8Array([0xaa, ...bytes(encodeBye(1))]);
+  assert.deepEqual(decode(raw.subarray(1)).body, { reason: 1 });
+});
