@@ -13,9 +13,9 @@ const BACKOFF_MAX_MS = 15000;
 // Framing errors leave no way to find the next message: answer Error and close (PROTOCOL.md).
 const FRAMING_ERRORS = new Set(['BadMagic', 'UnsupportedVersion', 'TooLarge']);
 
-/** An Error message from the server, as a JavaScript error (code, codeName, fatal, offendingType). */
+/** An Error message from the server, as a JavaScript error (code, codeName, fatal, offendingType, request: 0 when unasked). */
 export class ServerError extends Error {
-  constructor(body) {
+  constructor(body, request = 0) {
     const what = body.offendingType ? ` (${typeName(body.offendingType)})` : '';
     super(`${errorName(body.code)}${what}: ${body.message || 'no message'}`);
     this.name = 'ServerError';
@@ -24,6 +24,7 @@ export class ServerError extends Error {
     this.fatal = body.fatal;
     this.offendingType = body.offendingType;
     this.serverMessage = body.message;
+    this.request = request;
   }
 }
 
@@ -236,7 +237,7 @@ export class Connection extends EventTarget {
   }
 
   onError(m) {
-    const err = new ServerError(m.body);
+    const err = new ServerError(m.body, m.request);
     if (m.body.code === ErrorCode.AuthFailed || m.body.code === ErrorCode.NotAuthenticated) {
       // Fatal: the server closes. Forget the token and wait for a new one rather than retry it.
       this.token = null;

@@ -1,0 +1,555 @@
+// The page: wires the connection, the volume picker, the camera controls, the transfer-function
+// editor, the render options and the frame pipeline together, and exposes window.brickcast
+// for automated browser tests.
+
+import { Connection, ServerError } from './connection.js';
+import {
+  Type, Capability, Codec, Renderer, Quality, FrameMode, ErrorCode, TECHNIQUES_ALL, LEVEL_AUTOMATIC,
+  MAX_IMAGE_EDGE, ProtocolError,
+} from './protocol.js';
+import { Trackball } from './trackball.js';
+import { attachControls } from './controls.js';
+import { TfEditor } from './tfeditor.js';
+import { FrameStats, formatBytes, frameSize, volumeLabel } from './frames.js';
+
+const STATS_INTERVAL_MS = 3000;
+const RENDERER_NAMES = {
+  [Renderer.GpuRaycaster]: 'GPU raycaster', [Renderer.CpuRaycaster]: 'CPU raycaster',
+  [Renderer.Reference]: 'CPU reference (slow, exact)', [Renderer.Splatter]: 'splatting (CPU)',
+  [Renderer.GpuSplatter]: 'splatting (GPU)',
+};
+const CODEC_NAMES = ['raw', 'zstd', 'zstd delta', 'JPEG', 'PNG'];
+const IMAGE_TYPES = { [Codec.Jpeg]: 'image/jpeg', [Codec.Png]: 'image/png' };
+
+const $ = (id) => document.getElementById(id);
+const els = {
+  volume: $('volume'), connection: $('connection'), reconnect: $('reconnect'), view: $('view'),
+  overlay: $('overlay'), placeholder: $('placeholder'), renderer: $('renderer'), quality: $('quality'),
+  step: $('step'), jpegQuality: $('jpeg-quality'), jpegQualityValue: $('jpeg-quality-value'),
+  maxSize: $('max-size'), stats: $('stats'), status: $('status'), statusText: $('status-text'),
+  statusDismiss: $('status-dismiss'), auth: $('auth'), authForm: $('auth-form'),
+  authMessage: $('auth-message'), token: $('token'), tokenRemember: $('token-remember'),
+};
+
+const conn = new Connection(new URL('ws', location.href).href.replace(/^http/, 'ws'));
+const ctx = els.view.getContext('2d', { alpha: false });
+
+const state = {
+  volumes: [],
+  volume: null, // VolumeInfo of the open volume
+  opening: null, // name being opened
+  trackball: null,
+  nextCameraId: 1,
+  minCameraId: 0, // frames answering cameras before the current volume's first are stale
+  inputTimes: new Map(), // cameraId -> performance.now() of the input that made it
+  lastCamera: null,
+  lastTf: null,
+  lastOptions: null,
+  options: {
+    width: 0, height: 0, stepVoxels: 1, techniques: TECHNIQUES_ALL, ertThreshold: 0.99,
+    renderer: Renderer.CpuRaycaster, quality: Quality.Adaptive, codec: Codec.Jpeg, codecQuality: 80,
+    level: LEVEL_AUTOMATIC, refinedCodec: Codec.Png + 1,
+  },
+  maxEdge: 1024,
+  deviceSize: { width: 0, height: 0 },
+  lastDrawnCameraId: 0,
+  lastFrame: null,
+  frameCount: 0,
+  decoding: false,
+  pendingFrame: null,
+  stats: new FrameStats(),
+  statsTimer: 0,
+};
+
+// ---- status line -------------------------------------------------------------------------
+
+/** Shows a message in the dismissable status line (kind 'error' or 'info'). */
+function showStatus(text, kind = 'error') {
+  els.statusText.textContent = text;
+  els.status.dataset.kind = kind;
+  els.status.hidden = false;
+}
+
+function clearStatus() {
+  els.status.hidden = true;
+}
+
+els.statusDismiss.addEventListener('click', clearStatus);
+
+function report(e) {
+  if (e instanceof ServerError || e instanceof ProtocolError) showStatus(e.message);
+  else showStatus(String(e?.message ?? e));
+}
+
+// ---- coalescing --------------------------------------------------------------------------
+
+/** A sender that sends only the latest of the values given to it within one animation frame. */
+function coalesced(send) {
+  let pending = null, scheduled = false;
+  const flush = () => {
+    scheduled = false;
+    const v = pending;
+    pending = null;
+    if (v) send(v);
+  };
+  const schedule = (v) => {
+    pending = v;
+    if (!scheduled) {
+      scheduled = true;
+      requestAnimationFrame(flush);
+    }
+  };
+  schedule.cancel = () => { pending = null; };
+  return schedule;
+}
+
+// ---- sending -----------------------------------------------------------------------------
+
+function trySend(type, body) {
+  try {
+    return conn.send(type, body);
+  } catch (e) {
+    report(e);
+    return 0;
+  }
+}
+
+/** Sends a camera with the next cameraId; inputTime is when the input that made it happened. */
+function sendCamera(cam, inputTime = performance.now()) {
+  if (!state.volume || conn.state !== 'ready') return 0;
+  const cameraId = state.nextCameraId;
+  const msg = {
+    cameraId, eye: cam.eye.slice(), target: cam.target.slice(), up: cam.up.slice(),
+    fovYDeg: cam.fovYDeg, orthographic: !!cam.orthographic, orthoHeight: cam.orthoHeight,
+  };
+  if (!trySend(Type.SetCamera, msg)) return 0;
+  state.nextCameraId = cameraId >= 0xffffffff ? 1 : cameraId + 1;
+  state.inputTimes.set(cameraId, inputTime);
+  // Only recent ids can still be answered: keep the map small.
+  if (state.inputTimes.size > 256) state.inputTimes.delete(state.inputTimes.keys().next().value);
+  state.lastCamera = msg;
+  return cameraId;
+}
+const scheduleCamera = coalesced(({ cam, inputTime }) => sendCamera(cam, inputTime));
+
+function sendTransferFunction(tf) {
+  if (!state.volume || conn.state !== 'ready') return;
+  if (trySend(Type.SetTransferFunction, tf)) state.lastTf = structuredClone(tf);
+}
+const scheduleTransferFunction = coalesced(sendTransferFunction);
+
+function sendRenderOptions() {
+  const o = state.options;
+  if (!state.volume || conn.state !== 'ready' || !o.width || !o.height) return;
+  if (trySend(Type.SetRenderOptions, o)) state.lastOptions = { ...o };
+}
+const scheduleRenderOptions = coalesced(sendRenderOptions);
+
+// ---- connection --------------------------------------------------------------------------
+
+conn.addEventListener('state', (e) => {
+  const { state: s, reason, retryInMs } = e.detail;
+  els.connection.dataset.state = s;
+  els.reconnect.hidden = s !== 'disconnected';
+  const label = {
+    connecting: 'connecting…',
+    auth: 'waiting for a token',
+    ready: `connected${conn.serverHello?.software ? ` to ${conn.serverHello.software}` : ''}`,
+    disconnected: retryInMs ? `disconnected — reconnecting in ${Math.ceil(retryInMs / 1000)} s…` : 'disconnected',
+  }[s];
+  els.connection.textContent = label;
+  els.connection.title = reason || '';
+  if (s === 'disconnected') {
+    clearInterval(state.statsTimer);
+    els.volume.disabled = true;
+    if (reason) showStatus(`Disconnected: ${reason}${retryInMs ? ' — reconnecting…' : ''}`, retryInMs ? 'info' : 'error');
+  }
+  if (s === 'ready') onReady();
+});
+
+conn.addEventListener('auth', (e) => {
+  els.authMessage.textContent = e.detail.failed ? 'The server rejected that token. Enter the right one.' : 'This server requires an access token.';
+  els.authMessage.className = e.detail.failed ? 'bad' : '';
+  els.auth.hidden = false;
+  els.token.value = '';
+  els.token.focus();
+});
+
+els.authForm.addEventListener('submit', (e) => {
+  e.preventDefault();
+  const token = els.token.value;
+  if (!token) return;
+  els.auth.hidden = true;
+  els.token.value = '';
+  conn.submitToken(token, els.tokenRemember.checked);
+});
+
+conn.addEventListener('error', (e) => report(e.detail));
+els.reconnect.addEventListener('click', () => conn.reconnectNow());
+addEventListener('pagehide', () => conn.close());
+
+conn.addEventListener('message', (e) => {
+  const m = e.detail;
+  switch (m.type) {
+    case Type.Frame: return onFrame(m.body);
+    case Type.VolumeList: return onVolumeList(m.body.volumes);
+    case Type.VolumeOpened:
+      // Unasked (request 0): the operator reloaded the catalog and the server moved us to the new store.
+      if (m.request === 0) return onVolumeReloaded(m.body);
+      return undefined;
+    default: return undefined;
+  }
+});
+
+conn.addEventListener('error', (e) => {
+  const err = e.detail;
+  if (!(err instanceof ServerError)) return;
+  if (err.code === ErrorCode.UnknownVolume && err.request === 0 && state.volume) {
+    // The volume we view was removed or changed shape by a catalog reload.
+    closeVolume();
+    conn.send(Type.ListVolumes);
+  }
+});
+
+function onReady() {
+  els.auth.hidden = true;
+  clearStatus();
+  fillRenderers();
+  const o = state.options;
+  o.codec = conn.hasCodec(Codec.Jpeg) ? Codec.Jpeg : Codec.Raw;
+  o.refinedCodec = conn.hasCodec(Codec.Png) ? Codec.Png + 1 : 0;
+  els.jpegQuality.disabled = o.codec !== Codec.Jpeg;
+  conn.request(Type.ListVolumes, {}, Type.VolumeList).catch(report);
+  const reopen = state.volume?.name ?? state.opening;
+  if (reopen) openVolume(reopen).catch(report);
+  clearInterval(state.statsTimer);
+  state.statsTimer = setInterval(requestStats, STATS_INTERVAL_MS);
+}
+
+function fillRenderers() {
+  const allowed = [];
+  if (conn.can(Capability.GpuRenderer)) allowed.push(Renderer.GpuRaycaster);
+  if (conn.can(Capability.CpuRenderer)) allowed.push(Renderer.CpuRaycaster, Renderer.Reference, Renderer.Splatter);
+  if (conn.can(Capability.GpuRenderer)) allowed.push(Renderer.GpuSplatter);
+  if (allowed.length === 0) {
+    showStatus('The server reports neither a CPU nor a GPU renderer.');
+    allowed.push(Renderer.CpuRaycaster);
+  }
+  els.renderer.replaceChildren(...allowed.map((r) => new Option(RENDERER_NAMES[r], String(r))));
+  if (!allowed.includes(state.options.renderer)) state.options.renderer = allowed[0];
+  els.renderer.value = String(state.options.renderer);
+}
+
+// ---- volumes -----------------------------------------------------------------------------
+
+function onVolumeList(volumes) {
+  state.volumes = volumes;
+  const current = state.volume?.name ?? state.opening ?? '';
+  const none = new Option(volumes.length ? '— choose a volume —' : '— the catalog is empty —', '');
+  none.disabled = true;
+  els.volume.replaceChildren(none, ...volumes.map((v) => {
+    const o = new Option(volumeLabel(v), v.name);
+    o.title = `${v.levels} levels, values ${v.valueMin}..${v.valueMax}, spacing ${v.spacingMm.join(' × ')} mm`;
+    return o;
+  }));
+  els.volume.value = volumes.some((v) => v.name === current) ? current : '';
+  els.volume.disabled = volumes.length === 0;
+}
+
+els.volume.addEventListener('change', () => {
+  if (els.volume.value) openVolume(els.volume.value).catch(report);
+});
+
+/** Opens a catalog volume; resolves with its VolumeInfo once it is shown. */
+async function openVolume(name) {
+  state.opening = name;
+  let info;
+  try {
+    info = await conn.request(Type.OpenVolume, { name }, Type.VolumeOpened);
+  } finally {
+    if (state.opening === name) state.opening = null;
+  }
+  onVolumeOpened(info);
+  return info;
+}
+
+function sameGeometry(a, b) {
+  return !!a && !!b && a.name === b.name && a.voxelType === b.voxelType &&
+    a.dims.every((d, i) => d === b.dims[i]) && a.spacingMm.every((s, i) => s === b.spacingMm[i]);
+}
+
+function onVolumeOpened(info) {
+  // Reopening the same volume (a reconnect) keeps the user's view and edits.
+  const same = sameGeometry(state.volume, info) && state.trackball;
+  state.volume = info;
+  if (!same) state.trackball = new Trackball(info);
+  els.volume.value = info.name;
+  els.placeholder.hidden = true;
+  tfEditor.setVolume(info, same);
+  scheduleCamera.cancel();
+  const cameraId = sendCamera(state.trackball.camera);
+  state.minCameraId = cameraId;
+  requestHistogram();
+  const tf = tfEditor.current();
+  if (tf) sendTransferFunction(tf);
+  sendRenderOptions();
+  trySend(Type.RequestFrame, { mode: FrameMode.ContinuousOn });
+}
+
+function onVolumeReloaded(info) {
+  // Same name and geometry by the server's rule: camera and transfer function stay; values may not.
+  state.volume = info;
+  tfEditor.setVolume(info, true);
+  requestHistogram();
+  const i = state.volumes.findIndex((v) => v.name === info.name);
+  if (i >= 0) {
+    state.volumes[i] = info;
+    onVolumeList(state.volumes);
+  }
+  showStatus(`Volume '${info.name}' was reloaded by the server.`, 'info');
+}
+
+function closeVolume() {
+  state.volume = null;
+  state.trackball = null;
+  state.pendingFrame = null;
+  els.volume.value = '';
+  els.placeholder.hidden = false;
+  els.overlay.textContent = '';
+  ctx.fillStyle = '#000';
+  ctx.fillRect(0, 0, els.view.width, els.view.height);
+  tfEditor.setHistogram(null, '');
+}
+
+function requestHistogram() {
+  const name = state.volume?.name;
+  conn.request(Type.RequestHistogram, {}, Type.Histogram)
+    .then((h) => { if (state.volume?.name === name) tfEditor.setHistogram(h); })
+    .catch((e) => {
+      if (state.volume?.name === name) tfEditor.setHistogram(null, `no histogram: ${e.message}`);
+    });
+}
+
+function requestStats() {
+  if (!state.volume || conn.state !== 'ready') return;
+  conn.request(Type.RequestStats, {}, Type.Stats).then(showStats).catch(() => {});
+}
+
+function showStats({ counters }) {
+  els.stats.textContent = counters.length
+    ? counters.map(({ name, value }) => `${name} ${formatCounter(value)}`).join('\n')
+    : 'no counters';
+  state.residency = counters.filter(({ name }) => /resident|cache/i.test(name));
+  drawOverlay();
+}
+
+function formatCounter(v) {
+  return Number.isInteger(v) ? String(v) : v.toPrecision(4);
+}
+
+// ---- camera input ------------------------------------------------------------------------
+
+attachControls(els.view, () => state.trackball, (cam, inputTime) => scheduleCamera({ cam, inputTime }));
+
+// ---- transfer function -------------------------------------------------------------------
+
+const tfEditor = new TfEditor({
+  canvas: $('tf'), strip: $('tf-colours'), presetSelect: $('preset'), shading: $('shading'),
+  valueInput: $('tf-value'), alphaInput: $('tf-alpha'), hint: $('tf-hint'),
+  onChange: (tf) => scheduleTransferFunction(tf),
+});
+
+fetch(new URL('presets.json', location.href))
+  .then((r) => {
+    if (!r.ok) throw new Error(`presets.json: HTTP ${r.status}`);
+    return r.json();
+  })
+  .then((presets) => {
+    if (!Array.isArray(presets)) throw new Error('presets.json is not an array');
+    const hadNone = !tfEditor.current();
+    tfEditor.setPresets(presets);
+    // A volume opened before the presets arrived has had no transfer function from us yet.
+    if (hadNone && tfEditor.current()) sendTransferFunction(tfEditor.current());
+  })
+  .catch((e) => showStatus(`Transfer-function presets unavailable: ${e.message}`));
+
+// ---- render options ----------------------------------------------------------------------
+
+function optionsChanged() {
+  scheduleRenderOptions(true);
+}
+
+els.renderer.addEventListener('change', () => { state.options.renderer = Number(els.renderer.value); optionsChanged(); });
+els.quality.addEventListener('change', () => { state.options.quality = Number(els.quality.value); optionsChanged(); });
+els.step.addEventListener('change', () => { state.options.stepVoxels = Number(els.step.value); optionsChanged(); });
+els.jpegQuality.addEventListener('input', () => {
+  els.jpegQualityValue.textContent = els.jpegQuality.value;
+  state.options.codecQuality = Number(els.jpegQuality.value);
+  optionsChanged();
+});
+els.maxSize.addEventListener('change', () => {
+  state.maxEdge = Number(els.maxSize.value);
+  applySize();
+});
+
+function applySize() {
+  const { width, height } = frameSize(state.deviceSize.width, state.deviceSize.height, Math.min(MAX_IMAGE_EDGE, state.maxEdge));
+  if (width === state.options.width && height === state.options.height) return;
+  state.options.width = width;
+  state.options.height = height;
+  optionsChanged();
+}
+
+new ResizeObserver(([entry]) => {
+  // Device pixels where the browser reports them exactly; CSS size × devicePixelRatio otherwise.
+  const box = entry.devicePixelContentBoxSize?.[0];
+  const dpr = devicePixelRatio || 1;
+  state.deviceSize = box
+    ? { width: box.inlineSize, height: box.blockSize }
+    : { width: entry.contentRect.width * dpr, height: entry.contentRect.height * dpr };
+  applySize();
+}).observe(els.view);
+
+/** Merges a partial RenderOptions into the current ones, shows them in the controls and sends them now. */
+function setRenderOptions(partial) {
+  Object.assign(state.options, partial);
+  els.renderer.value = String(state.options.renderer);
+  els.quality.value = String(state.options.quality);
+  els.step.value = String(state.options.stepVoxels);
+  els.jpegQuality.value = String(state.options.codecQuality);
+  els.jpegQualityValue.textContent = String(state.options.codecQuality);
+  scheduleRenderOptions.cancel();
+  sendRenderOptions();
+  return state.lastOptions && { ...state.lastOptions };
+}
+
+// ---- frames ------------------------------------------------------------------------------
+
+function onFrame(f) {
+  // Stale frames: older than what is on screen, or of the volume before this one.
+  if (f.cameraId < state.minCameraId || f.cameraId < state.lastDrawnCameraId) return;
+  if (state.decoding) {
+    // One decode at a time; a frame waiting behind it is replaced by a newer one.
+    state.pendingFrame = f;
+    return;
+  }
+  decodeAndDraw(f);
+}
+
+async function decodeAndDraw(f) {
+  state.decoding = true;
+  try {
+    const bitmap = await toBitmap(f);
+    if (bitmap && state.volume && f.cameraId >= state.lastDrawnCameraId && f.cameraId >= state.minCameraId) {
+      draw(f, bitmap);
+    }
+    bitmap?.close();
+  } catch (e) {
+    report(new Error(`frame ${f.frameId}: ${e.message}`));
+  } finally {
+    state.decoding = false;
+    const next = state.pendingFrame;
+    state.pendingFrame = null;
+    if (next) onFrame(next);
+  }
+}
+
+/** An ImageBitmap of a frame's image, decoded off the main thread; raw frames drawn over black. */
+async function toBitmap(f) {
+  const type = IMAGE_TYPES[f.codec];
+  if (type) {
+    return createImageBitmap(new Blob([f.image], { type }), { premultiplyAlpha: 'none', colorSpaceConversion: 'none' });
+  }
+  if (f.codec === Codec.Raw) {
+    const n = f.width * f.height * 4;
+    if (f.image.length !== n) throw new Error(`raw image of ${f.image.length} bytes, ${f.width}×${f.height} needs ${n}`);
+    // Premultiplied colour is the image composited over black; drop alpha by making it opaque.
+    const pixels = new Uint8ClampedArray(n);
+    pixels.set(f.image);
+    const words = new Uint32Array(pixels.buffer);
+    for (let i = 0; i < words.length; ++i) words[i] |= 0xff000000; // little-endian: alpha is the high byte
+    return createImageBitmap(new ImageData(pixels, f.width, f.height));
+  }
+  throw new Error(`codec ${CODEC_NAMES[f.codec] ?? f.codec} is not one this page asked for`);
+}
+
+function draw(f, bitmap) {
+  const c = els.view;
+  if (c.width !== f.width || c.height !== f.height) {
+    c.width = f.width;
+    c.height = f.height;
+  }
+  ctx.imageSmoothingEnabled = true;
+  ctx.drawImage(bitmap, 0, 0, c.width, c.height);
+  const drawnAt = performance.now();
+  const firstOfCamera = f.cameraId !== state.lastDrawnCameraId;
+  state.lastDrawnCameraId = f.cameraId;
+  state.frameCount += 1;
+  const inputTime = state.inputTimes.get(f.cameraId);
+  state.stats.frameDrawn(drawnAt, firstOfCamera && inputTime !== undefined ? drawnAt - inputTime : null);
+  state.lastFrame = {
+    cameraId: f.cameraId, frameId: f.frameId, codec: f.codec, refined: f.refined,
+    width: f.width, height: f.height, bytes: f.image.length, drawnAt,
+  };
+  state.lastFrameHeader = f;
+  drawOverlay();
+}
+
+function drawOverlay() {
+  const f = state.lastFrameHeader;
+  if (!f || !state.volume) return;
+  const s = state.stats;
+  const lines = [
+    `${s.fps(performance.now()).toFixed(1)} fps   latency ${s.latencyMs === null ? '—' : `${Math.round(s.latencyMs)} ms`}`,
+    `${f.refined ? 'refined' : 'interactive'}  level ${f.level}  ${f.width}×${f.height}  ${CODEC_NAMES[f.codec] ?? f.codec} ${formatBytes(f.image.length)}`,
+    `render ${f.renderMs.toFixed(1)} ms  encode ${f.encodeMs.toFixed(1)} ms  queue ${f.queueMs.toFixed(1)} ms`,
+    `bricks ${f.bricksDrawn} drawn, ${f.bricksSkipped} skipped  uploaded ${formatBytes(f.bytesUploaded)}`,
+  ];
+  for (const { name, value } of state.residency ?? []) lines.push(`${name} ${formatCounter(value)}`);
+  els.overlay.textContent = lines.join('\n');
+}
+
+// ---- test API ----------------------------------------------------------------------------
+
+const clone = (v) => (v == null ? null : structuredClone(v));
+
+window.brickcast = {
+  /** 'connecting' | 'auth' | 'ready' | 'disconnected'. */
+  get state() { return conn.state; },
+  /** The last VolumeList's volumes. */
+  get volumes() { return clone(state.volumes); },
+  /** The last SetCamera sent, or null. */
+  camera: () => clone(state.lastCamera),
+  /** The last SetTransferFunction sent, or null. */
+  transferFunction: () => clone(state.lastTf),
+  /** The last RenderOptions sent, or null. */
+  renderOptions: () => clone(state.lastOptions),
+  /** The last frame drawn: {cameraId, frameId, codec, refined, width, height, bytes, drawnAt}, or null. */
+  get lastFrame() { return clone(state.lastFrame); },
+  /** Frames drawn since the page loaded. */
+  get frameCount() { return state.frameCount; },
+  /** Opens a volume by name; resolves with its VolumeInfo, rejects with the server's Error. */
+  openVolume: (name) => openVolume(name),
+  /** Sends a camera now (fields missing from `cam` keep their current values); returns its cameraId (0 when nothing was sent). */
+  setCamera(cam) {
+    if (!state.trackball) throw new Error('no volume is open');
+    scheduleCamera.cancel();
+    return sendCamera(state.trackball.set(cam));
+  },
+  /** Chooses a preset from /presets.json and sends it now. */
+  setPreset(name) {
+    tfEditor.choosePreset(name);
+    scheduleTransferFunction.cancel();
+    sendTransferFunction(tfEditor.current());
+  },
+  /** Sends points ({placement, position, rgba} or {value|fraction|percentile, rgba}) and shading now. */
+  setTransferFunction(points, shading) {
+    tfEditor.setPoints(points, shading);
+    scheduleTransferFunction.cancel();
+    sendTransferFunction(tfEditor.current());
+  },
+  /** Merges and sends render options now; returns what was sent. */
+  setRenderOptions: (partial) => setRenderOptions(partial),
+};
+
+conn.connect();
