@@ -7,6 +7,15 @@ const KEY_ORBIT_DEG = 5;
 const KEY_ZOOM = 0.9;
 const LINE_PIXELS = 16;
 
+/** Captures a pointer so a drag continues outside the element; a pointer the browser no longer tracks (released already, or synthetic) is left uncaptured. */
+export function capture(el, pointerId) {
+  try {
+    el.setPointerCapture(pointerId);
+  } catch {
+    // NotFoundError: nothing to capture; the drag still works while the pointer stays inside.
+  }
+}
+
 /**
  * Binds input on `el` to the trackball returned by getTrackball() (null while no volume is
  * open); calls onCamera(camera, inputTime) after every change, inputTime on the
@@ -41,7 +50,7 @@ export function attachControls(el, getTrackball, onCamera) {
   function onDown(e) {
     if (!getTrackball()) return;
     el.focus({ preventScroll: true });
-    el.setPointerCapture(e.pointerId);
+    capture(el, e.pointerId);
     const p = local(e);
     pointers.set(e.pointerId, p);
     if (pointers.size === 1) startSingle(e, p);

@@ -4,7 +4,8 @@
 // form; the page decides when to send (coalesced to one per animation frame).
 
 import { Placement } from './protocol.js';
-import { placePoints, evaluate } from './tf.js';
+import { capture } from './controls.js';
+import { placePoints, evaluate, normalizePoint } from './tf.js';
 
 const HIT_RADIUS = 9; // CSS pixels
 const POINT_RADIUS = 5;
@@ -104,7 +105,7 @@ export class TfEditor {
   /** Shows and reports points given in protocol form or preset-file form, sent as given. */
   setPoints(points, shading) {
     if (!Array.isArray(points) || points.length === 0) throw new Error('points: expected a non-empty array');
-    this.givenPoints = points.map((p) => ({ ...p, rgba: p.rgba.slice() }));
+    this.givenPoints = points.map(normalizePoint);
     this.mode = { kind: 1 };
     if (typeof shading === 'boolean') this.shading.checked = shading;
     this.syncPresetSelect();
@@ -209,7 +210,7 @@ export class TfEditor {
       const [x, y] = at(e);
       this.select(this.hit(x, y));
       if (this.selected) {
-        c.setPointerCapture(e.pointerId);
+        capture(c, e.pointerId);
         this.drag = { id: e.pointerId };
       }
     });

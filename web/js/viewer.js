@@ -204,6 +204,13 @@ conn.addEventListener('message', (e) => {
 conn.addEventListener('error', (e) => {
   const err = e.detail;
   if (!(err instanceof ServerError)) return;
+  const gpu = state.options.renderer === Renderer.GpuRaycaster || state.options.renderer === Renderer.GpuSplatter;
+  if (gpu && (err.code === ErrorCode.RenderFailed || err.code === ErrorCode.OutOfRange) && /OpenGL/.test(err.serverMessage)) {
+    // The server found it cannot draw on the GPU (PROTOCOL.md, Hello): keep viewing on the CPU.
+    showStatus(`${err.message} — switched to the CPU raycaster.`);
+    setRenderOptions({ renderer: Renderer.CpuRaycaster });
+    return;
+  }
   if (err.code === ErrorCode.UnknownVolume && err.request === 0 && state.volume) {
     // The volume we view was removed or changed shape by a catalog reload.
     closeVolume();
@@ -236,7 +243,9 @@ function fillRenderers() {
     allowed.push(Renderer.CpuRaycaster);
   }
   els.renderer.replaceChildren(...allowed.map((r) => new Option(RENDERER_NAMES[r], String(r))));
-  if (!allowed.includes(state.options.renderer)) state.options.renderer = allowed[0];
+  // The first connection starts on the best renderer the server offers; later ones keep the user's choice.
+  if (!state.rendererChosen || !allowed.includes(state.options.renderer)) state.options.renderer = allowed[0];
+  state.rendererChosen = true;
   els.renderer.value = String(state.options.renderer);
 }
 
@@ -400,15 +409,30 @@ function applySize() {
   optionsChanged();
 }
 
-new ResizeObserver(([entry]) => {
-  // Device pixels where the browser reports them exactly; CSS size × devicePixelRatio otherwise.
-  const box = entry.devicePixelContentBoxSize?.[0];
+function measure(entry) {
   const dpr = devicePixelRatio || 1;
-  state.deviceSize = box
-    ? { width: box.inlineSize, height: box.blockSize }
-    : { width: entry.contentRect.width * dpr, height: entry.contentRect.height * dpr };
+  const width = entry.contentRect.width * dpr, height = entry.contentRect.height * dpr;
+  // The browser's exact device-pixel size where it reports one that agrees with CSS size × ratio
+  // (device emulation can report CSS pixels there).
+  const box = entry.devicePixelContentBoxSize?.[0];
+  const exact = box && Math.abs(box.inlineSize - width) <= 1 && Math.abs(box.blockSize - height) <= 1;
+  state.deviceSize = exact ? { width: box.inlineSize, height: box.blockSize } : { width, height };
   applySize();
+}
+
+let lastEntry = null;
+new ResizeObserver(([entry]) => {
+  lastEntry = entry;
+  measure(entry);
 }).observe(els.view);
+
+// A window moved to a screen of another pixel ratio keeps its CSS size: no resize event then.
+(function watchPixelRatio() {
+  matchMedia(`(resolution: ${devicePixelRatio}dppx)`).addEventListener('change', () => {
+    if (lastEntry) measure(lastEntry);
+    watchPixelRatio();
+  }, { once: true });
+})();
 
 /** Merges a partial RenderOptions into the current ones, shows them in the controls and sends them now. */
 function setRenderOptions(partial) {
