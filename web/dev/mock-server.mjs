@@ -3,7 +3,7 @@
 // /ws with one synthetic volume and PNG or raw frames that show the camera's view direction.
 // It is no reference for the server's behaviour beyond what PROTOCOL.md says.
 //
-//   node web/test/mock-server.mjs [--port 8123] [--token SECRET] [--inject script.js]
+//   node web/dev/mock-server.mjs [--port 8123] [--token SECRET] [--inject script.js]
 //
 // --inject adds a script to index.html (browser smoke tests drive window.brickcast with it).
 
