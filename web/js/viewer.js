@@ -187,6 +187,8 @@ els.authForm.addEventListener('submit', (e) => {
 conn.addEventListener('error', (e) => report(e.detail));
 els.reconnect.addEventListener('click', () => conn.reconnectNow());
 addEventListener('pagehide', () => conn.close());
+// A page restored from the back-forward cache said Bye when it was hidden: connect again.
+addEventListener('pageshow', (e) => { if (e.persisted) conn.reconnectNow(); });
 
 conn.addEventListener('message', (e) => {
   const m = e.detail;
@@ -223,7 +225,8 @@ function onReady() {
   clearStatus();
   fillRenderers();
   const o = state.options;
-  o.codec = conn.hasCodec(Codec.Jpeg) ? Codec.Jpeg : Codec.Raw;
+  // Interactive frames: JPEG where offered (small, fast), else PNG, else raw.
+  o.codec = conn.hasCodec(Codec.Jpeg) ? Codec.Jpeg : conn.hasCodec(Codec.Png) ? Codec.Png : Codec.Raw;
   o.refinedCodec = conn.hasCodec(Codec.Png) ? Codec.Png + 1 : 0;
   els.jpegQuality.disabled = o.codec !== Codec.Jpeg;
   conn.request(Type.ListVolumes, {}, Type.VolumeList).catch(report);
@@ -385,7 +388,7 @@ fetch(new URL('presets.json', location.href))
 // ---- render options ----------------------------------------------------------------------
 
 function optionsChanged() {
-  scheduleRenderOptions(true);
+  scheduleRenderOptions(state.options);
 }
 
 els.renderer.addEventListener('change', () => { state.options.renderer = Number(els.renderer.value); optionsChanged(); });
@@ -518,6 +521,9 @@ function draw(f, bitmap) {
   state.lastFrameHeader = f;
   drawOverlay();
 }
+
+// fps falls to 0 when frames stop: refresh the overlay even when nothing is drawn.
+setInterval(() => drawOverlay(), 1000);
 
 function drawOverlay() {
   const f = state.lastFrameHeader;
