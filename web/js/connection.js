@@ -28,9 +28,11 @@ export class ServerError extends Error {
   }
 }
 
-/** The WebSocket URL of the page's own server: ws(s)://host:port/ws. */
-export function defaultUrl(loc = globalThis.location) {
-  return `${loc.protocol === 'https:' ? 'wss' : 'ws'}://${loc.host}/ws`;
+/** The WebSocket URL beside a page at `pageUrl`: ws(s)://host:port/ws for a page at /. */
+export function socketUrl(pageUrl) {
+  const u = new URL('ws', pageUrl);
+  u.protocol = u.protocol === 'https:' ? 'wss:' : 'ws:';
+  return u.href;
 }
 
 /**

@@ -11,8 +11,6 @@ export const MAX_SERVER_PAYLOAD = 80 * 1024 * 1024;
 export const MAX_IMAGE_EDGE = 4096;
 export const MAX_TF_POINTS = 256;
 export const MAX_HISTOGRAM_BINS = 4096;
-export const FRAME_HEADER_BYTES = 60;
-export const RENDER_OPTIONS_BYTES = 24;
 
 export const Type = Object.freeze({
   Hello: 0x01, Auth: 0x02, AuthOk: 0x03, ListVolumes: 0x04, VolumeList: 0x05,
@@ -47,7 +45,6 @@ export const Renderer = Object.freeze({ GpuRaycaster: 0, CpuRaycaster: 1, Refere
 export const Quality = Object.freeze({ Adaptive: 0, Refined: 1, Interactive: 2 });
 export const FrameMode = Object.freeze({ Once: 0, ContinuousOn: 1, ContinuousOff: 2 });
 export const Placement = Object.freeze({ Value: 0, Fraction: 1, Percentile: 2 });
-export const VoxelType = Object.freeze({ u8: 0, u16: 1, i16: 2, f32: 3 });
 export const VOXEL_TYPE_NAMES = Object.freeze(['u8', 'u16', 'i16', 'f32']);
 export const TECHNIQUES_ALL = 0x3f;
 export const LEVEL_AUTOMATIC = 255;
@@ -609,8 +606,3 @@ export const encodeRequestHistogram = (request) => encode(Type.RequestHistogram,
 export const encodeError = (m, request = 0) => encode(Type.Error, m, request);
 /** Bye with reason 0 normal, 1 shutting down, 2 idle timeout. */
 export const encodeBye = (reason = 0, request = 0) => encode(Type.Bye, { reason }, request);
-
-/** True when the server's Hello capabilities hold `bit`. */
-export function hasCapability(capabilities, bit) {
-  return (capabilities & bit) !== 0;
-}

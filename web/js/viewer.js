@@ -2,7 +2,7 @@
 // editor, the render options and the frame pipeline together, and exposes window.brickcast
 // for automated browser tests.
 
-import { Connection, ServerError } from './connection.js';
+import { Connection, ServerError, socketUrl } from './connection.js';
 import {
   Type, Capability, Codec, Renderer, Quality, FrameMode, ErrorCode, TECHNIQUES_ALL, LEVEL_AUTOMATIC,
   MAX_IMAGE_EDGE, ProtocolError,
@@ -31,7 +31,7 @@ const els = {
   authMessage: $('auth-message'), token: $('token'), tokenRemember: $('token-remember'),
 };
 
-const conn = new Connection(new URL('ws', location.href).href.replace(/^http/, 'ws'));
+const conn = new Connection(socketUrl(location.href));
 const ctx = els.view.getContext('2d', { alpha: false });
 
 const state = {

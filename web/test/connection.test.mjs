@@ -1,7 +1,7 @@
 // connection.js against a scripted fake WebSocket: handshake, auth, replies, reconnection.
 import { test, mock } from 'node:test';
 import assert from 'node:assert/strict';
-import { Connection, ServerError } from '../js/connection.js';
+import { Connection, ServerError, socketUrl } from '../js/connection.js';
 import { Type, encode, decode, Capability, ErrorCode } from '../js/protocol.js';
 
 class FakeSocket {
@@ -143,4 +143,9 @@ test('a framing error from the server is answered with Error and a close', () =>
   assert.equal(ws.readyState, 3);
   assert.match(errors[0].message, /malformed message from the server: bad magic/);
   c.close();
+});
+
+test('the socket is /ws beside the page, wss under https', () => {
+  assert.equal(socketUrl('http://host:8080/'), 'ws://host:8080/ws');
+  assert.equal(socketUrl('https://host/index.html'), 'wss://host/ws');
 });
