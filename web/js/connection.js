@@ -28,6 +28,14 @@ export class ServerError extends Error {
   }
 }
 
+/** A request that can have no reply because the connection closed (the state event says so already). */
+export class DisconnectedError extends Error {
+  constructor(why) {
+    super(`not answered: ${why}`);
+    this.name = 'DisconnectedError';
+  }
+}
+
 /** The WebSocket URL beside a page at `pageUrl`: ws(s)://host:port/ws for a page at /. */
 export function socketUrl(pageUrl) {
   const u = new URL('ws', pageUrl);
@@ -120,7 +128,7 @@ export class Connection extends EventTarget {
   /** Sends a request and resolves with the body of the reply of type `replyType` carrying its id; rejects with ServerError or on disconnect. */
   request(type, body, replyType) {
     const request = this.send(type, body);
-    if (!request) return Promise.reject(new Error(`not connected: ${typeName(type)} not sent`));
+    if (!request) return Promise.reject(new DisconnectedError(`not connected: ${typeName(type)} not sent`));
     return new Promise((resolve, reject) => this.pending.set(request, { resolve, reject, replyType }));
   }
 
@@ -165,7 +173,7 @@ export class Connection extends EventTarget {
   }
 
   rejectPending(why) {
-    for (const { reject } of this.pending.values()) reject(new Error(why));
+    for (const { reject } of this.pending.values()) reject(new DisconnectedError(why));
     this.pending.clear();
   }
 

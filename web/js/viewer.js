@@ -2,7 +2,7 @@
 // editor, the render options and the frame pipeline together, and exposes window.brickcast
 // for automated browser tests.
 
-import { Connection, ServerError, socketUrl } from './connection.js';
+import { Connection, ServerError, DisconnectedError, socketUrl } from './connection.js';
 import {
   Type, Capability, Codec, Renderer, Quality, FrameMode, ErrorCode, TECHNIQUES_ALL, LEVEL_AUTOMATIC,
   MAX_IMAGE_EDGE, ProtocolError,
@@ -77,6 +77,7 @@ function clearStatus() {
 els.statusDismiss.addEventListener('click', clearStatus);
 
 function report(e) {
+  if (e instanceof DisconnectedError) return; // the connection line and Reconnect button say it
   if (e instanceof ServerError || e instanceof ProtocolError) showStatus(e.message);
   else showStatus(String(e?.message ?? e));
 }
@@ -278,9 +279,12 @@ async function openVolume(name) {
   let info;
   try {
     info = await conn.request(Type.OpenVolume, { name }, Type.VolumeOpened);
-  } finally {
-    if (state.opening === name) state.opening = null;
+  } catch (e) {
+    // An open cut short by a disconnect is retried when the connection is back (onReady).
+    if (!(e instanceof DisconnectedError) && state.opening === name) state.opening = null;
+    throw e;
   }
+  if (state.opening === name) state.opening = null;
   onVolumeOpened(info);
   return info;
 }
