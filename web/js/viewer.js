@@ -347,7 +347,8 @@ function requestHistogram() {
 }
 
 function requestStats() {
-  if (!state.volume || conn.state !== 'ready') return;
+  // A hidden tab asks nothing, so the server's idle timeout can still end a forgotten session.
+  if (!state.volume || conn.state !== 'ready' || document.hidden) return;
   conn.request(Type.RequestStats, {}, Type.Stats).then(showStats).catch(() => {});
 }
 
