@@ -49,7 +49,7 @@ Client::Client(const ClientConfig& config)
     mFd = connectTo(config.host, config.port, mWhere);
     protocol::Hello hello;
     hello.codecs = {protocol::Codec::Raw, protocol::Codec::Zstd, protocol::Codec::ZstdDelta,
-                    protocol::Codec::Jpeg};
+                    protocol::Codec::Jpeg, protocol::Codec::Png};
     hello.software = "brickcast-client 0.1";
     const std::uint32_t id = nextId();
     send(hello, id);

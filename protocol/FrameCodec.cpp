@@ -1,6 +1,7 @@
 #include "protocol/FrameCodec.h"
 
 #include "protocol/Error.h"
+#include "protocol/detail/PngImage.h"
 
 #include <chrono>
 #include <string>
@@ -55,6 +56,8 @@ const char* codecName(Codec codec) {
         return "zstd delta";
     case Codec::Jpeg:
         return "JPEG";
+    case Codec::Png:
+        return "PNG";
     }
     return nullptr;
 }
@@ -65,6 +68,12 @@ int effectiveQuality(Codec codec, std::uint8_t quality) {
         throw ProtocolError("frame encoder: unknown codec " +
                             std::to_string(static_cast<unsigned>(codec)));
     if (codec == Codec::Raw) return 0;
+    if (codec == Codec::Png) {
+        if (quality > 1)
+            throw ProtocolError("frame encoder: PNG quality " + std::to_string(quality) +
+                                " is neither 0 (fast) nor 1 (small)");
+        return quality;
+    }
     const bool jpeg = codec == Codec::Jpeg;
     const int max = jpeg ? 100 : kMaxZstdLevel;
     if (quality > max)
@@ -177,6 +186,9 @@ FrameEncoder::Encoded FrameEncoder::encode(std::span<const std::uint8_t> rgba8, 
     case Codec::Jpeg:
         e.bytes = mImpl->jpeg(rgba8, width, height, q);
         break;
+    case Codec::Png:
+        e.bytes = detail::encodePng(rgba8, width, height, q == 1);
+        break;
     }
     e.encodeMs = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
     return e;
@@ -287,6 +299,8 @@ Bytes FrameImageDecoder::Impl::decode(Codec codec, std::uint16_t w, std::uint16_
         return undelta(bytes, w, h, keyframe);
     case Codec::Jpeg:
         return unjpeg(bytes, w, h);
+    case Codec::Png:
+        return detail::decodePng(bytes, w, h);
     }
     throw ProtocolError("frame image: unknown codec " +
                         std::to_string(static_cast<unsigned>(codec)));

@@ -1,5 +1,5 @@
 #pragma once
-// The frame image codecs of PROTOCOL.md ("Frame images"): raw, zstd, zstd delta and JPEG.
+// The frame image codecs of PROTOCOL.md ("Frame images"): raw, zstd, zstd delta, JPEG and PNG.
 // The server encodes with one FrameEncoder per connection, the client decodes with one
 // FrameImageDecoder; each keeps the delta base of its side and one reusable zstd and
 // turbojpeg context (kept out of this header).
@@ -39,7 +39,7 @@ class FrameEncoder {
     FrameEncoder& operator=(FrameEncoder&&) noexcept;
 
     /// rgba8: width*height*4 premultiplied RGBA bytes, rows top to bottom. quality: JPEG
-    /// 1..100 or zstd level 1..19, 0 = the codec default; ignored by Raw.
+    /// 1..100 or zstd level 1..19, 0 = the codec default; PNG 0 fast, 1 small; ignored by Raw.
     /// @throw ProtocolError on an edge outside 1..kMaxImageEdge, a span of the wrong size, a
     /// quality out of range or an unknown codec (the delta base is then unchanged).
     Encoded encode(std::span<const std::uint8_t> rgba8, std::uint16_t width, std::uint16_t height,
@@ -62,7 +62,7 @@ class FrameImageDecoder {
     FrameImageDecoder(FrameImageDecoder&&) noexcept;
     FrameImageDecoder& operator=(FrameImageDecoder&&) noexcept;
 
-    /// Returns width*height*4 RGBA bytes (JPEG: alpha 255); keyframe matters for ZstdDelta
+    /// Returns width*height*4 RGBA bytes (JPEG, PNG: alpha 255); keyframe matters for ZstdDelta
     /// only. Allocates at most that much
     /// whatever the bytes claim. @throw ProtocolError naming what is wrong: bad edge, zstd
     /// content size missing or not width*height*4, corrupt or trailing data, a non-keyframe

@@ -42,7 +42,7 @@ void check(Rules& r, const Hello& m) {
     // answers UnsupportedVersion (fatal) as PROTOCOL.md says.
     r.count("codecs", m.codecs.size(), kMaxCodecs);
     for (std::size_t i = 0; i < m.codecs.size(); ++i)
-        r.enumValue({"codecs", i}, std::uint8_t(m.codecs[i]), 3);
+        r.enumValue({"codecs", i}, std::uint8_t(m.codecs[i]), std::uint8_t(Codec::Png));
     r.text("software", m.software, 0, kMaxSoftwareBytes);
 }
 
@@ -166,6 +166,8 @@ void checkCodecQuality(Rules& r, Codec codec, std::uint8_t q) {
         return r.intRange("codecQuality", q, 0, 19);
     case Codec::Jpeg:
         return r.intRange("codecQuality", q, 0, 100);
+    case Codec::Png:
+        return r.intRange("codecQuality", q, 0, 1); // fast, small
     }
 }
 
@@ -178,8 +180,11 @@ void check(Rules& r, const SetRenderOptions& m) {
     r.realRange("ertThreshold", o.ertThreshold, 0, 1, true, false);
     r.enumValue("renderer", std::uint8_t(o.renderer), 4);
     r.enumValue("quality", std::uint8_t(o.quality), 2);
-    r.enumValue("codec", std::uint8_t(o.codec), 3);
+    r.enumValue("codec", std::uint8_t(o.codec), std::uint8_t(Codec::Png));
     if (r.ok()) checkCodecQuality(r, o.codec, o.codecQuality);
+    if (o.refinedCodec) // on the wire: the codec + 1
+        r.intRange("refinedCodec", std::uint8_t(*o.refinedCodec) + 1, 1,
+                   std::uint8_t(Codec::Png) + 1);
     if (o.level != kLevelAutomatic) r.intRange("level", o.level, 0, kMaxLevel);
 }
 
@@ -191,7 +196,7 @@ void check(Rules& r, const Frame& m) {
     const FrameHeader& h = m.header;
     r.intRange("width", h.width, 1, kMaxImageEdge);
     r.intRange("height", h.height, 1, kMaxImageEdge);
-    r.enumValue("codec", std::uint8_t(h.codec), 3);
+    r.enumValue("codec", std::uint8_t(h.codec), std::uint8_t(Codec::Png));
     r.intRange("level", h.level, 0, kMaxLevel);
     const std::uint64_t rawBytes = std::uint64_t(h.width) * h.height * 4;
     if (r.ok() && h.codec == Codec::Raw && m.image.size() != rawBytes)
@@ -220,6 +225,13 @@ void check(Rules& r, const Bye& m) {
 void check(Rules&, const AuthOk&) {}
 void check(Rules&, const ListVolumes&) {}
 void check(Rules&, const RequestStats&) {}
+void check(Rules&, const RequestHistogram&) {}
+
+void check(Rules& r, const Histogram& m) {
+    r.realRange("valueMin", m.valueMin, -1e300, 1e300, false, false);
+    r.realRange("valueMax", m.valueMax, m.valueMin, 1e300, false, false);
+    r.intRange("counts", m.counts.size(), 1, kMaxHistogramBins);
+}
 
 } // namespace
 

@@ -13,7 +13,7 @@ namespace {
 using detail::ByteWriter;
 
 // Variant alternatives are in wire order: alternative i is message type i + 1.
-static_assert(std::variant_size_v<Message> == std::size_t(MessageType::Bye));
+static_assert(std::variant_size_v<Message> == std::size_t(MessageType::Histogram));
 static_assert(
     std::is_same_v<std::variant_alternative_t<std::size_t(MessageType::SetCamera) - 1, Message>,
                    SetCamera>);
@@ -96,7 +96,7 @@ void write(ByteWriter& w, const SetRenderOptions& m) {
     w.u8(std::uint8_t(o.codec));
     w.u8(o.codecQuality);
     w.u8(o.level);
-    w.u8(0);  // reserved
+    w.u8(o.refinedCodec ? std::uint8_t(std::uint8_t(*o.refinedCodec) + 1) : 0);
     w.u16(0); // reserved
 }
 
@@ -147,7 +147,16 @@ void write(ByteWriter& w, const Bye& m) {
     w.u16(std::uint16_t(m.reason));
 }
 
+void write(ByteWriter& w, const Histogram& m) {
+    w.f64(m.valueMin);
+    w.f64(m.valueMax);
+    w.u16(static_cast<std::uint16_t>(m.counts.size()));
+    for (std::uint64_t c : m.counts)
+        w.u64(c);
+}
+
 void write(ByteWriter&, const AuthOk&) {}
+void write(ByteWriter&, const RequestHistogram&) {}
 void write(ByteWriter&, const ListVolumes&) {}
 void write(ByteWriter&, const RequestStats&) {}
 

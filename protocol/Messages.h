@@ -6,6 +6,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -97,6 +98,9 @@ struct RenderOptions {
     Codec codec = Codec::Zstd;
     std::uint8_t codecQuality = 0; ///< JPEG 1..100, zstd 1..19, 0 for the codec's default
     std::uint8_t level = kLevelAutomatic;
+    /// The codec of refined frames under adaptive quality (lossless at rest, JPEG while the
+    /// camera moves); none: `codec`. On the wire: 0 for none, else the codec's value + 1.
+    std::optional<Codec> refinedCodec;
     bool operator==(const RenderOptions&) const = default;
 };
 
@@ -153,9 +157,20 @@ struct Bye {
     bool operator==(const Bye&) const = default;
 };
 
+struct RequestHistogram {
+    bool operator==(const RequestHistogram&) const = default;
+};
+
+/// The open volume's level-0 voxels in equal bins over [valueMin, valueMax].
+struct Histogram {
+    double valueMin = 0, valueMax = 0;
+    std::vector<std::uint64_t> counts; ///< 1 .. kMaxHistogramBins bins
+    bool operator==(const Histogram&) const = default;
+};
+
 using Message = std::variant<Hello, Auth, AuthOk, ListVolumes, VolumeList, OpenVolume, VolumeOpened,
                              SetCamera, SetTransferFunction, SetRenderOptions, RequestFrame, Frame,
-                             RequestStats, Stats, Error, Bye>;
+                             RequestStats, Stats, Error, Bye, RequestHistogram, Histogram>;
 
 inline constexpr std::size_t kRenderOptionsBytes = 24;
 inline constexpr std::size_t kFrameHeaderBytes = 60;

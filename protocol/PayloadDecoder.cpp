@@ -205,7 +205,9 @@ Message readSetRenderOptions(PayloadReader& r) {
     o.codec = r.enumU8<Codec>("codec");
     o.codecQuality = r.u8("codecQuality");
     o.level = r.u8("level");
-    r.reserved("reserved", 3); // u8 and u16
+    if (const std::uint8_t refined = r.u8("refinedCodec"))
+        o.refinedCodec = Codec(refined - 1); // checked with the other enums (MessageRules)
+    r.reserved("reserved", 2);
     return SetRenderOptions{o};
 }
 
@@ -284,6 +286,20 @@ Message readListVolumes(PayloadReader&) {
 Message readRequestStats(PayloadReader&) {
     return RequestStats{};
 }
+Message readRequestHistogram(PayloadReader&) {
+    return RequestHistogram{};
+}
+
+Message readHistogram(PayloadReader& r) {
+    Histogram m;
+    m.valueMin = r.f64("valueMin");
+    m.valueMax = r.f64("valueMax");
+    const std::size_t n = r.count("counts", 2, kMaxHistogramBins, 8);
+    m.counts.reserve(n);
+    for (std::size_t i = 0; i < n && r.rules().ok(); ++i)
+        m.counts.push_back(r.u64("counts"));
+    return m;
+}
 
 struct PayloadKind {
     Message (*read)(PayloadReader&);
@@ -308,8 +324,10 @@ constexpr PayloadKind kKinds[] = {
     {readStats, {}},
     {readError, {}},
     {readBye, 2},
+    {readRequestHistogram, 0},
+    {readHistogram, {}},
 };
-static_assert(std::size(kKinds) == std::size_t(MessageType::Bye));
+static_assert(std::size(kKinds) == std::size_t(MessageType::Histogram));
 
 DecodeError decodeError(detail::Violation v, std::uint8_t type) {
     return DecodeError{v.code, false, type, 0, std::move(v.text)};

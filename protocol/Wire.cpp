@@ -36,6 +36,10 @@ const char* typeName(std::uint8_t type) {
         return "Error";
     case MessageType::Bye:
         return "Bye";
+    case MessageType::RequestHistogram:
+        return "RequestHistogram";
+    case MessageType::Histogram:
+        return "Histogram";
     }
     return "unknown";
 }

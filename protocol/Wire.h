@@ -22,6 +22,7 @@ inline constexpr std::size_t kMaxPresetBytes = 64;
 inline constexpr std::size_t kMaxErrorMessageBytes = 1024;
 inline constexpr std::size_t kMaxStatNameBytes = 128;
 inline constexpr std::size_t kMaxTfPoints = 256;
+inline constexpr std::size_t kMaxHistogramBins = 4096;
 inline constexpr std::size_t kMaxVolumes = 1024;
 inline constexpr std::size_t kMaxStats = 4096;
 inline constexpr std::size_t kMaxCodecs = 16;
@@ -45,6 +46,8 @@ enum class MessageType : std::uint8_t {
     Stats = 0x0E,
     Error = 0x0F,
     Bye = 0x10,
+    RequestHistogram = 0x11,
+    Histogram = 0x12,
 };
 
 enum class ErrorCode : std::uint16_t {
@@ -86,7 +89,7 @@ enum Technique : std::uint32_t {
     kTechAll = (1u << 6) - 1,
 };
 
-enum class Codec : std::uint8_t { Raw = 0, Zstd = 1, ZstdDelta = 2, Jpeg = 3 };
+enum class Codec : std::uint8_t { Raw = 0, Zstd = 1, ZstdDelta = 2, Jpeg = 3, Png = 4 };
 enum class Renderer : std::uint8_t {
     GpuRaycaster = 0,
     CpuRaycaster = 1,

@@ -5,9 +5,11 @@
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/RenderService.h"
+#include "server/detail/Acceptor.h"
 #include "server/detail/Asio.h"
 #include "server/detail/MetricsEndpoint.h"
 #include "server/detail/Session.h"
+#include "server/detail/WebListener.h"
 
 #include <chrono>
 #include <condition_variable>
@@ -40,6 +42,12 @@ struct Daemon::Impl {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };
         context.collect = [this](MetricSet& m) { collect(m); };
         bind();
+        if (const auto where = config.webListen()) {
+            web = std::make_unique<detail::WebListener>(
+                io, where->first, where->second, config, log,
+                [this](std::unique_ptr<detail::Transport> t) { startSession(std::move(t)); });
+            log.info("viewer: " + web->url());
+        }
         if (!config.metricsHost.empty())
             metrics = std::make_unique<detail::MetricsEndpoint>(
                 io, config.metricsHost, config.metricsPort, log,
@@ -59,7 +67,7 @@ struct Daemon::Impl {
 
     /// SIGHUP reloads the catalog and waits again; SIGTERM and SIGINT drain.
     void waitForSignal() {
-        signals.async_wait([this](const asio::error_code& ec, int signal) {
+        signals.async_wait([this](const IoError& ec, int signal) {
             if (ec) return;
             if (signal == SIGHUP) {
                 log.info("signal " + std::to_string(signal) + " (SIGHUP): reloading the catalog");
@@ -188,22 +196,8 @@ struct Daemon::Impl {
     }
 
     void bind() {
-        const std::string where = config.listenHost + ":" + std::to_string(config.listenPort);
-        try {
-            asio::ip::tcp::resolver resolver(io);
-            const asio::ip::tcp::endpoint ep =
-                resolver
-                    .resolve(config.listenHost, std::to_string(config.listenPort),
-                             asio::ip::resolver_base::numeric_service)
-                    .begin()
-                    ->endpoint();
-            acceptor.open(ep.protocol());
-            acceptor.set_option(asio::socket_base::reuse_address(true));
-            acceptor.bind(ep);
-            acceptor.listen();
-        } catch (const std::exception& e) {
-            throw ConfigError(config.source + ": listen " + where + ": " + e.what());
-        }
+        detail::listenOn(acceptor, config.listenHost, config.listenPort,
+                         config.source + ": listen");
         log.info("listening on " + config.listenHost + ":" + std::to_string(port()) + " (" +
                  std::to_string(catalog.size()) + " volumes, " +
                  (config.token.empty() ? "no token" : "token required") + ")");
@@ -215,6 +209,7 @@ struct Daemon::Impl {
     void collect(MetricSet& m) {
         render.collect(m);
         catalog.collect(m);
+        if (web) web->collect(m);
         m.gauge("sessions", "Client sessions open", double(sessions.size()));
         std::size_t queued = 0, deepest = 0;
         std::uint64_t bytes = 0, largest = 0;
@@ -238,25 +233,31 @@ struct Daemon::Impl {
     }
 
     void accept() {
-        acceptor.async_accept([this](const asio::error_code& ec, asio::ip::tcp::socket socket) {
+        acceptor.async_accept([this](const IoError& ec, asio::ip::tcp::socket socket) {
             if (ec) {
                 if (ec != asio::error::operation_aborted) log.error("accept: " + ec.message());
                 if (!draining && acceptor.is_open()) accept();
                 return;
             }
-            asio::error_code ignored;
+            IoError ignored;
             socket.set_option(asio::ip::tcp::no_delay(true), ignored);
-            auto session = std::make_shared<detail::Session>(std::move(socket), context, ++nextId);
-            if (sessions.size() >= config.maxClients) {
-                ++refused;
-                session->refuseBusy();
-            } else {
-                ++accepted;
-                sessions[session->id()] = session;
-                session->start();
-            }
+            startSession(detail::makeTcpTransport(std::move(socket)));
             accept();
         });
+    }
+
+    /// A connection over either transport: a session, or Busy when there are max_clients.
+    void startSession(std::unique_ptr<detail::Transport> transport) {
+        if (draining) return transport->close();
+        auto session = std::make_shared<detail::Session>(std::move(transport), context, ++nextId);
+        if (sessions.size() >= config.maxClients) {
+            ++refused;
+            session->refuseBusy();
+        } else {
+            ++accepted;
+            sessions[session->id()] = session;
+            session->start();
+        }
     }
 
     void onClosed(std::uint64_t id) {
@@ -267,8 +268,9 @@ struct Daemon::Impl {
     void drain() {
         if (draining) return;
         draining = true;
-        asio::error_code ignored;
+        IoError ignored;
         acceptor.close(ignored);
+        if (web) web->stop();
         signals.cancel(ignored);
         if (metrics) metrics->stop();
         if (sessions.empty()) return io.stop();
@@ -276,7 +278,7 @@ struct Daemon::Impl {
             s->shutdown();
         // Sessions close once their Bye is written; a stuck one is cut at the write deadline.
         drainTimer.expires_after(std::chrono::milliseconds(config.writeTimeoutMs + 500));
-        drainTimer.async_wait([this](const asio::error_code& ec) {
+        drainTimer.async_wait([this](const IoError& ec) {
             if (!ec) io.stop();
         });
     }
@@ -294,6 +296,7 @@ struct Daemon::Impl {
     detail::SessionContext context;
     std::map<std::uint64_t, std::shared_ptr<detail::Session>> sessions;
     std::unique_ptr<detail::MetricsEndpoint> metrics;
+    std::unique_ptr<detail::WebListener> web; ///< the browser viewer's address, when served
     std::uint64_t nextId = 0, accepted = 0, refused = 0;
     bool draining = false, reloading = false, reloadAgain = false;
     std::thread reloader; ///< the last reload's worker (opens stores off this thread)
@@ -309,6 +312,10 @@ std::uint16_t Daemon::port() const {
     return mImpl->port();
 }
 
+std::uint16_t Daemon::webPort() const {
+    return mImpl->web ? mImpl->web->port() : 0;
+}
+
 std::uint16_t Daemon::metricsPort() const {
     return mImpl->metrics ? mImpl->metrics->port() : 0;
 }
@@ -316,6 +323,7 @@ std::uint16_t Daemon::metricsPort() const {
 void Daemon::run() {
     mImpl->accept();
     if (mImpl->metrics) mImpl->metrics->start();
+    if (mImpl->web) mImpl->web->start();
     mImpl->io.run();
     mImpl->sessions.clear();
     mImpl->log.info("stopped");

@@ -31,6 +31,8 @@ class Daemon {
     std::uint16_t port() const;
     /// The metrics endpoint's bound port; 0 when the config has none.
     std::uint16_t metricsPort() const;
+    /// The browser viewer's port (DaemonConfig::web), 0 when it is not served.
+    std::uint16_t webPort() const;
     /// Serves until stop() or a signal, then drains. Call from one thread.
     void run();
     /// Starts the drain; thread-safe, returns at once.

@@ -44,6 +44,9 @@ store_dir = ""
 # HOST:PORT of the metrics endpoint: GET /metrics answers with every counter in the
 # Prometheus text format (no authentication, so loopback only); "" = no endpoint.
 metrics = ""
+# HOST:PORT of the browser viewer (HTTP and WebSocket, same token rule as listen); "auto" =
+# listen's host and port + 1 (any free port when listen's port is 0); "" = no viewer.
+web = "auto"
 
 [timeouts]
 # Hello (and Auth when required) must arrive within this long of connecting.
@@ -316,7 +319,7 @@ std::string Reader::resolve(const std::string& path) const {
 void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
     const toml::table* t = section(root, "server");
     if (!t) return;
-    checkKeys(*t, "server.", {"listen", "token", "max_clients", "store_dir", "metrics"});
+    checkKeys(*t, "server.", {"listen", "token", "max_clients", "store_dir", "metrics", "web"});
     if (auto listen = string(*t, "server.", "listen")) {
         Listen l;
         if (auto why = splitListen(*listen, l))
@@ -339,6 +342,12 @@ void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
                  "'" + l.host + "' is not loopback: the endpoint has no authentication");
         c.metricsHost = l.host;
         c.metricsPort = l.port;
+    }
+    if (auto web = string(*t, "server.", "web")) {
+        Listen l;
+        if (*web != "auto" && !web->empty())
+            if (auto why = splitListen(*web, l)) fail(t->get("web")->source(), "server.web", *why);
+        c.web = *web;
     }
     assign(c.maxClients, integer(*t, "server.", "max_clients", 1, 1024));
     if (auto dir = string(*t, "server.", "store_dir"); dir && !dir->empty())
@@ -537,6 +546,12 @@ DaemonConfig Reader::read(const toml::table& root) const {
              "required when listening on '" + c.listenHost +
                  "' (not loopback): clients from other machines must authenticate");
     }
+    if (const auto web = c.webListen(); web && c.token.empty() && !isLoopback(web->first)) {
+        const toml::node* at = root.at_path("server.web").node();
+        fail(at ? at->source() : root.source(), "server.token",
+             "required when serving the viewer on '" + web->first +
+                 "' (not loopback): clients from other machines must authenticate");
+    }
     return c;
 }
 
@@ -562,6 +577,28 @@ void DaemonConfig::setListen(const std::string& text, const std::string& sourceN
 
 bool DaemonConfig::loopbackOnly() const {
     return isLoopback(listenHost);
+}
+
+void DaemonConfig::setWeb(const std::string& text, const std::string& sourceName) {
+    Listen l;
+    if (text != "auto" && !text.empty())
+        if (auto why = splitListen(text, l)) throw ConfigError(sourceName + ": " + *why);
+    DaemonConfig next = *this;
+    next.web = text;
+    if (const auto web = next.webListen(); web && next.token.empty() && !isLoopback(web->first))
+        throw ConfigError(sourceName + ": the viewer on '" + web->first +
+                          "' (not loopback) needs server.token in the config");
+    *this = std::move(next);
+}
+
+std::optional<std::pair<std::string, std::uint16_t>> DaemonConfig::webListen() const {
+    if (web.empty()) return std::nullopt;
+    if (web == "auto")
+        return std::pair{
+            listenHost, std::uint16_t(listenPort == 0 || listenPort == 65535 ? 0 : listenPort + 1)};
+    Listen l;
+    splitListen(web, l); // checked when it was set
+    return std::pair{l.host, l.port};
 }
 
 void DaemonConfig::setMetrics(const std::string& text, const std::string& sourceName) {

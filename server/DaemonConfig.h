@@ -4,8 +4,10 @@
 // key); the daemon's other parts take this struct, never the file.
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace bc::server {
@@ -40,6 +42,9 @@ struct DaemonConfig {
     std::string token;                    ///< empty = no auth; required off loopback
     std::string metricsHost;              ///< empty = no metrics endpoint; loopback
     std::uint16_t metricsPort = 0;
+    /// The browser viewer's HTTP and WebSocket address: "auto" (listen's host, listen's port
+    /// + 1, or any free port when listen's is 0), "HOST:PORT", or "" for none. See webListen().
+    std::string web = "auto";
     std::uint32_t maxClients = 16;
     std::uint32_t handshakeTimeoutMs = 5000;
     std::uint32_t readTimeoutMs = 10000;
@@ -66,6 +71,11 @@ struct DaemonConfig {
     /// Serves metrics on "HOST:PORT" (a command-line override; loopback only).
     /// @throw ConfigError naming sourceName when the text is bad or not loopback.
     void setMetrics(const std::string& text, const std::string& sourceName);
+    /// Serves the browser viewer on "HOST:PORT", "auto" or "" (none): a command-line override.
+    /// @throw ConfigError naming sourceName when the text is bad or a token is missing.
+    void setWeb(const std::string& text, const std::string& sourceName);
+    /// The viewer's host and port as `web` resolves; nullopt when it is off.
+    std::optional<std::pair<std::string, std::uint16_t>> webListen() const;
     /// Whether listenHost is a loopback address: 127.0.0.0/8, ::1 (also v4-mapped), localhost.
     bool loopbackOnly() const;
     /// The built-in configuration: loopback, no token, a generated 128^3 "phantom" and 160^3

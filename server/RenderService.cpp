@@ -982,13 +982,18 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
         rgba8 = interactiveUpscale(rgba8, d.options.width, d.options.height, o.width, o.height);
     protocol::Frame frame;
     frame.header.renderMs = float(msSince(d.start));
-    auto encoded = slot.mEncoder.encode(rgba8, o.width, o.height, o.codec, o.codecQuality);
+    // A refined frame may have its own codec (lossless at rest, JPEG while moving), at that
+    // codec's default quality: codecQuality is `codec`'s.
+    const bool ownCodec = d.job.refined && o.refinedCodec;
+    const protocol::Codec codec = ownCodec ? *o.refinedCodec : o.codec;
+    auto encoded =
+        slot.mEncoder.encode(rgba8, o.width, o.height, codec, ownCodec ? 0 : o.codecQuality);
     auto& h = frame.header;
     h.frameId = slot.mNextFrameId++;
     h.cameraId = s.camera->cameraId;
     h.width = o.width;
     h.height = o.height;
-    h.codec = o.codec;
+    h.codec = codec;
     h.level = std::uint8_t(stats.level);
     h.refined = d.job.refined;
     h.keyframe = encoded.keyframe;

@@ -1,6 +1,7 @@
 #include "server/detail/MetricsEndpoint.h"
 
-#include "server/Error.h"
+#include "server/detail/Acceptor.h"
+
 #include "server/Log.h"
 
 #include <array>
@@ -21,7 +22,7 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
 
     void start() {
         mTimer.expires_after(std::chrono::milliseconds(kRequestTimeoutMs));
-        mTimer.async_wait([self = shared_from_this()](const asio::error_code& ec) {
+        mTimer.async_wait([self = shared_from_this()](const IoError& ec) {
             if (!ec && !self->mAnswered)
                 self->answer(408, "Request Timeout", "request not complete within 2 s\n");
         });
@@ -30,13 +31,12 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
 
   private:
     void read() {
-        mSocket.async_read_some(
-            asio::buffer(mBuffer),
-            [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
-                if (ec || self->mAnswered) return self->close();
-                self->mRequest.append(self->mBuffer.data(), n);
-                self->onBytes();
-            });
+        mSocket.async_read_some(asio::buffer(mBuffer),
+                                [self = shared_from_this()](const IoError& ec, std::size_t n) {
+                                    if (ec || self->mAnswered) return self->close();
+                                    self->mRequest.append(self->mBuffer.data(), n);
+                                    self->onBytes();
+                                });
     }
 
     void onBytes() {
@@ -78,16 +78,16 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
                     "\r\nConnection: close\r\n" + extra + "\r\n" + body;
         // The write is bounded like the read: a scraper that stops reading is cut.
         mTimer.expires_after(std::chrono::milliseconds(kRequestTimeoutMs));
-        mTimer.async_wait([self = shared_from_this()](const asio::error_code& ec) {
+        mTimer.async_wait([self = shared_from_this()](const IoError& ec) {
             if (!ec) self->close();
         });
         asio::async_write(
             mSocket, asio::buffer(mResponse),
-            [self = shared_from_this()](const asio::error_code&, std::size_t) { self->close(); });
+            [self = shared_from_this()](const IoError&, std::size_t) { self->close(); });
     }
 
     void close() {
-        asio::error_code ignored;
+        IoError ignored;
         mTimer.cancel();
         mSocket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
         mSocket.close(ignored);
@@ -106,20 +106,7 @@ MetricsEndpoint::MetricsEndpoint(asio::io_context& io, const std::string& host, 
                                  Log& log, std::function<std::string()> body,
                                  const std::string& source)
     : mIo(io), mAcceptor(io), mLog(log), mBody(std::move(body)), mOpen(std::make_shared<int>(0)) {
-    const std::string where = host + ":" + std::to_string(port);
-    try {
-        asio::ip::tcp::resolver resolver(io);
-        const auto ep =
-            resolver.resolve(host, std::to_string(port), asio::ip::resolver_base::numeric_service)
-                .begin()
-                ->endpoint();
-        mAcceptor.open(ep.protocol());
-        mAcceptor.set_option(asio::socket_base::reuse_address(true));
-        mAcceptor.bind(ep);
-        mAcceptor.listen();
-    } catch (const std::exception& e) {
-        throw ConfigError(source + ": metrics " + where + ": " + e.what());
-    }
+    listenOn(mAcceptor, host, port, source + ": metrics");
     mLog.info("metrics on http://" + host + ":" + std::to_string(this->port()) + "/metrics");
 }
 
@@ -135,19 +122,19 @@ void MetricsEndpoint::start() {
 
 void MetricsEndpoint::stop() {
     mStopped = true;
-    asio::error_code ignored;
+    IoError ignored;
     mAcceptor.close(ignored);
 }
 
 void MetricsEndpoint::accept() {
-    mAcceptor.async_accept([this](const asio::error_code& ec, asio::ip::tcp::socket socket) {
+    mAcceptor.async_accept([this](const IoError& ec, asio::ip::tcp::socket socket) {
         if (ec) {
             if (ec != asio::error::operation_aborted) mLog.error("metrics accept: " + ec.message());
             if (!mStopped && mAcceptor.is_open()) accept();
             return;
         }
         if (*mOpen >= kMaxConnections) {
-            asio::error_code ignored;
+            IoError ignored;
             socket.close(ignored);
         } else {
             std::make_shared<Connection>(std::move(socket), mBody, mOpen)->start();

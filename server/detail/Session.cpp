@@ -35,6 +35,24 @@ bool tokensEqual(const std::string& given, const std::string& expected) {
     return diff == 0;
 }
 
+/// The store's histogram as the protocol carries it: at most kMaxHistogramBins equal bins
+/// (a finer one is merged k bins at a time; the last merged bin may reach past valueMax).
+protocol::Histogram histogramOf(const render::VolumeValueStats& stats) {
+    protocol::Histogram h{stats.valueMin, stats.valueMax, {}};
+    const std::size_t n = stats.histogram.size();
+    if (n == 0) {
+        h.counts = {0};
+        return h;
+    }
+    const std::size_t k = (n + protocol::kMaxHistogramBins - 1) / protocol::kMaxHistogramBins;
+    h.counts.assign((n + k - 1) / k, 0);
+    for (std::size_t i = 0; i < n; ++i)
+        h.counts[i / k] += stats.histogram[i];
+    h.valueMax = stats.valueMin +
+                 (stats.valueMax - stats.valueMin) * double(h.counts.size() * k) / double(n);
+    return h;
+}
+
 std::string mib(std::uint64_t bytes) {
     std::ostringstream s;
     s.precision(3);
@@ -44,24 +62,18 @@ std::string mib(std::uint64_t bytes) {
 
 } // namespace
 
-Session::Session(asio::ip::tcp::socket socket, SessionContext& context, std::uint64_t id)
-    : mSocket(std::move(socket)), mTimer(mSocket.get_executor()), mContext(context), mId(id),
+Session::Session(std::unique_ptr<Transport> transport, SessionContext& context, std::uint64_t id)
+    : mTransport(std::move(transport)), mTimer(mTransport->executor()), mContext(context), mId(id),
       mDecoder(protocol::kMaxClientPayloadBytes) {
-    mPeer = peer();
+    mPeer = mTransport->peer();
     mStarted = mLastMessage = Clock::now();
 }
 
-std::string Session::peer() const {
-    asio::error_code ec;
-    const auto ep = mSocket.remote_endpoint(ec);
-    if (ec) return "?";
-    return ep.address().to_string() + ":" + std::to_string(ep.port());
-}
-
 void Session::start() {
-    mContext.log.info("session " + std::to_string(mId) + " from " + mPeer + " started");
+    mContext.log.info("session " + std::to_string(mId) + " from " + mPeer + " (" +
+                      mTransport->kind() + ") started");
     std::weak_ptr<Session> weak = shared_from_this();
-    auto executor = mSocket.get_executor();
+    auto executor = mTransport->executor();
     mSlot = mContext.render.open(
         [weak, executor](std::vector<std::uint8_t> bytes) {
             asio::post(executor, [weak, bytes = std::move(bytes)]() mutable {
@@ -138,21 +150,17 @@ void Session::volumeFailed(const std::shared_ptr<Volume>& volume) {
 // ---- reading -------------------------------------------------------------------------------
 
 void Session::read() {
-    mSocket.async_read_some(asio::buffer(mReadBuffer),
-                            [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
-                                if (self->mPhase == Phase::Closed) return;
-                                if (ec) {
-                                    self->close(ec == asio::error::eof ? "peer closed"
-                                                                       : "read: " + ec.message());
-                                    return;
-                                }
-                                self->onBytes(n);
-                            });
+    mTransport->read(
+        [self = shared_from_this()](const std::string& error, std::span<const std::uint8_t> bytes) {
+            if (self->mPhase == Phase::Closed) return;
+            if (!error.empty()) return self->close(error);
+            self->onBytes(bytes);
+        });
 }
 
-void Session::onBytes(std::size_t n) {
-    mBytesReceived += n;
-    mDecoder.feed(std::span<const std::uint8_t>(mReadBuffer.data(), n));
+void Session::onBytes(std::span<const std::uint8_t> bytes) {
+    mBytesReceived += bytes.size();
+    mDecoder.feed(bytes);
     for (;;) {
         auto r = mDecoder.next();
         if (r.status == protocol::Decoder::Status::NeedMore) break;
@@ -216,6 +224,8 @@ void Session::handle(protocol::Message& message, std::uint32_t request) {
                     onRequestFrame(m, request);
                 } else if constexpr (std::is_same_v<M, protocol::RequestStats>) {
                     onRequestStats(request);
+                } else if constexpr (std::is_same_v<M, protocol::RequestHistogram>) {
+                    onRequestHistogram(request);
                 } else if constexpr (std::is_same_v<M, protocol::Bye>) {
                     send(protocol::Bye{protocol::ByeReason::Normal}, request);
                     closeAfterFlush("bye");
@@ -252,7 +262,7 @@ void Session::onHello(const protocol::Hello& hello, std::uint32_t request) {
     reply.capabilities = mContext.capabilities;
     if (!mContext.render.gpuUnavailable()) reply.capabilities |= protocol::kCapGpuRenderer;
     reply.codecs = {protocol::Codec::Raw, protocol::Codec::Zstd, protocol::Codec::ZstdDelta,
-                    protocol::Codec::Jpeg};
+                    protocol::Codec::Jpeg, protocol::Codec::Png};
     reply.software = "brickcastd 0.1";
     send(reply, request);
     mPhase = mContext.config.token.empty() ? Phase::Ready : Phase::AwaitAuth;
@@ -351,6 +361,12 @@ void Session::onRequestFrame(const protocol::RequestFrame& m, std::uint32_t requ
     mSlot->request(m.mode, request);
 }
 
+void Session::onRequestHistogram(std::uint32_t request) {
+    const auto t = std::uint8_t(MessageType::RequestHistogram);
+    if (!mLease) return sendError(ErrorCode::NoVolume, false, t, request, "open a volume first");
+    send(histogramOf(mLease.volume()->stats), request);
+}
+
 void Session::onRequestStats(std::uint32_t request) {
     MetricSet metrics;
     if (mContext.collect) mContext.collect(metrics);
@@ -406,18 +422,15 @@ void Session::write() {
     }
     mWriting = true;
     mWriteStarted = Clock::now();
-    asio::async_write(mSocket, asio::buffer(mQueue.front().bytes),
-                      [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
+    mTransport->write(mQueue.front().bytes,
+                      [self = shared_from_this()](const std::string& error, std::size_t n) {
                           if (self->mPhase == Phase::Closed) return;
                           Outgoing done = std::move(self->mQueue.front());
                           self->mQueue.pop_front();
                           self->mQueueBytes -= done.bytes.size();
                           if (done.fromRenderer)
                               self->mSlot->frameDone(done.bytes.size()), ++self->mFramesSent;
-                          if (ec) {
-                              self->close("write: " + ec.message());
-                              return;
-                          }
+                          if (!error.empty()) return self->close(error);
                           self->mBytesSent += n;
                           self->write();
                       });
@@ -427,7 +440,7 @@ void Session::write() {
 
 void Session::watchdog() {
     mTimer.expires_after(kWatchdogPeriod);
-    mTimer.async_wait([self = shared_from_this()](const asio::error_code& ec) {
+    mTimer.async_wait([self = shared_from_this()](const IoError& ec) {
         if (ec || self->mPhase == Phase::Closed) return;
         const auto now = Clock::now();
         const auto& c = self->mContext.config;
@@ -465,9 +478,7 @@ void Session::closeAfterFlush(const std::string& why) {
 void Session::close(const std::string& why) {
     if (mPhase == Phase::Closed) return;
     mPhase = Phase::Closed;
-    asio::error_code ignored;
-    mSocket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
-    mSocket.close(ignored);
+    mTransport->close();
     mTimer.cancel();
     if (mSlot) mSlot->close();
     mLease = {};

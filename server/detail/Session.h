@@ -1,9 +1,10 @@
 #pragma once
-// One client connection of brickcastd (private to server/). Runs on the daemon's network
-// thread: reads bytes into the protocol decoder, answers control messages at once, hands
-// render requests to its RenderSlot, and writes what comes back through a bounded queue.
-// A watchdog enforces the handshake, trickle (message started but incomplete), idle and write
-// deadlines. Every error is answered with an Error message; a fatal one closes the session.
+// One client connection of brickcastd (private to server/), over TCP or WebSocket (Transport).
+// Runs on the daemon's network thread: reads bytes into the protocol decoder, answers control
+// messages at once, hands render requests to its RenderSlot, and writes what comes back through a
+// bounded queue. A watchdog enforces the handshake, trickle (message started but incomplete), idle
+// and write deadlines. Every error is answered with an Error message; a fatal one closes the
+// session.
 #include "protocol/Decoder.h"
 #include "protocol/Messages.h"
 #include "server/Catalog.h"
@@ -11,6 +12,7 @@
 #include "server/RenderService.h"
 
 #include "server/detail/Asio.h"
+#include "server/detail/Transport.h"
 
 #include <array>
 #include <cstdint>
@@ -42,7 +44,7 @@ struct SessionContext {
 
 class Session : public std::enable_shared_from_this<Session> {
   public:
-    Session(asio::ip::tcp::socket socket, SessionContext& context, std::uint64_t id);
+    Session(std::unique_ptr<Transport> transport, SessionContext& context, std::uint64_t id);
     /// Starts reading and the watchdog.
     void start();
     /// Refuses the connection: Error Busy, then close (the session never starts).
@@ -73,7 +75,7 @@ class Session : public std::enable_shared_from_this<Session> {
     };
 
     void read();
-    void onBytes(std::size_t n);
+    void onBytes(std::span<const std::uint8_t> bytes);
     void handle(protocol::Message& message, std::uint32_t request);
     bool admitted(protocol::MessageType type, std::uint32_t request);
     void onHello(const protocol::Hello& hello, std::uint32_t request);
@@ -83,6 +85,7 @@ class Session : public std::enable_shared_from_this<Session> {
     void onSetRenderOptions(const protocol::SetRenderOptions& options, std::uint32_t request);
     void onRequestFrame(const protocol::RequestFrame& frame, std::uint32_t request);
     void onRequestStats(std::uint32_t request);
+    void onRequestHistogram(std::uint32_t request);
     /// Views `next`, the reopened volume of the same shape, in place of the current one.
     void moveTo(const std::shared_ptr<Volume>& next);
     /// Stops viewing the current volume and sends UnknownVolume saying `why`.
@@ -96,16 +99,14 @@ class Session : public std::enable_shared_from_this<Session> {
     /// Stops reading; closes once the queue is written (or the write deadline passes).
     void closeAfterFlush(const std::string& why);
     void close(const std::string& why);
-    std::string peer() const;
 
-    asio::ip::tcp::socket mSocket;
+    std::unique_ptr<Transport> mTransport;
     asio::steady_timer mTimer;
     SessionContext& mContext;
     std::uint64_t mId;
     std::string mPeer;
     Phase mPhase = Phase::AwaitHello;
     protocol::Decoder mDecoder;
-    std::array<std::uint8_t, 64 * 1024> mReadBuffer{};
     std::deque<Outgoing> mQueue;
     std::uint64_t mQueueBytes = 0;
     bool mWriting = false;

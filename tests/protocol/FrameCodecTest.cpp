@@ -153,6 +153,41 @@ TEST(FrameCodecTest, JpegDropsAlphaSoColourIsCompositedOverBlack) {
     EXPECT_EQ(out[3], 255);
 }
 
+TEST(FrameCodecTest, PngIsLosslessInColourAndDropsAlphaAsJpegDoes) {
+    Bytes img = renderLikeFrame(97, 61, 2.0);
+    for (std::size_t i = 3; i < img.size(); i += 4)
+        img[i] = std::uint8_t(i * 7); // alpha that must not leak into the colour
+    Bytes rgbOnly = img;
+    for (std::size_t i = 3; i < rgbOnly.size(); i += 4)
+        rgbOnly[i] = 255;
+    FrameEncoder enc;
+    for (std::uint8_t q : {0, 1}) { // fast, small
+        auto e = enc.encode(span(img), 97, 61, Codec::Png, q);
+        EXPECT_EQ(FrameImageDecoder().decode(Codec::Png, 97, 61, false, span(e.bytes)), rgbOnly)
+            << "quality " << int(q);
+        EXPECT_LT(e.bytes.size(), img.size()) << "quality " << int(q);
+    }
+    expectError([&] { enc.encode(span(img), 97, 61, Codec::Png, 2); }, {"PNG quality 2"});
+}
+
+TEST(FrameCodecTest, PngDecoderRefusesOtherSizesAndCorruptData) {
+    const Bytes img = renderLikeFrame(32, 32, 0);
+    auto e = FrameEncoder().encode(span(img), 32, 32, Codec::Png, 0);
+    FrameImageDecoder dec;
+    expectError([&] { dec.decode(Codec::Png, 32, 31, false, span(e.bytes)); },
+                {"PNG frame", "32x32", "32x31"});
+    expectError([&] { dec.decode(Codec::Png, 32, 32, false, span(img)); }, {"not a PNG image"});
+    Bytes cut(e.bytes.begin(), e.bytes.begin() + e.bytes.size() / 2);
+    expectError([&] { dec.decode(Codec::Png, 32, 32, false, span(cut)); }, {"PNG frame"});
+    Bytes flipped = e.bytes;
+    flipped[flipped.size() / 2] ^= 0xFF; // the IDAT checksum no longer holds
+    expectError([&] { dec.decode(Codec::Png, 32, 32, false, span(flipped)); }, {"PNG frame"});
+    // A header that claims a huge image is refused before anything is allocated for it.
+    Bytes huge = e.bytes;
+    huge[16] = 0x7F; // width's top byte: 0x7F000020 pixels
+    expectError([&] { dec.decode(Codec::Png, 32, 32, false, span(huge)); }, {"PNG frame"});
+}
+
 TEST(FrameCodecTest, ResetDeltaMakesTheNextDeltaFrameAKeyframe) {
     FrameEncoder enc;
     FrameImageDecoder dec;
@@ -336,8 +371,8 @@ TEST_F(FrameDecodeErrorTest, ZeroOrOversizedEdgesAndUnknownCodec) {
     expectError([&] { dec.decode(Codec::Zstd, 0, 32, false, span(z)); }, {"0x32", "1..4096"});
     expectError([&] { dec.decode(Codec::Raw, 48, 0, false, span(z)); }, {"48x0"});
     expectError([&] { dec.decode(Codec::Jpeg, 5000, 32, false, span(z)); }, {"5000x32"});
-    expectError([&] { dec.decode(static_cast<Codec>(4), 48, 32, false, span(z)); },
-                {"unknown codec 4"});
+    expectError([&] { dec.decode(static_cast<Codec>(5), 48, 32, false, span(z)); },
+                {"unknown codec 5"});
 }
 
 } // namespace

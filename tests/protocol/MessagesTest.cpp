@@ -313,6 +313,36 @@ TEST(Messages, ErrorGoldenBytesRoundTrip) {
     expectGolden(m, 6, golden);
 }
 
+TEST(Messages, SetRenderOptionsWithARefinedCodecGoldenBytesRoundTrip) {
+    RenderOptions o;
+    o.codec = Codec::Jpeg;
+    o.codecQuality = 80;
+    Bytes golden = encode(SetRenderOptions{o}, 9);
+    EXPECT_EQ(golden[kHeaderBytes + 21], 0x00) << "no refined codec: as codec";
+    golden[kHeaderBytes + 21] = 0x05; // refinedCodec: PNG (4) + 1
+    o.refinedCodec = Codec::Png;
+    expectGolden(SetRenderOptions{o}, 9, golden);
+    o.refinedCodec = Codec::Raw; // 0 + 1: raw is a refined codec too, not "none"
+    EXPECT_EQ(encode(SetRenderOptions{o}, 9)[kHeaderBytes + 21], 0x01);
+}
+
+TEST(Messages, RequestHistogramGoldenBytesRoundTrip) {
+    expectGolden(RequestHistogram{}, 4, Bytes{BC_HEADER(0x11, 0, 4)});
+}
+
+TEST(Messages, HistogramGoldenBytesRoundTrip) {
+    Histogram m{-1024.0, 3071.0, {7, 0x0102030405}};
+    const Bytes golden = {
+        BC_HEADER(0x12, 34, 4),
+        0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x90, 0xC0, // valueMin -1024
+        0x00, 0x00, 0x00, 0x00, 0x00, 0xFE, 0xA7, 0x40, // valueMax 3071
+        0x02, 0x00,                                     // bins 2
+        0x07, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, // [0] 7
+        0x05, 0x04, 0x03, 0x02, 0x01, 0x00, 0x00, 0x00, // [1] 0x0102030405
+    };
+    expectGolden(m, 4, golden);
+}
+
 TEST(Messages, ByeGoldenBytesRoundTrip) {
     expectGolden(Bye{ByeReason::IdleTimeout}, 0,
                  Bytes{BC_HEADER(0x10, 2, 0), 0x02, 0x00 /* reason: idle timeout */});
@@ -341,6 +371,8 @@ TEST(Messages, TypeOfNamesEveryAlternative) {
     EXPECT_EQ(typeOf(SetCamera{}), MessageType::SetCamera);
     EXPECT_EQ(typeOf(Frame{}), MessageType::Frame);
     EXPECT_EQ(typeOf(Bye{}), MessageType::Bye);
+    EXPECT_EQ(typeOf(Histogram{}), MessageType::Histogram);
+    EXPECT_STREQ(typeName(0x11), "RequestHistogram");
     EXPECT_STREQ(typeName(0x0A), "SetRenderOptions");
     EXPECT_STREQ(typeName(0x42), "unknown");
     EXPECT_STREQ(errorName(6), "OutOfRange");

@@ -299,6 +299,39 @@ TEST(DaemonConfigTest, MetricsAddressIsLoopbackOnlyAndNamed) {
     EXPECT_EQ(c.metricsHost, "::1") << "a refused override changes nothing";
 }
 
+// The viewer's address: "auto" follows listen, "" is off, HOST:PORT as listen's syntax, and a
+// non-loopback one needs the token as listen does.
+TEST(DaemonConfigTest, WebAddressFollowsListenAndKeepsTheTokenRule) {
+    using Where = std::optional<std::pair<std::string, std::uint16_t>>;
+    auto web = [](const std::string& text) {
+        return parseText("[server]\n" + text + kVolume).webListen();
+    };
+    EXPECT_EQ(DaemonConfig::embeddedDefault().web, "auto");
+    EXPECT_EQ(DaemonConfig::embeddedDefault().webListen(), (Where{{"127.0.0.1", 7412}}));
+    EXPECT_EQ(web("listen = \"[::1]:8000\"\n"), (Where{{"::1", 8001}}));
+    EXPECT_EQ(web("listen = \"127.0.0.1:0\"\n"), (Where{{"127.0.0.1", 0}})) << "any free port";
+    EXPECT_EQ(web("web = \"\"\n"), Where{}) << "off";
+    EXPECT_EQ(web("web = \"127.0.0.1:9000\"\n"), (Where{{"127.0.0.1", 9000}}));
+    const std::string bad = errorOf("[server]\nweb = \"9000\"\n" + std::string(kVolume));
+    EXPECT_NE(bad.find("bad.toml:2:"), std::string::npos) << bad;
+    EXPECT_NE(bad.find("server.web"), std::string::npos) << bad;
+    const std::string open = errorOf("[server]\nweb = \"0.0.0.0:9000\"\n" + std::string(kVolume));
+    EXPECT_NE(open.find("server.token"), std::string::npos) << open;
+    EXPECT_NE(open.find("viewer"), std::string::npos) << open;
+    EXPECT_EQ(errorOf("[server]\nweb = \"0.0.0.0:9000\"\ntoken = \"t\"\n" + std::string(kVolume)),
+              "");
+    DaemonConfig c = DaemonConfig::embeddedDefault();
+    c.setWeb("", "--web");
+    EXPECT_EQ(c.webListen(), Where{});
+    try {
+        c.setWeb("0.0.0.0:80", "--web");
+        ADD_FAILURE() << "no ConfigError";
+    } catch (const ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find("--web"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(c.web, "") << "a refused override changes nothing";
+}
+
 TEST(DaemonConfigTest, LoopbackOnlyCases) {
     DaemonConfig c;
     auto loopback = [&](const char* host) {

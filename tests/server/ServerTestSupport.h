@@ -14,11 +14,14 @@
 #include <gtest/gtest.h>
 
 #include <cerrno>
+#include <cstring>
+#include <filesystem>
 #include <memory>
 #include <netinet/in.h>
 #include <optional>
 #include <poll.h>
 #include <sstream>
+#include <sys/inotify.h>
 #include <sys/socket.h>
 #include <thread>
 #include <unistd.h>
@@ -209,6 +212,32 @@ inline std::string scrape(std::uint16_t port, const std::string& request) {
     ::close(fd);
     return reply;
 }
+
+/// Watches a folder for any open or read of what is in it.
+class OpenWatch {
+  public:
+    explicit OpenWatch(const std::filesystem::path& folder) {
+        mFd = inotify_init1(IN_NONBLOCK | IN_CLOEXEC);
+        if (mFd < 0 || inotify_add_watch(mFd, folder.c_str(), IN_OPEN | IN_ACCESS) < 0)
+            throw std::runtime_error("inotify: " + std::string(std::strerror(errno)));
+    }
+    ~OpenWatch() { ::close(mFd); }
+    /// Names opened or read since the last call ("." for the folder itself).
+    std::vector<std::string> events() {
+        std::vector<std::string> names;
+        alignas(inotify_event) char buf[4096];
+        for (ssize_t n; (n = ::read(mFd, buf, sizeof buf)) > 0;)
+            for (char* p = buf; p < buf + n;) {
+                const auto* e = reinterpret_cast<const inotify_event*>(p);
+                names.emplace_back(e->len ? e->name : ".");
+                p += sizeof(inotify_event) + e->len;
+            }
+        return names;
+    }
+
+  private:
+    int mFd = -1;
+};
 
 /// The value of the sample line `name` (labels included) in a text exposition; -1 if absent.
 inline double sampleOf(const std::string& text, const std::string& name) {

@@ -10,7 +10,6 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
-#include <sys/inotify.h>
 
 namespace bc::server::test {
 namespace {
@@ -48,32 +47,6 @@ Bytes pointsMessage(std::uint16_t count, const std::vector<RawPoint>& points,
     m.insert(m.end(), p.begin(), p.end());
     return m;
 }
-
-/// Watches a folder for any open or read of what is in it.
-class OpenWatch {
-  public:
-    explicit OpenWatch(const std::filesystem::path& folder) {
-        mFd = inotify_init1(IN_NONBLOCK | IN_CLOEXEC);
-        if (mFd < 0 || inotify_add_watch(mFd, folder.c_str(), IN_OPEN | IN_ACCESS) < 0)
-            throw std::runtime_error("inotify: " + std::string(std::strerror(errno)));
-    }
-    ~OpenWatch() { ::close(mFd); }
-    /// Names opened or read since the last call ("." for the folder itself).
-    std::vector<std::string> events() {
-        std::vector<std::string> names;
-        alignas(inotify_event) char buf[4096];
-        for (ssize_t n; (n = ::read(mFd, buf, sizeof buf)) > 0;)
-            for (char* p = buf; p < buf + n;) {
-                const auto* e = reinterpret_cast<const inotify_event*>(p);
-                names.emplace_back(e->len ? e->name : ".");
-                p += sizeof(inotify_event) + e->len;
-            }
-        return names;
-    }
-
-  private:
-    int mFd = -1;
-};
 
 class WireSafety : public ::testing::Test {
   protected:

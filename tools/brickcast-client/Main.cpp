@@ -67,7 +67,8 @@ protocol::Codec codecOf(const std::string& s) {
     if (s == "zstd") return protocol::Codec::Zstd;
     if (s == "delta") return protocol::Codec::ZstdDelta;
     if (s == "jpeg") return protocol::Codec::Jpeg;
-    throw CLI::ValidationError("--codec", "one of raw, zstd, delta, jpeg");
+    if (s == "png") return protocol::Codec::Png;
+    throw CLI::ValidationError("--codec", "one of raw, zstd, delta, jpeg, png");
 }
 
 protocol::SetTransferFunction preset(const std::string& name) {
@@ -205,7 +206,7 @@ int main(int argc, char** argv) {
     app.add_option("--tf", o.tf, "Transfer-function preset");
     app.add_option("--tf-switch", o.tfSwitch,
                    "PRESET@FRAME: switch the transfer function mid-flight");
-    app.add_option("--codec", o.codec, "raw, zstd, delta or jpeg")->capture_default_str();
+    app.add_option("--codec", o.codec, "raw, zstd, delta, jpeg or png")->capture_default_str();
     app.add_option("--quality", o.quality, "JPEG quality or zstd level (0 = default)")
         ->check(CLI::Range(0, 100));
     app.add_option("--renderer", o.renderer, "gpu, cpu, splat, splat-gpu or reference")

@@ -66,7 +66,8 @@ protocol::Codec codecOf(const std::string& name) {
     if (name == "zstd") return protocol::Codec::Zstd;
     if (name == "delta") return protocol::Codec::ZstdDelta;
     if (name == "jpeg") return protocol::Codec::Jpeg;
-    throw std::invalid_argument("--codec: '" + name + "' is not raw, zstd, delta or jpeg");
+    if (name == "png") return protocol::Codec::Png;
+    throw std::invalid_argument("--codec: '" + name + "' is not raw, zstd, delta, jpeg or png");
 }
 
 /// A window ramp over fractions [lo, lo + 0.25] of the value range.

@@ -11,11 +11,13 @@
 #include <cstdio>
 #include <fstream>
 #include <new>
+#include <optional>
 #include <string>
 
 int main(int argc, char** argv) {
     CLI::App app{"brickcastd: out-of-core volume rendering, streamed to thin clients"};
-    std::string configPath, portFile, listen, metrics, metricsPortFile;
+    std::string configPath, portFile, listen, metrics, metricsPortFile, webPortFile;
+    std::optional<std::string> web;
     bool printDefault = false, quiet = false;
     app.add_option("-c,--config", configPath, "Config file (TOML); default: the embedded one");
     app.add_option("--listen", listen, "HOST:PORT, overriding the config (port 0: any free port)");
@@ -25,6 +27,10 @@ int main(int argc, char** argv) {
                    "overriding the config");
     app.add_option("--metrics-port-file", metricsPortFile,
                    "Write the metrics port here once listening");
+    app.add_option("--web", web,
+                   "HOST:PORT of the browser viewer, \"auto\" (the listen port + 1) or \"\" "
+                   "(none), overriding the config");
+    app.add_option("--web-port-file", webPortFile, "Write the viewer's port here once listening");
     app.add_flag("--print-default-config", printDefault,
                  "Print the embedded default config and exit");
     app.add_flag("-q,--quiet", quiet, "Log errors only");
@@ -40,6 +46,7 @@ int main(int argc, char** argv) {
                                          : bc::server::DaemonConfig::load(configPath);
         if (!listen.empty()) config.setListen(listen, "--listen");
         if (!metrics.empty()) config.setMetrics(metrics, "--metrics");
+        if (web) config.setWeb(*web, "--web");
         bc::server::Daemon daemon(std::move(config), log, /*handleSignals=*/true);
         auto writePort = [](const std::string& file, unsigned port) {
             if (file.empty()) return;
@@ -47,6 +54,7 @@ int main(int argc, char** argv) {
             std::rename((file + ".tmp").c_str(), file.c_str());
         };
         writePort(metricsPortFile, daemon.metricsPort());
+        writePort(webPortFile, daemon.webPort());
         writePort(portFile, daemon.port());
         daemon.run();
         return 0;

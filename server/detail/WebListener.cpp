@@ -1,0 +1,251 @@
+#include "server/detail/WebListener.h"
+
+#include "server/DaemonConfig.h"
+#include "server/Log.h"
+#include "server/Metrics.h"
+#include "server/detail/Acceptor.h"
+#include "server/detail/WebAssets.h"
+#include "server/detail/WebSocketTransport.h"
+
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket/rfc6455.hpp>
+
+#include <map>
+
+namespace bc::server::detail {
+
+namespace beast = boost::beast;
+namespace http = beast::http;
+
+const WebAsset* findWebAsset(std::string_view path) {
+    for (std::size_t i = 0; i < kWebAssetCount; ++i)
+        if (kWebAssets[i].path == path) return &kWebAssets[i];
+    return nullptr;
+}
+
+struct WebListener::Impl {
+    Impl(asio::io_context& io, const DaemonConfig& c, Log& l,
+         std::function<void(std::unique_ptr<Transport>)> open)
+        : acceptor(io), config(c), log(l), onOpen(std::move(open)) {}
+
+    asio::ip::tcp::acceptor acceptor;
+    const DaemonConfig& config;
+    Log& log;
+    std::function<void(std::unique_ptr<Transport>)> onOpen;
+    std::size_t open = 0;                 ///< HTTP connections open (not upgraded)
+    std::map<unsigned, double> responses; ///< by status
+    double upgrades = 0, refused = 0;
+    bool stopped = false;
+};
+
+namespace {
+
+/// Headers every response carries: the page's scripts come from this server only, and it
+/// may only talk to this server.
+template <class Body> void secure(http::response<Body>& res) {
+    res.set(http::field::server, "brickcastd");
+    res.set("X-Content-Type-Options", "nosniff");
+    res.set(http::field::cache_control, "no-cache");
+    res.set("Content-Security-Policy",
+            "default-src 'self'; connect-src 'self'; img-src 'self' blob: data:; "
+            "frame-ancestors 'none'; base-uri 'none'; form-action 'none'");
+    res.set("Referrer-Policy", "no-referrer");
+}
+
+/// The host:port part of an Origin ("http://host:port"), empty when it has none.
+std::string_view originHost(std::string_view origin) {
+    const auto scheme = origin.find("://");
+    return scheme == std::string_view::npos ? std::string_view{} : origin.substr(scheme + 3);
+}
+
+class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
+  public:
+    HttpConnection(asio::ip::tcp::socket socket, std::shared_ptr<WebListener::Impl> listener)
+        : mSocket(std::move(socket)), mTimer(mSocket.get_executor()), mL(std::move(listener)),
+          mPeer(peerOf(mSocket)) {
+        ++mL->open;
+    }
+    ~HttpConnection() { --mL->open; }
+
+    void readRequest() {
+        mParser.emplace();
+        mParser->header_limit(WebListener::kMaxHeaderBytes);
+        mParser->body_limit(0);
+        // The whole request (every header) within the handshake timeout: a client that
+        // trickles bytes holds a connection that long at most.
+        mTimer.expires_after(std::chrono::milliseconds(mL->config.handshakeTimeoutMs));
+        mTimer.async_wait([weak = weak_from_this()](const IoError& ec) {
+            if (auto self = weak.lock(); self && !ec) self->cut();
+        });
+        http::async_read(mSocket, mBuffer, *mParser,
+                         [self = shared_from_this()](const IoError& ec, std::size_t) {
+                             self->mTimer.cancel();
+                             self->onRequest(ec);
+                         });
+    }
+
+  private:
+    void onRequest(const IoError& ec) {
+        if (ec == http::error::end_of_stream || ec == asio::error::operation_aborted ||
+            !mSocket.is_open())
+            return cut();
+        if (ec == http::error::header_limit)
+            return fail(http::status::request_header_fields_too_large,
+                        "request headers over " + std::to_string(WebListener::kMaxHeaderBytes) +
+                            " bytes");
+        if (ec == http::error::body_limit)
+            return fail(http::status::payload_too_large, "requests have no body here");
+        if (ec) return fail(http::status::bad_request, "malformed request: " + ec.message());
+        const auto& req = mParser->get();
+        const std::string_view target(req.target().data(), req.target().size());
+        const std::string_view path = target.substr(0, target.find('?'));
+        if (beast::websocket::is_upgrade(req)) return upgrade(path);
+        if (req.method() != http::verb::get && req.method() != http::verb::head)
+            return fail(http::status::method_not_allowed, "only GET and HEAD");
+        const WebAsset* asset = findWebAsset(path);
+        if (!asset) return notFound(path, req.version(), req.keep_alive());
+        http::response<http::span_body<const char>> res{http::status::ok, req.version()};
+        res.set(http::field::content_type,
+                beast::string_view(asset->contentType.data(), asset->contentType.size()));
+        res.body() = {asset->body.data(), asset->body.size()};
+        res.prepare_payload();
+        if (req.method() == http::verb::head) res.body() = {};
+        res.keep_alive(req.keep_alive());
+        send(std::move(res));
+    }
+
+    void upgrade(std::string_view path) {
+        if (path != "/ws") return notFound(path, 11, false);
+        const auto& req = mParser->get();
+        // A page from another origin must not drive the daemon from its user's browser
+        // (cross-site WebSocket hijacking): an Origin, when sent, names this host.
+        const auto origin = req[http::field::origin];
+        const auto host = req[http::field::host];
+        if (!origin.empty() && originHost(std::string_view(origin.data(), origin.size())) !=
+                                   std::string_view(host.data(), host.size()))
+            return fail(http::status::forbidden, "cross-origin WebSocket refused (Origin " +
+                                                     std::string(origin.substr(0, 200)) + ")");
+        ++mL->upgrades;
+        acceptWebSocket(std::move(mSocket), mParser->release(), mL->config.handshakeTimeoutMs,
+                        mL->log, mL->onOpen);
+    }
+
+    void notFound(std::string_view path, unsigned version, bool keepAlive) {
+        mL->log.info("web: " + mPeer + ": 404 " + std::string(path.substr(0, 200)));
+        respond(http::status::not_found, "not found\n", version, keepAlive);
+    }
+
+    /// Answers `status` saying why, then closes.
+    void fail(http::status status, const std::string& why) {
+        mL->log.info("web: " + mPeer + ": " + std::to_string(unsigned(status)) + " " + why);
+        respond(status, why + "\n", 11, false);
+    }
+
+    void respond(http::status status, const std::string& text, unsigned version, bool keepAlive) {
+        http::response<http::string_body> res{status, version};
+        res.set(http::field::content_type, "text/plain; charset=utf-8");
+        if (status == http::status::method_not_allowed) res.set(http::field::allow, "GET, HEAD");
+        res.body() = text;
+        res.prepare_payload();
+        res.keep_alive(keepAlive);
+        send(std::move(res));
+    }
+
+    template <class Body> void send(http::response<Body>&& response) {
+        secure(response);
+        mL->responses[unsigned(response.result())] += 1;
+        auto res = std::make_shared<http::response<Body>>(std::move(response));
+        // A reader that stops reading is cut at the write deadline.
+        mTimer.expires_after(std::chrono::milliseconds(mL->config.writeTimeoutMs));
+        mTimer.async_wait([weak = weak_from_this()](const IoError& ec) {
+            if (auto self = weak.lock(); self && !ec) self->cut();
+        });
+        http::async_write(mSocket, *res,
+                          [self = shared_from_this(), res](const IoError& ec, std::size_t) {
+                              self->mTimer.cancel();
+                              if (ec || !res->keep_alive()) return self->cut();
+                              self->readRequest();
+                          });
+    }
+
+    void cut() {
+        IoError ignored;
+        mSocket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+        mSocket.close(ignored);
+    }
+
+    asio::ip::tcp::socket mSocket;
+    asio::steady_timer mTimer;
+    std::shared_ptr<WebListener::Impl> mL;
+    std::string mPeer;
+    beast::flat_buffer mBuffer{WebListener::kMaxHeaderBytes + 1024};
+    std::optional<http::request_parser<http::empty_body>> mParser;
+};
+
+void accept(const std::shared_ptr<WebListener::Impl>& l) {
+    l->acceptor.async_accept([l](const IoError& ec, asio::ip::tcp::socket socket) {
+        if (l->stopped) return;
+        if (ec) {
+            if (ec != asio::error::operation_aborted) l->log.error("web: accept: " + ec.message());
+            if (l->acceptor.is_open()) accept(l);
+            return;
+        }
+        if (l->open >= WebListener::kMaxConnections) {
+            ++l->refused; // closed unanswered: answering would cost what the limit saves
+        } else {
+            IoError ignored;
+            socket.set_option(asio::ip::tcp::no_delay(true), ignored);
+            std::make_shared<HttpConnection>(std::move(socket), l)->readRequest();
+        }
+        accept(l);
+    });
+}
+
+} // namespace
+
+WebListener::WebListener(asio::io_context& io, const std::string& host, std::uint16_t port,
+                         const DaemonConfig& config, Log& log,
+                         std::function<void(std::unique_ptr<Transport>)> onOpen)
+    : mImpl(std::make_shared<Impl>(io, config, log, std::move(onOpen))) {
+    listenOn(mImpl->acceptor, host, port, config.source + ": web");
+}
+
+WebListener::~WebListener() {
+    stop();
+}
+
+void WebListener::start() {
+    accept(mImpl);
+}
+
+void WebListener::stop() {
+    mImpl->stopped = true;
+    IoError ignored;
+    mImpl->acceptor.close(ignored);
+}
+
+std::uint16_t WebListener::port() const {
+    IoError ec;
+    return mImpl->acceptor.local_endpoint(ec).port();
+}
+
+std::string WebListener::url() const {
+    IoError ec;
+    const auto ep = mImpl->acceptor.local_endpoint(ec);
+    const std::string host = ep.address().to_string();
+    return "http://" + (ep.address().is_v6() ? "[" + host + "]" : host) + ":" +
+           std::to_string(ep.port()) + "/";
+}
+
+void WebListener::collect(MetricSet& m) const {
+    for (const auto& [status, n] : mImpl->responses)
+        m.counter("web_responses_total", "HTTP responses of the viewer's address, by status", n,
+                  {{"status", std::to_string(status)}});
+    m.counter("web_upgrades_total", "WebSocket upgrades asked for", mImpl->upgrades);
+    m.counter("web_connections_refused_total",
+              "HTTP connections closed unanswered (over the connection limit)", mImpl->refused);
+    m.gauge("web_connections", "HTTP connections open", double(mImpl->open));
+}
+
+} // namespace bc::server::detail

@@ -1,0 +1,152 @@
+#include "server/detail/WebSocketTransport.h"
+
+#include "protocol/Wire.h"
+#include "server/Log.h"
+
+#include <boost/beast/core.hpp>
+#include <boost/beast/websocket.hpp>
+
+#include <chrono>
+
+namespace bc::server::detail {
+namespace {
+
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+using Clock = std::chrono::steady_clock;
+
+/// How long a closing handshake may take before the socket is closed under it.
+constexpr auto kCloseHandshake = std::chrono::seconds(1);
+
+/// One connection's state, shared by the transport and its pending operations (a closing
+/// handshake outlives the session).
+struct Connection {
+    explicit Connection(asio::ip::tcp::socket socket)
+        : ws(std::move(socket)), timer(ws.get_executor()) {}
+
+    /// Closes the socket under the WebSocket: pending operations complete with an error.
+    void cut() {
+        IoError ignored;
+        ws.next_layer().shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+        ws.next_layer().close(ignored);
+    }
+
+    websocket::stream<asio::ip::tcp::socket> ws;
+    beast::flat_buffer buffer;
+    asio::steady_timer timer; ///< the handshake's, then the closing handshake's deadline
+    websocket::close_code closeCode = websocket::close_code::normal;
+    std::string failure; ///< why the transport itself ended the connection (a ping flood)
+    Clock::time_point pingWindow;
+    unsigned pings = 0;
+    bool writing = false, closed = false;
+};
+
+class WebSocketTransport final : public Transport {
+  public:
+    explicit WebSocketTransport(std::shared_ptr<Connection> c)
+        : mC(std::move(c)), mPeer(peerOf(mC->ws.next_layer())) {}
+    ~WebSocketTransport() override { close(); }
+
+    asio::any_io_executor executor() override { return mC->ws.get_executor(); }
+
+    void read(ReadHandler handler) override {
+        mC->buffer.consume(mC->buffer.size());
+        mC->ws.async_read(
+            mC->buffer, [c = mC, handler = std::move(handler)](const IoError& ec, std::size_t) {
+                if (!c->failure.empty()) return handler(c->failure, {});
+                if (ec == websocket::error::closed) return handler("peer closed", {});
+                if (ec == websocket::error::message_too_big)
+                    return handler("read: a WebSocket message over " +
+                                       std::to_string(c->ws.read_message_max()) + " bytes",
+                                   {});
+                if (ec) return handler("read: " + ec.message(), {});
+                if (!c->ws.got_binary()) {
+                    c->closeCode = websocket::close_code::unknown_data;
+                    return handler("read: a text message (the protocol's messages are binary)", {});
+                }
+                const auto data = c->buffer.cdata();
+                handler({}, {static_cast<const std::uint8_t*>(data.data()), data.size()});
+            });
+    }
+
+    void write(std::span<const std::uint8_t> bytes, WriteHandler handler) override {
+        mC->writing = true;
+        mC->ws.binary(true);
+        mC->ws.async_write(
+            asio::buffer(bytes.data(), bytes.size()),
+            [c = mC, handler = std::move(handler)](const IoError& ec, std::size_t n) {
+                c->writing = false;
+                handler(ec ? "write: " + ec.message() : std::string(), n);
+            });
+    }
+
+    /// A closing handshake when nothing is being written (a write cannot overlap it), under a
+    /// deadline; else the socket is closed at once.
+    void close() override {
+        if (mC->closed) return;
+        mC->closed = true;
+        if (mC->writing || !mC->ws.is_open() || !mC->failure.empty()) return mC->cut();
+        mC->timer.expires_after(kCloseHandshake);
+        mC->timer.async_wait([c = mC](const IoError& ec) {
+            if (!ec) c->cut();
+        });
+        mC->ws.async_close(mC->closeCode, [c = mC](const IoError&) {
+            c->timer.cancel();
+            c->cut();
+        });
+    }
+
+    std::string peer() const override { return mPeer; }
+    const char* kind() const override { return "websocket"; }
+
+  private:
+    std::shared_ptr<Connection> mC;
+    std::string mPeer;
+};
+
+/// Counts pings; one over kMaxPingsPerSecond in a second ends the connection.
+void limitPings(const std::shared_ptr<Connection>& c) {
+    c->ws.control_callback(
+        [weak = std::weak_ptr<Connection>(c)](websocket::frame_type kind, beast::string_view) {
+            const auto c = weak.lock();
+            if (!c || kind != websocket::frame_type::ping || !c->failure.empty()) return;
+            const auto now = Clock::now();
+            if (now - c->pingWindow > std::chrono::seconds(1)) {
+                c->pingWindow = now;
+                c->pings = 0;
+            }
+            if (++c->pings <= kMaxPingsPerSecond) return;
+            c->failure =
+                "ping flood: over " + std::to_string(kMaxPingsPerSecond) + " pings in a second";
+            asio::post(c->ws.get_executor(), [c] { c->cut(); });
+        });
+}
+
+} // namespace
+
+void acceptWebSocket(asio::ip::tcp::socket socket, UpgradeRequest request, std::uint32_t timeoutMs,
+                     Log& log, std::function<void(std::unique_ptr<Transport>)> onOpen) {
+    auto c = std::make_shared<Connection>(std::move(socket));
+    c->ws.read_message_max(protocol::kHeaderBytes + protocol::kMaxClientPayloadBytes);
+    c->ws.auto_fragment(false);
+    c->ws.set_option(websocket::stream_base::decorator(
+        [](websocket::response_type& res) { res.set(http::field::server, "brickcastd"); }));
+    limitPings(c);
+    c->timer.expires_after(std::chrono::milliseconds(timeoutMs));
+    c->timer.async_wait([c](const IoError& ec) {
+        if (!ec) c->cut();
+    });
+    auto req = std::make_shared<UpgradeRequest>(std::move(request));
+    c->ws.async_accept(*req, [c, req, &log, onOpen = std::move(onOpen)](const IoError& ec) {
+        c->timer.cancel();
+        if (ec) {
+            log.info("web: " + peerOf(c->ws.next_layer()) +
+                     ": WebSocket handshake refused: " + ec.message());
+            return c->cut();
+        }
+        onOpen(std::make_unique<WebSocketTransport>(c));
+    });
+}
+
+} // namespace bc::server::detail
