@@ -16,16 +16,28 @@ packages=(
   libgtest-dev clang libclang-rt-14-dev               # tests; the protocol fuzzer (libFuzzer)
   clang-format                                        # the formatting check (test clang_format)
   gnuplot-nox                                         # bc_bench_render --plot
+  chromium                                            # the browser viewer's tests (tests/browser)
 )
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
+# Node.js with npm (the viewer's unit tests and playwright-core): Debian's, unless the machine
+# has one already (a NodeSource nodejs brings its own npm and conflicts with Debian's).
+command -v npm >/dev/null || missing+=(nodejs npm)
 if ((${#missing[@]})); then
   echo "setup: installing ${missing[*]}"
   export DEBIAN_FRONTEND=noninteractive
   apt-get update -qq
   apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# playwright-core for the browser tests, exactly as tests/browser/package-lock.json pins it (it
+# drives Debian's chromium; no browser is downloaded).
+if [[ ! -d tests/browser/node_modules/playwright-core ||
+      tests/browser/node_modules -ot tests/browser/package-lock.json ]]; then
+  (cd tests/browser && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --silent &&
+    touch node_modules)
 fi
 
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
