@@ -186,6 +186,7 @@ void check(Rules& r, const SetRenderOptions& m) {
         r.intRange("refinedCodec", std::uint8_t(*o.refinedCodec) + 1, 1,
                    std::uint8_t(Codec::Png) + 1);
     if (o.level != kLevelAutomatic) r.intRange("level", o.level, 0, kMaxLevel);
+    r.bits("flags", o.flags, kFlagAll);
 }
 
 void check(Rules& r, const RequestFrame& m) {

@@ -97,7 +97,7 @@ void write(ByteWriter& w, const SetRenderOptions& m) {
     w.u8(o.codecQuality);
     w.u8(o.level);
     w.u8(o.refinedCodec ? std::uint8_t(std::uint8_t(*o.refinedCodec) + 1) : 0);
-    w.u16(0); // reserved
+    w.u16(o.flags);
 }
 
 void write(ByteWriter& w, const RequestFrame& m) {

@@ -101,6 +101,7 @@ struct RenderOptions {
     /// The codec of refined frames under adaptive quality (lossless at rest, JPEG while the
     /// camera moves); none: `codec`. On the wire: 0 for none, else the codec's value + 1.
     std::optional<Codec> refinedCodec;
+    std::uint16_t flags = 0; ///< RenderFlag bits
     bool operator==(const RenderOptions&) const = default;
 };
 

@@ -207,7 +207,7 @@ Message readSetRenderOptions(PayloadReader& r) {
     o.level = r.u8("level");
     if (const std::uint8_t refined = r.u8("refinedCodec"))
         o.refinedCodec = Codec(refined - 1); // checked with the other enums (MessageRules)
-    r.reserved("reserved", 2);
+    o.flags = r.u16("flags");
     return SetRenderOptions{o};
 }
 

@@ -78,6 +78,15 @@ enum Capability : std::uint32_t {
     kCapContinuous = 1u << 3,
 };
 
+/// RenderOptions.flags bits.
+enum RenderFlag : std::uint16_t {
+    /// Interactive frames come at the size they were drawn (half the width and height, rounded
+    /// up) for the client to scale, instead of scaled up by pixel replication: a browser's
+    /// canvas scales them smoothly, and the frame has a quarter of the pixels to encode and send.
+    kFlagUnscaledInteractive = 1u << 0,
+    kFlagAll = (1u << 1) - 1,
+};
+
 /// RenderOptions.techniques bits.
 enum Technique : std::uint32_t {
     kTechBrickSkipping = 1u << 0,

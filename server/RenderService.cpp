@@ -978,7 +978,11 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     const auto& o = s.options;
     const render::FrameStats& stats = d.stats;
     std::vector<std::uint8_t> rgba8 = std::move(d.rgba8);
-    if (!d.job.refined)
+    // An interactive frame is scaled up here, or sent as drawn for the client to scale.
+    const bool asDrawn = !d.job.refined && (o.flags & protocol::kFlagUnscaledInteractive);
+    const auto width = std::uint16_t(asDrawn ? d.options.width : o.width);
+    const auto height = std::uint16_t(asDrawn ? d.options.height : o.height);
+    if (!d.job.refined && !asDrawn)
         rgba8 = interactiveUpscale(rgba8, d.options.width, d.options.height, o.width, o.height);
     protocol::Frame frame;
     frame.header.renderMs = float(msSince(d.start));
@@ -986,13 +990,12 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     // codec's default quality: codecQuality is `codec`'s.
     const bool ownCodec = d.job.refined && o.refinedCodec;
     const protocol::Codec codec = ownCodec ? *o.refinedCodec : o.codec;
-    auto encoded =
-        slot.mEncoder.encode(rgba8, o.width, o.height, codec, ownCodec ? 0 : o.codecQuality);
+    auto encoded = slot.mEncoder.encode(rgba8, width, height, codec, ownCodec ? 0 : o.codecQuality);
     auto& h = frame.header;
     h.frameId = slot.mNextFrameId++;
     h.cameraId = s.camera->cameraId;
-    h.width = o.width;
-    h.height = o.height;
+    h.width = width;
+    h.height = height;
     h.codec = codec;
     h.level = std::uint8_t(stats.level);
     h.refined = d.job.refined;

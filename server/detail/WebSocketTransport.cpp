@@ -55,7 +55,9 @@ class WebSocketTransport final : public Transport {
         mC->ws.async_read(
             mC->buffer, [c = mC, handler = std::move(handler)](const IoError& ec, std::size_t) {
                 if (!c->failure.empty()) return handler(c->failure, {});
-                if (ec == websocket::error::closed) return handler("peer closed", {});
+                if (ec == websocket::error::closed || ec == asio::error::eof ||
+                    ec == asio::error::connection_reset || ec == asio::error::not_connected)
+                    return handler("peer closed", {}); // a page closed or reloaded
                 if (ec == websocket::error::message_too_big)
                     return handler("read: a WebSocket message over " +
                                        std::to_string(c->ws.read_message_max()) + " bytes",

@@ -531,9 +531,10 @@ TEST(DecoderRejects, BoolByteTwo) {
 }
 
 TEST(DecoderRejects, ReservedBytesThatAreNotZero) {
-    for (std::size_t at : {22, 23})
-        expectRejected(patched<std::uint8_t>(SetRenderOptions{}, at, 1), ErrorCode::OutOfRange,
-                       "SetRenderOptions.reserved");
+    expectRejected(patched<std::uint8_t>(SetRenderOptions{}, 22, 2), ErrorCode::OutOfRange,
+                   "SetRenderOptions.flags");
+    expectRejected(patched<std::uint8_t>(SetRenderOptions{}, 23, 1), ErrorCode::OutOfRange,
+                   "SetRenderOptions.flags");
     for (std::size_t at : {53, 54, 55})
         expectRejected(patched<std::uint8_t>(sampleFrame(), at, 1), ErrorCode::OutOfRange,
                        "Frame.reserved");

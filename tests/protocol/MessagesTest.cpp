@@ -324,6 +324,10 @@ TEST(Messages, SetRenderOptionsWithARefinedCodecGoldenBytesRoundTrip) {
     expectGolden(SetRenderOptions{o}, 9, golden);
     o.refinedCodec = Codec::Raw; // 0 + 1: raw is a refined codec too, not "none"
     EXPECT_EQ(encode(SetRenderOptions{o}, 9)[kHeaderBytes + 21], 0x01);
+    o.flags = kFlagUnscaledInteractive;
+    golden[kHeaderBytes + 21] = 0x01;
+    golden[kHeaderBytes + 22] = 0x01; // flags: unscaled interactive
+    expectGolden(SetRenderOptions{o}, 9, golden);
 }
 
 TEST(Messages, RequestHistogramGoldenBytesRoundTrip) {

@@ -271,6 +271,38 @@ TEST_F(WebViewer, AWebSocketSessionDrawsTheFramesATcpSessionDraws) {
     EXPECT_GT(lit, 500) << "the phantom is in view";
 }
 
+TEST_F(WebViewer, UnscaledInteractiveFramesAreTheScaledOnesBeforeTheirScaling) {
+    client::Client tcp(sDaemon->clientConfig());
+    const auto info = tcp.openVolume("phantom");
+    protocol::RenderOptions o = smallCpuFrames(65);
+    o.height = 47; // odd edges: the drawn size rounds up
+    o.quality = protocol::Quality::Interactive;
+    o.codec = protocol::Codec::Raw;
+    auto frameWith = [&](std::uint16_t flags, std::uint32_t camera) {
+        o.flags = flags;
+        tcp.setRenderOptions(o);
+        tcp.setCamera(orbitCamera(info, 60, camera));
+        tcp.requestFrame();
+        return tcp.nextFrame();
+    };
+    const auto scaled = frameWith(0, 1), drawn = frameWith(protocol::kFlagUnscaledInteractive, 2);
+    ASSERT_EQ(scaled.header.width, 65);
+    ASSERT_EQ(scaled.header.height, 47);
+    ASSERT_EQ(drawn.header.width, 33);
+    ASSERT_EQ(drawn.header.height, 24);
+    EXPECT_FALSE(drawn.header.refined);
+    int differing = 0, lit = 0;
+    for (int y = 0; y < 47; ++y)
+        for (int x = 0; x < 65; ++x)
+            for (int c = 0; c < 4; ++c) {
+                const auto a = scaled.rgba[(std::size_t(y) * 65 + x) * 4 + c];
+                differing += a != drawn.rgba[(std::size_t(y / 2) * 33 + x / 2) * 4 + c];
+                lit += a > 0;
+            }
+    EXPECT_EQ(differing, 0) << "the scaled frame is the drawn one, pixels replicated";
+    EXPECT_GT(lit, 100);
+}
+
 TEST_F(WebViewer, BadUpgradesAreRefusedAndOthersServed) {
     const std::string upgrade = "Upgrade: websocket\r\nConnection: Upgrade\r\n";
     const std::string key = "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
