@@ -51,3 +51,48 @@ export class FrameStats {
     while (this.times.length && this.times[0] <= now - FPS_WINDOW_MS) this.times.shift();
   }
 }
+
+/** Size of an interactive frame the server sends unscaled (RenderOptions flags bit 0): half of each edge, rounded up. */
+export function halfSize(width, height) {
+  return { width: Math.ceil(width / 2), height: Math.ceil(height / 2) };
+}
+
+const MIB = 1024 * 1024;
+
+function mib(bytes) {
+  const v = bytes / MIB;
+  return v === 0 ? '0' : v < 10 ? v.toFixed(1) : v.toFixed(0);
+}
+
+function ratio(hits, misses) {
+  const n = hits + misses;
+  return n > 0 ? `${Math.round((100 * hits) / n)}%` : '—';
+}
+
+/**
+ * The overlay's one residency line for volume `name` from a Stats reply's counters (those
+ * labelled volume="NAME"): the host cache's resident and budget bytes and hit ratio, and the
+ * GPU brick pool's hit ratio and budget where the server reports a pool for it. '' when the
+ * server reports nothing for the volume.
+ */
+export function residencyLine(counters, name) {
+  const label = `{volume=${JSON.stringify(name)}}`;
+  const v = new Map();
+  for (const c of counters) {
+    if (c.name.endsWith(label)) v.set(c.name.slice(0, -label.length), c.value);
+  }
+  const parts = [];
+  if (v.has('host_cache_resident_bytes')) {
+    const budget = v.get('host_cache_budget_bytes');
+    parts.push(`cache ${mib(v.get('host_cache_resident_bytes'))}${budget ? ` / ${mib(budget)}` : ''} MiB, ` +
+      `hits ${ratio(v.get('host_cache_hits_total') ?? 0, v.get('host_cache_misses_total') ?? 0)}`);
+  }
+  if (v.has('gpu_pool_hits_total')) {
+    const hits = v.get('gpu_pool_hits_total'), uploads = v.get('gpu_pool_uploads_total') ?? 0;
+    const budget = v.get('gpu_pool_budget_bytes') ?? 0;
+    if (hits + uploads > 0 || budget > 0) {
+      parts.push(`GPU pool ${budget ? `${mib(budget)} MiB, ` : ''}hits ${ratio(hits, uploads)}`);
+    }
+  }
+  return parts.join('  ');
+}

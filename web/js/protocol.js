@@ -48,6 +48,9 @@ export const Placement = Object.freeze({ Value: 0, Fraction: 1, Percentile: 2 })
 export const VOXEL_TYPE_NAMES = Object.freeze(['u8', 'u16', 'i16', 'f32']);
 export const TECHNIQUES_ALL = 0x3f;
 export const LEVEL_AUTOMATIC = 255;
+/** RenderOptions flags (u16 at offset 22): bit 0 unscaled interactive frames (half size, rounded up). */
+export const RenderFlags = Object.freeze({ UnscaledInteractive: 1 });
+export const RENDER_FLAGS_ALL = 0x1;
 
 /** Thrown for malformed input; `code` is the ErrorCode name the server would answer with. */
 export class ProtocolError extends Error {
@@ -249,6 +252,9 @@ function validateRenderOptions(o) {
   if (!(Number.isInteger(o.level) && (o.level <= 15 && o.level >= 0 || o.level === LEVEL_AUTOMATIC)))
     throw new ProtocolError('OutOfRange', `level: ${o.level} is neither 0..15 nor 255`);
   checkInt(o.refinedCodec ?? 0, 0, 255, 'refinedCodec');
+  checkInt(o.flags ?? 0, 0, 0xffff, 'flags');
+  if ((o.flags ?? 0) & ~RENDER_FLAGS_ALL)
+    throw new ProtocolError('OutOfRange', `flags: 0x${(o.flags).toString(16)} has bits other than 0x${RENDER_FLAGS_ALL.toString(16)}`);
 }
 
 function validateCamera(c) {
@@ -386,7 +392,7 @@ const codecs = {
       w.u8(m.codecQuality, 'codecQuality');
       w.u8(m.level, 'level');
       w.u8(m.refinedCodec ?? 0, 'refinedCodec');
-      w.u16(0, 'reserved');
+      w.u16(m.flags ?? 0, 'flags');
     },
     read(r) {
       const m = {
@@ -394,8 +400,11 @@ const codecs = {
         techniques: r.u32('techniques'), ertThreshold: r.f32('ertThreshold'),
         renderer: r.u8('renderer'), quality: r.u8('quality'), codec: r.u8('codec'),
         codecQuality: r.u8('codecQuality'), level: r.u8('level'), refinedCodec: r.u8('refinedCodec'),
+        flags: r.u16('flags'),
       };
-      if (r.u16('reserved') !== 0) throw new ProtocolError('BadPayload', 'RenderOptions: reserved bytes not 0');
+      // As the server: an undefined flag bit is out of range, not malformed.
+      if (m.flags & ~RENDER_FLAGS_ALL)
+        throw new ProtocolError('OutOfRange', `RenderOptions: flags 0x${m.flags.toString(16)} has bits other than 0x${RENDER_FLAGS_ALL.toString(16)}`);
       return m;
     },
   },
@@ -594,7 +603,7 @@ export const encodeOpenVolume = (name, request) => encode(Type.OpenVolume, { nam
 export const encodeSetCamera = (cam, request) => encode(Type.SetCamera, cam, request);
 /** SetTransferFunction: {kind 0, shading, shadingSource, preset} or {kind 1, shading, shadingSource 0, points:[{placement, position, rgba}]}. */
 export const encodeSetTransferFunction = (tf, request) => encode(Type.SetTransferFunction, tf, request);
-/** SetRenderOptions: the 24-byte RenderOptions, refinedCodec in byte 21. */
+/** SetRenderOptions: the 24-byte RenderOptions, refinedCodec in byte 21, flags (u16) in bytes 22..23. */
 export const encodeSetRenderOptions = (o, request) => encode(Type.SetRenderOptions, o, request);
 /** RequestFrame with mode 0 once, 1 continuous on, 2 continuous off. */
 export const encodeRequestFrame = (mode, request) => encode(Type.RequestFrame, { mode }, request);

@@ -5,12 +5,12 @@
 import { Connection, ServerError, DisconnectedError, socketUrl } from './connection.js';
 import {
   Type, Capability, Codec, Renderer, Quality, FrameMode, ErrorCode, TECHNIQUES_ALL, LEVEL_AUTOMATIC,
-  MAX_IMAGE_EDGE, ProtocolError,
+  MAX_IMAGE_EDGE, ProtocolError, RenderFlags,
 } from './protocol.js';
 import { Trackball } from './trackball.js';
 import { attachControls } from './controls.js';
 import { TfEditor } from './tfeditor.js';
-import { FrameStats, formatBytes, frameSize, volumeLabel } from './frames.js';
+import { FrameStats, formatBytes, frameSize, halfSize, residencyLine, volumeLabel } from './frames.js';
 
 const STATS_INTERVAL_MS = 3000;
 const RENDERER_NAMES = {
@@ -49,11 +49,16 @@ const state = {
     width: 0, height: 0, stepVoxels: 1, techniques: TECHNIQUES_ALL, ertThreshold: 0.99,
     renderer: Renderer.CpuRaycaster, quality: Quality.Adaptive, codec: Codec.Jpeg, codecQuality: 80,
     level: LEVEL_AUTOMATIC, refinedCodec: Codec.Png + 1,
+    // Interactive frames at the size drawn (half each edge): a quarter of the pixels to encode
+    // and send; the canvas scales them up smoothly (draw()).
+    flags: RenderFlags.UnscaledInteractive,
   },
   maxEdge: 1024,
   deviceSize: { width: 0, height: 0 },
   lastDrawnCameraId: 0,
   lastFrame: null,
+  lastBitmap: null, // the last frame drawn, decoded, at its own size (lastFrameImage())
+  residency: '',
   frameCount: 0,
   decoding: false,
   pendingFrame: null,
@@ -214,6 +219,14 @@ conn.addEventListener('error', (e) => {
     setRenderOptions({ renderer: Renderer.CpuRaycaster });
     return;
   }
+  if (state.options.flags && err.offendingType === Type.SetRenderOptions && /reserved|flags/.test(err.serverMessage)) {
+    // A server from before 2026-12-03 knows no RenderOptions flags (the bytes were reserved):
+    // ask for full-size interactive frames instead.
+    state.options.flags = 0;
+    clearStatus();
+    sendRenderOptions();
+    return;
+  }
   if (err.code === ErrorCode.UnknownVolume && err.request === 0 && state.volume) {
     // The volume we view was removed or changed shape by a catalog reload.
     closeVolume();
@@ -228,6 +241,7 @@ function onReady() {
   const o = state.options;
   // Interactive frames: JPEG where offered (small, fast), else PNG, else raw.
   o.codec = conn.hasCodec(Codec.Jpeg) ? Codec.Jpeg : conn.hasCodec(Codec.Png) ? Codec.Png : Codec.Raw;
+  o.codecQuality = o.codec === Codec.Jpeg ? Number(els.jpegQuality.value) : 0;
   o.refinedCodec = conn.hasCodec(Codec.Png) ? Codec.Png + 1 : 0;
   els.jpegQuality.disabled = o.codec !== Codec.Jpeg;
   conn.request(Type.ListVolumes, {}, Type.VolumeList).catch(report);
@@ -334,6 +348,8 @@ function closeVolume() {
   els.overlay.textContent = '';
   ctx.fillStyle = '#000';
   ctx.fillRect(0, 0, els.view.width, els.view.height);
+  state.lastBitmap?.close();
+  state.lastBitmap = null;
   tfEditor.setHistogram(null, '');
 }
 
@@ -356,7 +372,8 @@ function showStats({ counters }) {
   els.stats.textContent = counters.length
     ? counters.map(({ name, value }) => `${name} ${formatCounter(value)}`).join('\n')
     : 'no counters';
-  state.residency = counters.filter(({ name }) => /resident|cache/i.test(name));
+  // The overlay gets one line for the open volume; the panel above keeps every counter.
+  state.residency = state.volume ? residencyLine(counters, state.volume.name) : '';
   drawOverlay();
 }
 
@@ -442,14 +459,26 @@ new ResizeObserver(([entry]) => {
   }, { once: true });
 })();
 
-/** Merges a partial RenderOptions into the current ones, shows them in the controls and sends them now. */
+/**
+ * Merges a partial RenderOptions into the current ones, shows them in the controls and sends
+ * them now. A new codec without a codecQuality gets that codec's default (0), or the slider's
+ * JPEG quality when it is JPEG: another codec's quality would be out of range.
+ */
 function setRenderOptions(partial) {
-  Object.assign(state.options, partial);
+  const p = { ...partial };
+  if (p.codec !== undefined && p.codec !== state.options.codec && p.codecQuality === undefined) {
+    p.codecQuality = p.codec === Codec.Jpeg ? Number(els.jpegQuality.value) : 0;
+  }
+  Object.assign(state.options, p);
   els.renderer.value = String(state.options.renderer);
   els.quality.value = String(state.options.quality);
   els.step.value = String(state.options.stepVoxels);
-  els.jpegQuality.value = String(state.options.codecQuality);
-  els.jpegQualityValue.textContent = String(state.options.codecQuality);
+  els.jpegQuality.disabled = state.options.codec !== Codec.Jpeg;
+  // The slider shows JPEG qualities (1..100) only; 0 (the default) leaves it as it is.
+  if (state.options.codec === Codec.Jpeg && state.options.codecQuality >= 1) {
+    els.jpegQuality.value = String(state.options.codecQuality);
+    els.jpegQualityValue.textContent = String(state.options.codecQuality);
+  }
   scheduleRenderOptions.cancel();
   sendRenderOptions();
   return state.lastOptions && { ...state.lastOptions };
@@ -474,8 +503,12 @@ async function decodeAndDraw(f) {
     const bitmap = await toBitmap(f);
     if (bitmap && state.volume && f.cameraId >= state.lastDrawnCameraId && f.cameraId >= state.minCameraId) {
       draw(f, bitmap);
+      // Kept (until the next frame replaces it) for lastFrameImage().
+      state.lastBitmap?.close();
+      state.lastBitmap = bitmap;
+    } else {
+      bitmap?.close();
     }
-    bitmap?.close();
   } catch (e) {
     report(new Error(`frame ${f.frameId}: ${e.message}`));
   } finally {
@@ -505,14 +538,43 @@ async function toBitmap(f) {
   throw new Error(`codec ${CODEC_NAMES[f.codec] ?? f.codec} is not one this page asked for`);
 }
 
+/**
+ * The canvas backing size a frame is shown at: a refined frame's own size (drawn 1:1); for an
+ * interactive frame the size of the RenderOptions it answers (it may be half of it, rounded up,
+ * under flags bit 0), or the canvas's size when it answers options sent before a resize.
+ */
+function canvasSizeFor(f) {
+  const own = { width: f.width, height: f.height };
+  if (f.refined) return own;
+  const o = state.lastOptions;
+  if (o) {
+    const half = halfSize(o.width, o.height);
+    if ((f.width === o.width && f.height === o.height) || (f.width === half.width && f.height === half.height)) {
+      return { width: o.width, height: o.height };
+    }
+  }
+  const c = els.view;
+  if (state.lastFrame) return { width: c.width, height: c.height };
+  return state.options.flags & RenderFlags.UnscaledInteractive ? { width: 2 * f.width, height: 2 * f.height } : own;
+}
+
 function draw(f, bitmap) {
   const c = els.view;
-  if (c.width !== f.width || c.height !== f.height) {
-    c.width = f.width;
-    c.height = f.height;
+  const size = canvasSizeFor(f);
+  if (c.width !== size.width || c.height !== size.height) {
+    c.width = size.width; // resets the context's state: smoothing is set below, every frame
+    c.height = size.height;
   }
-  ctx.imageSmoothingEnabled = true;
-  ctx.drawImage(bitmap, 0, 0, c.width, c.height);
+  if (size.width === f.width && size.height === f.height) {
+    // 1:1 (refined frames, and interactive ones at full size): every pixel as the server made it.
+    ctx.imageSmoothingEnabled = false;
+    ctx.drawImage(bitmap, 0, 0);
+  } else {
+    // An interactive frame drawn at half size: scaled up smoothly, not pixel-replicated.
+    ctx.imageSmoothingEnabled = true;
+    ctx.imageSmoothingQuality = 'high';
+    ctx.drawImage(bitmap, 0, 0, c.width, c.height);
+  }
   const drawnAt = performance.now();
   const firstOfCamera = f.cameraId !== state.lastDrawnCameraId;
   state.lastDrawnCameraId = f.cameraId;
@@ -522,6 +584,7 @@ function draw(f, bitmap) {
   state.lastFrame = {
     cameraId: f.cameraId, frameId: f.frameId, codec: f.codec, refined: f.refined,
     width: f.width, height: f.height, bytes: f.image.length, drawnAt,
+    canvasWidth: c.width, canvasHeight: c.height,
   };
   state.lastFrameHeader = f;
   drawOverlay();
@@ -534,13 +597,16 @@ function drawOverlay() {
   const f = state.lastFrameHeader;
   if (!f || !state.volume) return;
   const s = state.stats;
+  const shown = state.lastFrame;
+  const scaled = shown && (shown.canvasWidth !== f.width || shown.canvasHeight !== f.height)
+    ? ` → ${shown.canvasWidth}×${shown.canvasHeight}` : '';
   const lines = [
     `${s.fps(performance.now()).toFixed(1)} fps   latency ${s.latencyMs === null ? '—' : `${Math.round(s.latencyMs)} ms`}`,
-    `${f.refined ? 'refined' : 'interactive'}  level ${f.level}  ${f.width}×${f.height}  ${CODEC_NAMES[f.codec] ?? f.codec} ${formatBytes(f.image.length)}`,
+    `${f.refined ? 'refined' : 'interactive'} ${f.width}×${f.height}${scaled}  level ${f.level}  ${CODEC_NAMES[f.codec] ?? f.codec} ${formatBytes(f.image.length)}`,
     `render ${f.renderMs.toFixed(1)} ms  encode ${f.encodeMs.toFixed(1)} ms  queue ${f.queueMs.toFixed(1)} ms`,
     `bricks ${f.bricksDrawn} drawn, ${f.bricksSkipped} skipped  uploaded ${formatBytes(f.bytesUploaded)}`,
   ];
-  for (const { name, value } of state.residency ?? []) lines.push(`${name} ${formatCounter(value)}`);
+  if (state.residency) lines.push(state.residency);
   els.overlay.textContent = lines.join('\n');
 }
 
@@ -559,8 +625,22 @@ window.brickcast = {
   transferFunction: () => clone(state.lastTf),
   /** The last RenderOptions sent, or null. */
   renderOptions: () => clone(state.lastOptions),
-  /** The last frame drawn: {cameraId, frameId, codec, refined, width, height, bytes, drawnAt}, or null. */
+  /** The last frame drawn: {cameraId, frameId, codec, refined, width, height (the frame's own), bytes, drawnAt, canvasWidth, canvasHeight (the size shown at)}, or null. */
   get lastFrame() { return clone(state.lastFrame); },
+  /**
+   * The last frame drawn as decoded, before any scaling (an interactive frame at the size the
+   * server drew it): {width, height, data: Uint8ClampedArray RGBA}, or null.
+   */
+  lastFrameImage() {
+    const b = state.lastBitmap;
+    if (!b) return null;
+    const off = new OffscreenCanvas(b.width, b.height);
+    const c = off.getContext('2d', { willReadFrequently: true });
+    c.imageSmoothingEnabled = false;
+    c.drawImage(b, 0, 0);
+    const img = c.getImageData(0, 0, b.width, b.height);
+    return { width: img.width, height: img.height, data: img.data };
+  },
   /** Frames drawn since the page loaded. */
   get frameCount() { return state.frameCount; },
   /** Opens a volume by name; resolves with its VolumeInfo, rejects with the server's Error. */

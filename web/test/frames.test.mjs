@@ -1,6 +1,6 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { frameSize, formatBytes, volumeLabel, FrameStats } from '../js/frames.js';
+import { frameSize, formatBytes, volumeLabel, FrameStats, halfSize, residencyLine } from '../js/frames.js';
 
 test('frame size follows the canvas, capped by the configured max and 4096, aspect kept', () => {
   assert.deepEqual(frameSize(800, 600, 1024), { width: 800, height: 600 });
@@ -25,4 +25,32 @@ test('fps counts the frames of the last second; latency keeps the last measured'
   assert.equal(s.fps(1960), 25);
   assert.equal(s.latencyMs, 55);
   assert.equal(s.fps(5000), 0);
+});
+
+test('unscaled interactive frames are half of each edge, rounded up', () => {
+  assert.deepEqual(halfSize(960, 762), { width: 480, height: 381 });
+  assert.deepEqual(halfSize(961, 1), { width: 481, height: 1 });
+  assert.deepEqual(halfSize(1, 1), { width: 1, height: 1 });
+});
+
+test('the residency line shows the open volume only', () => {
+  const c = (name, value, volume) => ({ name: volume ? `${name}{volume="${volume}"}` : name, value });
+  const counters = [
+    c('frames_total', 3),
+    c('host_cache_hits_total', 30, 'phantom'), c('host_cache_misses_total', 10, 'phantom'),
+    c('host_cache_resident_bytes', 0, 'phantom'), c('host_cache_budget_bytes', 0, 'phantom'),
+    c('host_cache_hits_total', 0, 'vessels'), c('host_cache_misses_total', 1, 'vessels'),
+    c('host_cache_resident_bytes', 314432, 'vessels'), c('host_cache_budget_bytes', 1073741824, 'vessels'),
+    c('gpu_pool_hits_total', 95, 'vessels'), c('gpu_pool_uploads_total', 5, 'vessels'),
+    c('gpu_pool_budget_bytes', 512 * 1024 * 1024, 'vessels'),
+  ];
+  assert.equal(residencyLine(counters, 'vessels'), 'cache 0.3 / 1024 MiB, hits 0%  GPU pool 512 MiB, hits 95%');
+  assert.equal(residencyLine(counters, 'phantom'), 'cache 0 MiB, hits 75%');
+  assert.equal(residencyLine(counters, 'other'), '');
+  // A pool that has done nothing yet is left out; no lookups yet is a dash, not NaN.
+  const idle = [c('host_cache_resident_bytes', 12.5 * 1024 * 1024, 'ct'), c('host_cache_budget_bytes', 64 * 1024 * 1024, 'ct'),
+    c('gpu_pool_hits_total', 0, 'ct'), c('gpu_pool_uploads_total', 0, 'ct'), c('gpu_pool_budget_bytes', 0, 'ct')];
+  assert.equal(residencyLine(idle, 'ct'), 'cache 13 / 64 MiB, hits —');
+  // A name that is a suffix of another is not confused with it.
+  assert.equal(residencyLine([c('host_cache_resident_bytes', 0, 'xct'), c('host_cache_hits_total', 1, 'xct')], 'ct'), '');
 });

@@ -6,7 +6,7 @@ import {
   Type, ErrorCode, ProtocolError, encode, decode, decodeHeader, encodeHello, encodeSetCamera,
   encodeSetRenderOptions, encodeSetTransferFunction, encodeAuth, encodeOpenVolume,
   encodeRequestHistogram, encodeRequestFrame, encodeListVolumes, encodeRequestStats, encodeBye,
-  encodeError, errorName, typeName, MAX_CLIENT_PAYLOAD,
+  encodeError, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags,
 } from '../js/protocol.js';
 
 const header = (type, length, request) => [
@@ -130,6 +130,31 @@ test('SetRenderOptions: golden bytes of MessagesTest.cpp, refinedCodec at byte 2
   assert.equal(back.width, 640);
   assert.equal(back.refinedCodec, 0);
   assert.ok(Math.abs(back.ertThreshold - 0.99) < 1e-6);
+});
+
+test('SetRenderOptions: flags (u16 at bytes 22..23), bit 0 unscaled interactive', () => {
+  const o = {
+    width: 640, height: 480, stepVoxels: 0.5, techniques: 0x3f, ertThreshold: 0.99, renderer: 1,
+    quality: 0, codec: 3, codecQuality: 80, level: 255, refinedCodec: 5, flags: RenderFlags.UnscaledInteractive,
+  };
+  const got = bytes(encodeSetRenderOptions(o, 7));
+  assert.equal(got.length, 16 + 24);
+  assert.deepEqual(got.slice(16 + 20, 16 + 24), [0xff, 0x05, 0x01, 0x00], 'level, refinedCodec, flags 1 (little-endian)');
+  assert.deepEqual(decode(buf(got)).body.flags, 1);
+  // Left out: 0, as the two bytes were reserved.
+  const { flags, ...old } = o;
+  assert.deepEqual(bytes(encodeSetRenderOptions(old, 7)).slice(16 + 22), [0x00, 0x00]);
+  assert.equal(decode(encodeSetRenderOptions(old, 7)).body.flags, 0);
+  // Other bits: refused when encoding and when decoding (OutOfRange, as the server answers).
+  throwsCode(() => encodeSetRenderOptions({ ...o, flags: 2 }), 'OutOfRange', /flags/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, flags: 0x10000 }), 'OutOfRange', /flags/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, flags: 0.5 }), 'OutOfRange', /flags/);
+  for (const [lo, hi] of [[0x02, 0x00], [0x03, 0x00], [0x00, 0x01], [0x01, 0x80]]) {
+    const bad = got.slice();
+    bad[16 + 22] = lo;
+    bad[16 + 23] = hi;
+    throwsCode(() => decode(buf(bad)), 'OutOfRange', /flags/);
+  }
 });
 
 test('SetRenderOptions: ranges', () => {
