@@ -96,9 +96,9 @@ brick_store)
     ;;
 frame_codec)
     harness=FrameCodecFuzz
-    sources=(protocol/FrameCodec.cpp protocol/Wire.cpp)
+    sources=(protocol/FrameCodec.cpp protocol/PngImage.cpp protocol/Wire.cpp)
     folders=(protocol)
-    libs=(-lzstd -lturbojpeg)
+    libs=(-lzstd -lturbojpeg -lpng)
     max_len=65536
     ;;
 daemon_config)

@@ -1,5 +1,5 @@
 // libFuzzer target of the frame image codecs a client decodes (protocol/FrameCodec.h: raw,
-// zstd, zstd delta, JPEG); scripts/fuzz.sh frame_codec builds and runs it.
+// zstd, zstd delta, JPEG, PNG); scripts/fuzz.sh frame_codec builds and runs it.
 //
 // Input: up to 8 frames, each [codec u8][width u16][height u16][keyframe u8][length u16]
 // [length bytes] (little endian), decoded in turn by one FrameImageDecoder as a client would
@@ -60,9 +60,9 @@ void decodeFrames(std::span<const std::uint8_t> input) {
         }
         require(image.size() == std::size_t(f.width) * f.height * 4,
                 "a decoded image is not width*height*4 bytes");
-        if (Codec(f.codec) == Codec::Jpeg)
+        if (Codec(f.codec) == Codec::Jpeg || Codec(f.codec) == Codec::Png)
             for (std::size_t p = 3; p < image.size(); p += 4)
-                require(image[p] == 255, "a JPEG frame decoded with alpha other than 255");
+                require(image[p] == 255, "a JPEG or PNG frame decoded with alpha other than 255");
     }
 }
 
@@ -83,11 +83,15 @@ void checkRoundTrips(std::span<const std::uint8_t> input) {
     FrameEncoder encoder;
     FrameImageDecoder decoder;
     // ZstdDelta last: a frame of another codec ends a delta chain (on both sides).
-    for (Codec codec : {Codec::Raw, Codec::Zstd, Codec::Jpeg, Codec::ZstdDelta}) {
+    for (Codec codec : {Codec::Raw, Codec::Zstd, Codec::Jpeg, Codec::Png, Codec::ZstdDelta}) {
         const auto encoded = encoder.encode(image, w, h, codec, 0);
         const Bytes back = decoder.decode(codec, w, h, encoded.keyframe, encoded.bytes);
         require(back.size() == image.size(), "a round trip changed the image size");
-        if (codec != Codec::Jpeg) require(back == image, "a lossless round trip changed pixels");
+        if (codec == Codec::Jpeg) continue;
+        bool same = true; // PNG is lossless in colour and drops alpha (255)
+        for (std::size_t i = 0; i < image.size(); ++i)
+            same &= back[i] == (codec == Codec::Png && i % 4 == 3 ? 255 : image[i]);
+        require(same, "a lossless round trip changed pixels");
     }
     // A delta chain: the second frame (every byte plus one) is decoded against the first.
     Bytes next = image;
@@ -113,7 +117,7 @@ void appendFrame(Bytes& out, Codec codec, std::uint16_t w, std::uint16_t h, bool
 Bytes seedOf(const Bytes& image, std::uint16_t w, std::uint16_t h) {
     FrameEncoder encoder;
     Bytes out;
-    for (Codec codec : {Codec::Raw, Codec::Zstd, Codec::Jpeg, Codec::ZstdDelta}) {
+    for (Codec codec : {Codec::Raw, Codec::Zstd, Codec::Jpeg, Codec::Png, Codec::ZstdDelta}) {
         const auto e = encoder.encode(image, w, h, codec, 0);
         appendFrame(out, codec, w, h, e.keyframe, e.bytes);
     }
