@@ -1,7 +1,6 @@
 #include "server/Daemon.h"
 
 #include "server/Catalog.h"
-#include "server/Error.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/RenderService.h"

@@ -14,7 +14,6 @@
 #include "server/detail/Asio.h"
 #include "server/detail/Transport.h"
 
-#include <array>
 #include <cstdint>
 #include <deque>
 #include <functional>

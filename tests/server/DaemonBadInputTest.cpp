@@ -236,15 +236,8 @@ TEST_F(DaemonBadInput, AClientThatStopsReadingIsCutWhileOthersKeepGettingFrames)
     }
     // Asked of the server (reading the stuck socket would unstick it): the session leases end
     // when it is cut at the write deadline, however slowly this machine draws the big frames.
-    auto sessions = [&] {
-        for (const auto& [name, value] : mWitness->stats())
-            if (name == "sessions") return value;
-        return -1.0;
-    };
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (sessions() > 1.0 && std::chrono::steady_clock::now() < until)
-        std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    EXPECT_EQ(sessions(), 1.0) << "the server still holds a client that stopped reading";
+    EXPECT_EQ(sessionsDownTo(*mWitness, 1.0, 30), 1.0)
+        << "the server still holds a client that stopped reading";
     EXPECT_TRUE(c.closedByPeer(5000));
 }
 

@@ -239,6 +239,21 @@ class OpenWatch {
     int mFd = -1;
 };
 
+/// The server's "sessions" gauge, asked through `c`, once it is `n` or less, or what it still is
+/// after `seconds` (asked of the server: reading a stuck client's socket would unstick it).
+inline double sessionsDownTo(client::Client& c, double n, int seconds) {
+    auto sessions = [&] {
+        for (const auto& [name, value] : c.stats())
+            if (name == "sessions") return value;
+        return -1.0;
+    };
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+    double now = sessions();
+    for (; now > n && std::chrono::steady_clock::now() < until; now = sessions())
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    return now;
+}
+
 /// The value of the sample line `name` (labels included) in a text exposition; -1 if absent.
 inline double sampleOf(const std::string& text, const std::string& name) {
     std::istringstream in(text);

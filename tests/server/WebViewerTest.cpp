@@ -134,21 +134,6 @@ class WebViewer : public ::testing::Test {
         EXPECT_EQ(statusOf(scrape(sPort, get("/presets.json"))), 200);
     }
 
-    /// The server's session count once it is down to the two witnesses, or what it still is
-    /// after `seconds`.
-    double sessionsWithin(int seconds) {
-        auto sessions = [&] {
-            for (const auto& [name, value] : mTcpWitness->stats())
-                if (name == "sessions") return value;
-            return -1.0;
-        };
-        const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
-        double n = sessions();
-        for (; n > 2.0 && std::chrono::steady_clock::now() < until; n = sessions())
-            std::this_thread::sleep_for(std::chrono::milliseconds(50));
-        return n;
-    }
-
     static inline TempDir* sDir = nullptr;
     static inline TestDaemon* sDaemon = nullptr;
     static inline std::uint16_t sPort = 0;
@@ -365,7 +350,8 @@ TEST_F(WebViewer, TextOversizedFragmentedAndFloodingPeersLoseOnlyTheirConnection
                 c.ws().ping({});
         } catch (const boost::system::system_error&) {
         }
-        EXPECT_EQ(sessionsWithin(10), 2.0) << "the flooding session is still served";
+        EXPECT_EQ(sessionsDownTo(*mTcpWitness, 2.0, 10), 2.0)
+            << "the flooding session is still served";
     }
     expectOthersServed("a ping flood");
 }
@@ -436,7 +422,8 @@ TEST_F(WebViewer, APageThatNeverReadsIsCutWhileOthersKeepGettingFrames) {
     EXPECT_EQ(frames, 6) << "the witness got every frame it asked for";
     // Asked of the server (reading the stuck socket would unstick it): the two witnesses
     // are left once the write deadline has cut the page that never reads.
-    EXPECT_EQ(sessionsWithin(30), 2.0) << "the server still holds a page that stopped reading";
+    EXPECT_EQ(sessionsDownTo(*mTcpWitness, 2.0, 30), 2.0)
+        << "the server still holds a page that stopped reading";
     expectOthersServed("a page that never reads");
 }
 
