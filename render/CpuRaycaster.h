@@ -38,6 +38,9 @@ class CpuRaycaster final : public Renderer {
     Image render(const Scene& scene, const View& view, const RenderOptions& options,
                  FrameStats& stats) override;
     using Renderer::render;
+
+    /// The instruction set RenderOptions::simd runs on here and its lanes ("AVX3_SPR x16").
+    static std::string simdTarget();
 };
 
 } // namespace bc::render

@@ -58,6 +58,10 @@ struct RenderOptions {
     /// the hardware's 8-bit interpolation weights cost accuracy and make a sample depend on
     /// its brick's place in the pool (so skipping no longer gives bit-identical images).
     bool hardwareFilter = false;
+    /// CPU raycaster only: take each ray's samples a vector at a time (Highway, the host's
+    /// widest instruction set; render/detail/CpuMarchSimd.cpp). The same image as the scalar
+    /// loop, bit for bit; false draws with the scalar loop.
+    bool simd = true;
     OccupancyConfig octree; ///< second-stage traversal (SkipMode::All)
     /// Start rays at the previous frame's occlusion frustums (same raycaster, same scene).
     bool occlusionFrustums = true;

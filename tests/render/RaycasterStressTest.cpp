@@ -1,7 +1,9 @@
 // Stress cases of issue 3: each test name says what it guards. "No NaN, no holes, no seams":
 // every image is finite, agrees with the CPU reference, and a bricked store renders like a
-// single-brick store of the same volume.
+// single-brick store of the same volume. Each case runs on the GPU raycaster, the CPU
+// raycaster's SIMD march and its scalar loop (the parameter).
 #include "RenderTestSupport.h"
+#include "render/CpuRaycaster.h"
 
 #include <cmath>
 
@@ -31,13 +33,40 @@ bool hasHole(const Image& got, const Image& want) {
     return false;
 }
 
-void expectCloseToReference(TestStore& t, const TransferFunction& tf, const Camera& camera,
-                            const RenderOptions& o, const std::string& what, double minPsnr = 40.0,
-                            double minCoverage = 0.01) {
-    Raycaster raycaster;
+/// The raycaster under test: "gpu", "cpu" (the SIMD march) or "cpu_scalar".
+class RaycasterStress : public ::testing::TestWithParam<std::string> {
+  protected:
+    void SetUp() override {
+        if (GetParam() == "gpu") test::glContext();
+    }
+    /// The frame of the parameter's raycaster (a new instance per call).
+    Image frame(TestStore& t, const TransferFunction& tf, const Camera& camera, RenderOptions o,
+                FrameStats* stats = nullptr) const {
+        FrameStats s;
+        Image image;
+        if (GetParam() == "gpu") {
+            Raycaster r;
+            image = r.render(*t.store, *t.cache, tf, camera, o, s);
+        } else {
+            o.simd = GetParam() == "cpu";
+            CpuRaycaster r;
+            image = r.render(*t.store, *t.cache, tf, camera, o, s);
+        }
+        if (stats) *stats = s;
+        return image;
+    }
+    void expectCloseToReference(TestStore& t, const TransferFunction& tf, const Camera& camera,
+                                const RenderOptions& o, const std::string& what,
+                                double minPsnr = 40.0, double minCoverage = 0.01) const;
+};
+
+void RaycasterStress::expectCloseToReference(TestStore& t, const TransferFunction& tf,
+                                             const Camera& camera, const RenderOptions& o,
+                                             const std::string& what, double minPsnr,
+                                             double minCoverage) const {
     RenderOptions gpuOptions = o;
     gpuOptions.earlyTermination = false;
-    const Image gpu = test::gpuFrame(t, raycaster, tf, camera, gpuOptions);
+    const Image gpu = frame(t, tf, camera, gpuOptions);
     const Image ref = test::referenceFrame(t, tf, camera, o);
     const auto c = compareImages(gpu, ref);
     test::printComparison(what, c);
@@ -57,10 +86,9 @@ RenderOptions small(std::uint32_t edge = 128) {
     return o;
 }
 
-TEST(RaycasterStress, CameraInsideTheVolumeStartsRaysAtTheEye) {
+TEST_P(RaycasterStress, CameraInsideTheVolumeStartsRaysAtTheEye) {
     auto spec = test::realScan("headsq");
     if (!spec) return test::missingData("scan headsq");
-    test::glContext();
     auto t = test::ingestSpec(*spec, {16, 2, 8});
     const auto tf = TransferFunction::preset("ct-skin", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
@@ -73,9 +101,8 @@ TEST(RaycasterStress, CameraInsideTheVolumeStartsRaysAtTheEye) {
 }
 
 // Orthographic pixel rays land exactly on the x = 32k brick faces and run along the z axis.
-TEST(RaycasterStress, RaysExactlyAlongBrickFacesAndAxesShowNoSeam) {
+TEST_P(RaycasterStress, RaysExactlyAlongBrickFacesAndAxesShowNoSeam) {
     auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {128, 128, 96}, 7);
-    test::glContext();
     auto bricked = test::ingestStore(*source, {32, 2, 8});
     auto source1 = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {128, 128, 96}, 7);
     auto single = test::ingestStore(*source1, {128, 2, 8});
@@ -86,10 +113,9 @@ TEST(RaycasterStress, RaysExactlyAlongBrickFacesAndAxesShowNoSeam) {
     c.target = {63.5, 64, 0};
     c.up = {0, 1, 0};
     c.orthoHeight = 128;
-    Raycaster raycaster;
     const RenderOptions o = small();
-    const Image a = test::gpuFrame(*bricked, raycaster, tf, c, o);
-    const Image b = test::gpuFrame(*single, raycaster, tf, c, o);
+    const Image a = frame(*bricked, tf, c, o);
+    const Image b = frame(*single, tf, c, o);
     const auto cmp = compareImages(a, b);
     test::printComparison("phantom rays on brick faces, bricked vs single", cmp);
     EXPECT_TRUE(test::allFinite(a));
@@ -98,9 +124,8 @@ TEST(RaycasterStress, RaysExactlyAlongBrickFacesAndAxesShowNoSeam) {
     expectCloseToReference(*bricked, tf, c, o, "phantom rays on brick faces vs reference");
 }
 
-TEST(RaycasterStress, GrazingRaysAlongTheTopFaceStayFiniteAndSeamless) {
+TEST_P(RaycasterStress, GrazingRaysAlongTheTopFaceStayFiniteAndSeamless) {
     auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {96, 96, 64}, 3);
-    test::glContext();
     auto t = test::ingestStore(*source, {16, 2, 8});
     const auto tf = TransferFunction::preset("ct-skin", t->stats);
     Camera c;
@@ -111,10 +136,9 @@ TEST(RaycasterStress, GrazingRaysAlongTheTopFaceStayFiniteAndSeamless) {
     expectCloseToReference(*t, tf, c, small(), "phantom grazing rays");
 }
 
-TEST(RaycasterStress, NonCubicSpacingOfCtheadMatchesReference) {
+TEST_P(RaycasterStress, NonCubicSpacingOfCtheadMatchesReference) {
     auto spec = test::realScan("cthead"); // 1 x 1 x 2 mm
     if (!spec) return test::missingData("scan cthead");
-    test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera c =
@@ -122,10 +146,9 @@ TEST(RaycasterStress, NonCubicSpacingOfCtheadMatchesReference) {
     expectCloseToReference(*t, tf, c, small(), "cthead 1x1x2 mm side view", 45.0);
 }
 
-TEST(RaycasterStress, SignedSixteenBitDicomMatchesReference) {
+TEST_P(RaycasterStress, SignedSixteenBitDicomMatchesReference) {
     auto spec = test::realScan("pancreas"); // i16, HU -1000..1988
     if (!spec) return test::missingData("scan pancreas");
-    test::glContext();
     auto t = test::ingestSpec(*spec, {64, 2, 8});
     ASSERT_EQ(t->store->info().volume.type, brickstore::VoxelType::I16);
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
@@ -133,10 +156,9 @@ TEST(RaycasterStress, SignedSixteenBitDicomMatchesReference) {
     expectCloseToReference(*t, tf, c, small(), "pancreas i16", 45.0);
 }
 
-TEST(RaycasterStress, FloatDataMatchesReference) {
+TEST_P(RaycasterStress, FloatDataMatchesReference) {
     auto spec = test::realScan("hydrogen"); // f32 0..1
     if (!spec) return test::missingData("scan hydrogen");
-    test::glContext();
     auto t = test::ingestSpec(*spec, {16, 2, 8});
     ASSERT_EQ(t->store->info().volume.type, brickstore::VoxelType::F32);
     const auto tf = TransferFunction::preset("smoke", t->stats);
@@ -145,19 +167,17 @@ TEST(RaycasterStress, FloatDataMatchesReference) {
 }
 
 // A TF opaque only at one value between two integers: samples between voxels reach it.
-TEST(RaycasterStress, OneValueWidePeakIsRenderedAndNeverSkipped) {
+TEST_P(RaycasterStress, OneValueWidePeakIsRenderedAndNeverSkipped) {
     auto spec = test::realScan("CT_AVM");
     if (!spec) return test::missingData("scan CT_AVM");
-    test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = peakTf(100.5, 0.5, t->stats);
     const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
-    Raycaster plain, skipping;
     RenderOptions none = small(), bricks = small();
     none.skip = SkipMode::None;
     FrameStats sb;
-    const Image a = test::gpuFrame(*t, plain, tf, c, none);
-    const Image b = test::gpuFrame(*t, skipping, tf, c, bricks, &sb);
+    const Image a = frame(*t, tf, c, none);
+    const Image b = frame(*t, tf, c, bricks, &sb);
     const auto cmp = compareImages(a, b);
     test::printComparison("CT_AVM one-value peak, skip vs none", cmp);
     EXPECT_LE(cmp.maxAbs, 1.0 / 255.0);
@@ -171,20 +191,18 @@ TEST(RaycasterStress, OneValueWidePeakIsRenderedAndNeverSkipped) {
 
 // The brick-skipping guard of DESIGN.md: a TF whose only opaque value lies strictly between
 // a brick's voxel values (never equal to any voxel) must not skip that brick.
-TEST(RaycasterStress, PeakStrictlyBetweenVoxelValuesKeepsItsBrick) {
+TEST_P(RaycasterStress, PeakStrictlyBetweenVoxelValuesKeepsItsBrick) {
     // Two-valued checkerboard: voxels are 0 or 255 only; opacity only around 127.75.
     auto source = brickstore::makeSynthetic(brickstore::SynthKind::Checker, {64, 64, 64}, 1);
-    test::glContext();
     auto t = test::ingestStore(*source, {16, 2, 8});
     const double lo = t->store->info().valueMin, hi = t->store->info().valueMax;
     const auto tf = peakTf(0.5 * (lo + hi) + 0.25, 0.5, t->stats);
     const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 20, 30);
-    Raycaster plain, skipping;
     RenderOptions none = small(), bricks = small();
     none.skip = SkipMode::None;
     FrameStats sb;
-    const Image a = test::gpuFrame(*t, plain, tf, c, none);
-    const Image b = test::gpuFrame(*t, skipping, tf, c, bricks, &sb);
+    const Image a = frame(*t, tf, c, none);
+    const Image b = frame(*t, tf, c, bricks, &sb);
     EXPECT_EQ(sb.bricksSkipped, 0u);
     EXPECT_LE(compareImages(a, b).maxAbs, 1.0 / 255.0);
     double alpha = 0;
@@ -193,10 +211,9 @@ TEST(RaycasterStress, PeakStrictlyBetweenVoxelValuesKeepsItsBrick) {
     EXPECT_GT(alpha, 1.0);
 }
 
-TEST(RaycasterStress, StepsFromFiveHundredthsToFourVoxelsMatchReference) {
+TEST_P(RaycasterStress, StepsFromFiveHundredthsToFourVoxelsMatchReference) {
     auto spec = test::realScan("headsq");
     if (!spec) return test::missingData("scan headsq");
-    test::glContext();
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 150, 10);
@@ -209,9 +226,8 @@ TEST(RaycasterStress, StepsFromFiveHundredthsToFourVoxelsMatchReference) {
 
 // Positions near x = 16384 voxels leave float about 1/1000 voxel of precision. A dense 3D
 // checkerboard fills every brick, so any hole or seam at the far end shows.
-TEST(RaycasterStress, SixteenThousandVoxelWideVolumeHasNoNaNHolesOrSeams) {
+TEST_P(RaycasterStress, SixteenThousandVoxelWideVolumeHasNoNaNHolesOrSeams) {
     auto source = brickstore::makeSynthetic(brickstore::SynthKind::Checker, {16384, 40, 40}, 5);
-    test::glContext();
     auto t = test::ingestStore(*source, {64, 2, 8});
     const std::string json = R"({"name":"checker","points":[{"value":100,"rgba":[0.9,0.7,0.4,0]},)"
                              R"({"value":255,"rgba":[0.9,0.7,0.4,0.6]}]})";
@@ -223,6 +239,9 @@ TEST(RaycasterStress, SixteenThousandVoxelWideVolumeHasNoNaNHolesOrSeams) {
     c.fovYDeg = 40;
     expectCloseToReference(*t, tf, c, small(), "checker 16384 wide, far end", 40.0);
 }
+
+INSTANTIATE_TEST_SUITE_P(Raycasters, RaycasterStress, ::testing::Values("gpu", "cpu", "cpu_scalar"),
+                         [](const auto& info) { return info.param; });
 
 } // namespace
 } // namespace bc::render

@@ -37,7 +37,7 @@ struct RenderCliOptions {
                                ert = "0.99", skip = "all", statsPath, renderer = "gpu";
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32;
-    bool ortho = false, noShading = false, reference = false, interactive = false;
+    bool ortho = false, noShading = false, noSimd = false, reference = false, interactive = false;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
     std::uint32_t repeat = 1;
@@ -81,6 +81,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     if (r.earlyTermination) r.ertThreshold = tools::parseNumbers(o.ert, "--ert", 1, 1)[0];
     r.skip = render::parseSkipMode(o.skip);
     r.shading = !o.noShading;
+    r.simd = !o.noSimd;
     r.level = o.level;
     r.interactive = o.interactive;
     r.octree.ratioThreshold = o.octreeRatio;
@@ -214,9 +215,10 @@ void runRender(const RenderCliOptions& o) {
             draw = [&, raycaster](render::FrameStats& s) {
                 return raycaster->render(*store, *cache, tf, camera, options, s);
             };
-            describe = [] {
+            describe = [&o] {
                 return "CPU raycaster (float, " +
-                       std::to_string(std::thread::hardware_concurrency()) + " threads)";
+                       (o.noSimd ? std::string("scalar") : render::CpuRaycaster::simdTarget()) +
+                       ", " + std::to_string(std::thread::hardware_concurrency()) + " threads)";
             };
         } else {
             auto raycaster =
@@ -318,6 +320,8 @@ void addRenderCommand(CLI::App& app) {
                     "Deepest octree level descended (0 = the brick)")
         ->capture_default_str();
     cmd->add_flag("--no-shading", o->noShading, "No gradient shading");
+    cmd->add_flag("--no-simd", o->noSimd,
+                  "CPU raycaster: the scalar sample loop instead of the SIMD one (same image)");
     cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")
         ->capture_default_str();
     cmd->add_option("--host-budget-mb", o->hostBudgetMb, "Host brick cache budget")

@@ -1,0 +1,172 @@
+#pragma once
+// The CPU raycaster's ray model (render/CpuRaycaster.cpp): the frame's uniforms, the
+// classification, shading and compositing of one sample, the octree walk and the scalar
+// march through one brick. The vectorised march (render/detail/CpuMarchSimd.cpp) takes the
+// same samples with the same formulas, many at once, and falls back to these per sample.
+#include "render/RenderTypes.h"
+#include "render/detail/CpuSampling.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+
+namespace bc::render::detail {
+
+enum class Slot : std::uint8_t { Absent, Sampled, Constant };
+
+struct BrickRef {
+    const void* voxels = nullptr; ///< while its batch is drawn
+    float constant = 0.0f;
+    std::uint32_t batch = 0; ///< the front-to-back batch that draws it
+    Slot slot = Slot::Absent;
+};
+
+/// Everything a ray needs, in float, as the shader's uniforms.
+struct Frame {
+    glm::vec3 eye, forward, right, up;
+    bool ortho = false;
+    float width = 0, height = 0;
+    glm::vec3 invSpacing, dims;
+    float stepMm = 1;
+    int brick = 64, apron = 2, edge = 68;
+    glm::ivec3 grid{1};
+    const float* tf = nullptr;
+    int entries = 2;
+    float tfScale = 1, tfOffset = 0; ///< native value -> table position
+    float ert = 2;
+    bool shading = true;
+    bool simd = true; ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
+    glm::vec3 gradScale{1};
+    const std::uint32_t* occ = nullptr;
+    int octDepth = 0, occWords = 0, leafAxis = 1;
+    float leaf = 1;
+    const BrickRef* bricks = nullptr;
+    std::uint32_t batch = 0; ///< the batch being drawn
+};
+
+struct Rgba {
+    float r = 0, g = 0, b = 0, a = 0;
+};
+
+inline Rgba classify(const Frame& f, float value) {
+    const float u = std::clamp(value * f.tfScale + f.tfOffset, 0.0f, float(f.entries - 1));
+    const int i = std::min(int(u), f.entries - 2);
+    const float w = u - float(i);
+    const float* e = f.tf + 4 * i;
+    auto mix = [w](float a, float b) { return a * (1.0f - w) + b * w; };
+    return {mix(e[0], e[4]), mix(e[1], e[5]), mix(e[2], e[6]), mix(e[3], e[7])};
+}
+
+/// diff^kShininess by squaring (the exponent is a whole number): std::pow costs more than
+/// the rest of the shading.
+inline float powShininess(float x) {
+    static_assert(ShadingModel::kShininess == 24.0, "powShininess assumes 24");
+    const float x3 = x * x * x, x6 = x3 * x3, x12 = x6 * x6;
+    return x12 * x12;
+}
+
+/// `diffs`: v(q + e_a) - v(q - e_a), the central differences of the interpolated field.
+inline Rgba shade(const Frame& f, Rgba c, glm::vec3 diffs, glm::vec3 dir) {
+    const glm::vec3 g = diffs * f.gradScale;
+    const float len = glm::length(g);
+    if (len <= 0.0f) return c;
+    const float diff = std::abs(glm::dot(g / len, dir));
+    const float spec = float(ShadingModel::kSpecular) * powShininess(diff);
+    const float k = float(ShadingModel::kAmbient) + float(ShadingModel::kDiffuse) * diff;
+    const float w = std::clamp(len / float(ShadingModel::kGradientFade), 0.0f, 1.0f);
+    auto lit = [&](float x) { return x + ((x * k + spec) - x) * w; };
+    return {lit(c.r), lit(c.g), lit(c.b), c.a};
+}
+
+inline void composite(Rgba& acc, const Rgba& c) {
+    const float w = (1.0f - acc.a) * c.a;
+    acc.r += w * c.r;
+    acc.g += w * c.g;
+    acc.b += w * c.b;
+    acc.a += w;
+}
+
+/// The coarsest octree level whose node holding `leaf` is empty, or 0 (the shader's walk).
+inline int emptyLevel(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
+    int first = 0;
+    for (int l = 1; l <= f.octDepth; ++l) {
+        const glm::ivec3 n = leaf >> (f.octDepth - l);
+        const int s = 1 << l;
+        const int bit = first + (n.z * s + n.y) * s + n.x;
+        if (((words[bit >> 5] >> (bit & 31)) & 1u) == 0u) return l;
+        first += s * s * s;
+    }
+    return 0;
+}
+
+inline float exitParameter(glm::vec3 p0, glm::vec3 dv, glm::vec3 lo, float size) {
+    float t = 3.0e38f;
+    for (int a = 0; a < 3; ++a) {
+        if (dv[a] > 0.0f)
+            t = std::min(t, (lo[a] + size - p0[a]) / dv[a]);
+        else if (dv[a] < 0.0f)
+            t = std::min(t, (lo[a] - p0[a]) / dv[a]);
+    }
+    return t;
+}
+
+struct RayCount {
+    std::uint64_t samples = 0, leaps = 0;
+};
+
+/// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque.
+template <class T>
+bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
+                glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Rgba& acc, RayCount& n) {
+    const glm::vec3 rel = local + (float(f.apron) - 0.5f);
+    glm::ivec3 checked(-1);
+    for (; k < kEnd; ++k) {
+        const float t = t0 + (float(k) + 0.5f) * f.stepMm;
+        if (words) {
+            const glm::ivec3 leaf = glm::clamp(glm::ivec3(glm::floor((local + dv * t) / f.leaf)),
+                                               glm::ivec3(0), glm::ivec3(f.leafAxis - 1));
+            if (leaf != checked) {
+                const int l = emptyLevel(f, words, leaf);
+                if (l > 0) {
+                    const float size = f.leaf * float(1 << (f.octDepth - l));
+                    const glm::vec3 lo = glm::vec3(leaf >> (f.octDepth - l)) * size;
+                    const float tExit = exitParameter(local, dv, lo, size);
+                    const int kNext = int(std::ceil((tExit - t0) / f.stepMm - 0.5f));
+                    ++n.leaps;
+                    k = std::max(k, std::min(kNext, kEnd) - 1);
+                    continue;
+                }
+                checked = leaf;
+            }
+        }
+        const glm::vec3 q = rel + dv * t;
+        // Where no fetch of the six-fetch gradient would be clamped (every sample of the
+        // payload once the apron is 2 or more), the value's weights give the gradient too:
+        // 8 loads for the value, 24 more only for a visible shaded sample.
+        const bool fused = detail::fusedInRange(f.edge, q);
+        detail::Cell<T> cell;
+        float value;
+        if (fused) {
+            cell = detail::cellAt(v, f.edge, q);
+            value = detail::cellValue(cell); // bit for bit detail::fetch(v, f.edge, q)
+        } else {
+            value = detail::fetch(v, f.edge, q);
+        }
+        Rgba c = classify(f, value);
+        ++n.samples;
+        if (c.a <= 0.0f) continue;
+        if (f.shading)
+            c = shade(f, c,
+                      fused ? detail::cellGradient(cell) : detail::sixFetchGradient(v, f.edge, q),
+                      dir);
+        composite(acc, c);
+        if (acc.a >= f.ert) return false;
+    }
+    return true;
+}
+
+} // namespace bc::render::detail
