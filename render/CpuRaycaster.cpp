@@ -28,6 +28,7 @@ double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
+using detail::Accum;
 using detail::BrickRef;
 using detail::Frame;
 using detail::RayCount;
@@ -46,7 +47,7 @@ enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
 /// A ray between batches: its colour so far and, while it waits for a brick of a later batch,
 /// its DDA state at that brick (so the next pass goes on with the same floats).
 struct RayState {
-    Rgba acc;
+    Accum acc;
     glm::ivec3 cell{0};
     glm::vec3 tMax{0.0f};
     int k = 0;
@@ -64,7 +65,7 @@ template <class T> void marchRay(const Frame& f, float sx, float sy, RayState& s
     const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
     const glm::vec3 d = f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
     const glm::vec3 ov = o * f.invSpacing, dv = d * f.invSpacing;
-    Rgba& acc = s.acc;
+    Accum& acc = s.acc;
     float t0 = 0.0f, t1 = 3.0e38f;
     for (int a = 0; a < 3; ++a) {
         if (dv[a] == 0.0f) {
@@ -121,7 +122,7 @@ template <class T> void marchRay(const Frame& f, float sx, float sy, RayState& s
             n.samples += std::uint64_t(kEnd - k);
             for (; c.a > 0.0f && k < kEnd; ++k) {
                 composite(acc, c);
-                if (acc.a >= f.ert) return;
+                if (acc.t <= f.ertT) return;
             }
         }
         k = std::max(k, kEnd);
@@ -192,7 +193,7 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     const double span = table.domainMax - table.domainMin, last = double(table.entries - 1);
     f.tfScale = float(last / span);
     f.tfOffset = float(-table.domainMin * last / span);
-    f.ert = o.earlyTermination ? float(o.ertThreshold) : 2.0f;
+    f.ertT = o.earlyTermination ? float(1.0 - o.ertThreshold) : -1.0f;
     f.shading = o.shading;
     f.simd = o.simd;
     f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);
@@ -218,12 +219,12 @@ Image imageOf(const std::vector<RayState>& rays, std::uint32_t width, std::uint3
     Image image(width, height);
     for (std::uint32_t y = 0; y < height; ++y)
         for (std::uint32_t x = 0; x < width; ++x) {
-            const Rgba& c = rays[std::size_t(y) * width + x].acc;
+            const Accum& c = rays[std::size_t(y) * width + x].acc;
             float* px = image.pixel(x, y);
             px[0] = std::clamp(c.r, 0.0f, 1.0f);
             px[1] = std::clamp(c.g, 0.0f, 1.0f);
             px[2] = std::clamp(c.b, 0.0f, 1.0f);
-            px[3] = std::clamp(c.a, 0.0f, 1.0f);
+            px[3] = std::clamp(1.0f - c.t, 0.0f, 1.0f);
         }
     return image;
 }

@@ -22,6 +22,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <type_traits>
 
 HWY_BEFORE_NAMESPACE();
 namespace bc::render::detail {
@@ -41,7 +42,7 @@ struct PairF {
 /// 8- and 16-bit voxels: one 32-bit gather per pair. For 8 bits it reads v[o .. o + 3]; every
 /// offset the march uses has o + 3 inside the stored brick (the last row of the last slice is
 /// never read: see marchChunk).
-PairF pairAt(const std::uint8_t* v, VI o) {
+HWY_INLINE PairF pairAt(const std::uint8_t* v, VI o) {
     const DF df;
     const DI di;
     const VI w = hn::GatherOffset(di, reinterpret_cast<const std::int32_t*>(v), o);
@@ -49,7 +50,7 @@ PairF pairAt(const std::uint8_t* v, VI o) {
     return {hn::ConvertTo(df, hn::And(w, byte)),
             hn::ConvertTo(df, hn::And(hn::ShiftRight<8>(w), byte))};
 }
-PairF pairAt(const std::uint16_t* v, VI o) {
+HWY_INLINE PairF pairAt(const std::uint16_t* v, VI o) {
     const DF df;
     const DI di;
     const VI w =
@@ -58,7 +59,7 @@ PairF pairAt(const std::uint16_t* v, VI o) {
     return {hn::ConvertTo(df, hn::And(w, half)),
             hn::ConvertTo(df, hn::And(hn::ShiftRight<16>(w), half))};
 }
-PairF pairAt(const std::int16_t* v, VI o) {
+HWY_INLINE PairF pairAt(const std::int16_t* v, VI o) {
     const DF df;
     const DI di;
     const VI w =
@@ -66,13 +67,13 @@ PairF pairAt(const std::int16_t* v, VI o) {
     return {hn::ConvertTo(df, hn::ShiftRight<16>(hn::ShiftLeft<16>(w))),
             hn::ConvertTo(df, hn::ShiftRight<16>(w))};
 }
-PairF pairAt(const float* v, VI o) {
+HWY_INLINE PairF pairAt(const float* v, VI o) {
     const DF df;
     return {hn::GatherIndex(df, v, o), hn::GatherIndex(df, v, hn::Add(o, hn::Set(DI(), 1)))};
 }
 
 /// v[o - 1] and v[o + 2]: the x neighbours of a cell row (one gather for 8 bits).
-PairF outerAt(const std::uint8_t* v, VI o) {
+HWY_INLINE PairF outerAt(const std::uint8_t* v, VI o) {
     const DF df;
     const DI di;
     const VI w =
@@ -81,19 +82,77 @@ PairF outerAt(const std::uint8_t* v, VI o) {
     return {hn::ConvertTo(df, hn::And(w, byte)),
             hn::ConvertTo(df, hn::And(hn::ShiftRight<24>(w), byte))};
 }
-template <class T> PairF outerAt(const T* v, VI o) {
+template <class T> HWY_INLINE PairF outerAt(const T* v, VI o) {
     const DI di;
     return {pairAt(v, hn::Sub(o, hn::Set(di, 1))).lo, pairAt(v, hn::Add(o, hn::Set(di, 1))).hi};
 }
 
-VF lerpV(VF a, VF b, VF t) {
+/// A cell row with its x neighbours per lane: pair = (v[o], v[o + 1]), outer = (v[o - 1],
+/// v[o + 2]); what the value and the x central differences read.
+struct QuadF {
+    PairF pair, outer;
+};
+
+HWY_INLINE QuadF quadAt(const std::uint8_t* v, VI o) {
+    const DF df;
+    const DI di;
+    const VI w =
+        hn::GatherOffset(di, reinterpret_cast<const std::int32_t*>(v), hn::Sub(o, hn::Set(di, 1)));
+    const VI byte = hn::Set(di, 0xFF);
+    auto at = [&](VI x) { return hn::ConvertTo(df, hn::And(x, byte)); };
+    return {{at(hn::ShiftRight<8>(w)), at(hn::ShiftRight<16>(w))},
+            {at(w), at(hn::ShiftRight<24>(w))}};
+}
+
+/// 16-bit voxels: one 64-bit gather per lane (half a vector of them per gather) reads the four.
+template <class T> HWY_INLINE QuadF quad16(const T* v, VI o) {
+#if HWY_TARGET == HWY_SCALAR
+    return {pairAt(v, o), outerAt(v, o)};
+#else
+    const DF df;
+    const DI di;
+    const hn::Repartition<std::int64_t, DF> d64;
+    const hn::Half<DI> dh;
+    const VI bytes = hn::ShiftLeft<1>(hn::Sub(o, hn::Set(di, 1)));
+    const auto* base = reinterpret_cast<const std::int64_t*>(v);
+    const auto q0 = hn::GatherOffset(d64, base, hn::PromoteTo(d64, hn::LowerHalf(dh, bytes)));
+    const auto q1 = hn::GatherOffset(d64, base, hn::PromoteTo(d64, hn::UpperHalf(dh, bytes)));
+    // Lane i of q holds v[o-1] | v[o] << 16 in its low 32 bits and v[o+1] | v[o+2] << 16 above.
+    const VI w01 = hn::ConcatEven(di, hn::BitCast(di, q1), hn::BitCast(di, q0));
+    const VI w23 = hn::ConcatOdd(di, hn::BitCast(di, q1), hn::BitCast(di, q0));
+    auto low = [&](VI w) {
+        if constexpr (std::is_signed_v<T>)
+            return hn::ConvertTo(df, hn::ShiftRight<16>(hn::ShiftLeft<16>(w)));
+        else
+            return hn::ConvertTo(df, hn::And(w, hn::Set(di, 0xFFFF)));
+    };
+    auto high = [&](VI w) {
+        if constexpr (std::is_signed_v<T>)
+            return hn::ConvertTo(df, hn::ShiftRight<16>(w));
+        else
+            return hn::ConvertTo(df, hn::And(hn::ShiftRight<16>(w), hn::Set(di, 0xFFFF)));
+    };
+    return {{high(w01), low(w23)}, {low(w01), high(w23)}};
+#endif
+}
+HWY_INLINE QuadF quadAt(const std::uint16_t* v, VI o) {
+    return quad16(v, o);
+}
+HWY_INLINE QuadF quadAt(const std::int16_t* v, VI o) {
+    return quad16(v, o);
+}
+HWY_INLINE QuadF quadAt(const float* v, VI o) {
+    return {pairAt(v, o), outerAt(v, o)};
+}
+
+HWY_INLINE VF lerpV(VF a, VF b, VF t) {
     const VF one = hn::Set(DF(), 1.0f);
     return hn::Add(hn::Mul(a, hn::Sub(one, t)), hn::Mul(b, t));
 }
 
 /// Trilinear in fetch()'s order (x, then y, then z) of eight corner values dXYZ.
-VF tri(VF d000, VF d100, VF d010, VF d110, VF d001, VF d101, VF d011, VF d111, VF fx, VF fy,
-       VF fz) {
+HWY_INLINE VF tri(VF d000, VF d100, VF d010, VF d110, VF d001, VF d101, VF d011, VF d111, VF fx,
+                  VF fy, VF fz) {
     return lerpV(lerpV(lerpV(d000, d100, fx), lerpV(d010, d110, fx), fy),
                  lerpV(lerpV(d001, d101, fx), lerpV(d011, d111, fx), fy), fz);
 }
@@ -101,15 +160,44 @@ VF tri(VF d000, VF d100, VF d010, VF d110, VF d001, VF d101, VF d011, VF d111, V
 /// The four cell rows of each lane's sample: pairs at o, o + sy, o + sz, o + sy + sz.
 struct CellRows {
     PairF r00, r10, r01, r11; ///< rJK: row y0 + J of slice z0 + K
+    PairF x00, x10, x01, x11; ///< their x neighbours (outerAt), once `outer` is set
+    bool outer = false;
 };
+
+/// The rows at o, o + sy, o + sz, o + sy + sz; with their x neighbours when `withOuter` and
+/// the voxels are narrow enough to read all four in one gather lane.
+template <class T>
+HWY_INLINE void cellRows(const T* v, VI o, VI sy, VI sz, bool withOuter, CellRows& c) {
+    const VI o10 = hn::Add(o, sy), o01 = hn::Add(o, sz), o11 = hn::Add(o10, sz);
+    if (sizeof(T) <= 2 && withOuter) {
+        const QuadF q00 = quadAt(v, o), q10 = quadAt(v, o10), q01 = quadAt(v, o01),
+                    q11 = quadAt(v, o11);
+        c.r00 = q00.pair;
+        c.r10 = q10.pair;
+        c.r01 = q01.pair;
+        c.r11 = q11.pair;
+        c.x00 = q00.outer;
+        c.x10 = q10.outer;
+        c.x01 = q01.outer;
+        c.x11 = q11.outer;
+        c.outer = true;
+        return;
+    }
+    c.r00 = pairAt(v, o);
+    c.r10 = pairAt(v, o10);
+    c.r01 = pairAt(v, o01);
+    c.r11 = pairAt(v, o11);
+}
 
 /// cellGradient() of CpuSampling.h per lane: the central differences at the 8 corners,
 /// interpolated with the value's weights.
 template <class T>
-void gradientOf(const T* v, VI o, VI sy, VI sz, const CellRows& c, VF fx, VF fy, VF fz, VF& gx,
-                VF& gy, VF& gz) {
-    const PairF x00 = outerAt(v, o), x10 = outerAt(v, hn::Add(o, sy));
-    const PairF x01 = outerAt(v, hn::Add(o, sz)), x11 = outerAt(v, hn::Add(hn::Add(o, sy), sz));
+HWY_INLINE void gradientOf(const T* v, VI o, VI sy, VI sz, const CellRows& c, VF fx, VF fy, VF fz,
+                           VF& gx, VF& gy, VF& gz) {
+    const bool have = c.outer;
+    const PairF x00 = have ? c.x00 : outerAt(v, o), x10 = have ? c.x10 : outerAt(v, hn::Add(o, sy));
+    const PairF x01 = have ? c.x01 : outerAt(v, hn::Add(o, sz)),
+                x11 = have ? c.x11 : outerAt(v, hn::Add(hn::Add(o, sy), sz));
     gx = tri(hn::Sub(c.r00.hi, x00.lo), hn::Sub(x00.hi, c.r00.lo), hn::Sub(c.r10.hi, x10.lo),
              hn::Sub(x10.hi, c.r10.lo), hn::Sub(c.r01.hi, x01.lo), hn::Sub(x01.hi, c.r01.lo),
              hn::Sub(c.r11.hi, x11.lo), hn::Sub(x11.hi, c.r11.lo), fx, fy, fz);
@@ -128,13 +216,13 @@ void gradientOf(const T* v, VI o, VI sy, VI sz, const CellRows& c, VF fx, VF fy,
              hn::Sub(zp1.lo, c.r10.lo), hn::Sub(zp1.hi, c.r10.hi), fx, fy, fz);
 }
 
-VF pow24(VF x) {
+HWY_INLINE VF pow24(VF x) {
     const VF x3 = hn::Mul(hn::Mul(x, x), x), x6 = hn::Mul(x3, x3), x12 = hn::Mul(x6, x6);
     return hn::Mul(x12, x12);
 }
 
 /// shade() of CpuRay.h per lane (r, g, b in place; lanes with a zero gradient keep theirs).
-void shadeV(const Frame& f, glm::vec3 dir, VF gx, VF gy, VF gz, VF& r, VF& g, VF& b) {
+HWY_INLINE void shadeV(const Frame& f, glm::vec3 dir, VF gx, VF gy, VF gz, VF& r, VF& g, VF& b) {
     const DF df;
     gx = hn::Mul(gx, hn::Set(df, f.gradScale.x));
     gy = hn::Mul(gy, hn::Set(df, f.gradScale.y));
@@ -179,7 +267,7 @@ Rgba scalarSample(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::
 /// edge - 1) is never a row read here (z = edge - 1 is read only for rows y0 and y0 + 1).
 template <class T>
 bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::vec3 dir, float t0,
-                int k, int count, Rgba& acc, RayCount& n) {
+                int k, int count, Accum& acc, RayCount& n) {
     const DF df;
     const DI di;
     constexpr std::size_t kMax = hn::MaxLanes(DF());
@@ -207,10 +295,7 @@ bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::ve
     const VI sy = hn::Set(di, f.edge), sz = hn::Set(di, f.edge * f.edge);
     const VI o = hn::Add(hn::Add(hn::Mul(z0, sz), hn::Mul(y0, sy)), x0);
     CellRows c;
-    c.r00 = pairAt(v, o);
-    c.r10 = pairAt(v, hn::Add(o, sy));
-    c.r01 = pairAt(v, hn::Add(o, sz));
-    c.r11 = pairAt(v, hn::Add(hn::Add(o, sy), sz));
+    cellRows(v, o, sy, sz, f.shading, c);
     const VF value =
         lerpV(lerpV(lerpV(c.r00.lo, c.r00.hi, fx), lerpV(c.r10.lo, c.r10.hi, fx), fy),
               lerpV(lerpV(c.r01.lo, c.r01.hi, fx), lerpV(c.r11.lo, c.r11.hi, fx), fy), fz);
@@ -247,14 +332,19 @@ bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::ve
         hn::StoreMaskBits(df, fused, fusedBits);
         hn::Store(t, df, ts);
     }
-    Rgba sum = acc; // a local: through the reference every lane would store and reload it
+    // Lane by lane, without a branch on visibility: a transparent lane (alpha 0; the TF has
+    // no negative alpha) adds exactly +0 to each sum and multiplies t by exactly 1, which
+    // leaves the sums bit for bit as skipping the lane would. The sum is a local: through the
+    // reference every lane would store it.
+    Accum sum = acc;
     for (int j = 0; j < count; ++j) {
         Rgba s{rs[j], gs[j], bs[j], as[j]};
-        if (!allFused && ((fusedBits[j >> 3] >> (j & 7)) & 1) == 0)
+        if (!allFused && ((fusedBits[j >> 3] >> (j & 7)) & 1) == 0) {
             s = scalarSample(f, v, rel, dv, dir, ts[j]);
-        if (s.a <= 0.0f) continue;
-        composite(sum, s);
-        if (sum.a >= f.ert) {
+            if (s.a <= 0.0f) continue;
+        }
+        composite(sum, s); // the chain from lane to lane is its one multiply of t
+        if (sum.t <= f.ertT) {
             acc = sum;
             n.samples += std::uint64_t(j + 1);
             return false;
@@ -265,33 +355,31 @@ bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::ve
     return true;
 }
 
-/// A 3D DDA over the leaves of one brick (Amanatides & Woo at leaf granularity): the leaf a
-/// run has reached and where the ray leaves it, without a floor or a division per leaf.
-struct LeafWalk {
-    glm::ivec3 leaf{0}, step{0};
-    glm::vec3 tMax{0.0f}, tDelta{0.0f};
+/// One ray in one brick, with the reciprocals the leaf walk multiplies by (a division per
+/// leaf is most of a leaf step's latency).
+struct BrickRay {
+    glm::vec3 local, dv, invDv; ///< invDv: 0 on an axis the ray does not move along
+    glm::ivec3 step;
+    float t0, invStep, invLeaf;
 
-    /// At the leaf holding the point at parameter t (clamped to the grid, as the scalar walk).
-    void start(const Frame& f, glm::vec3 local, glm::vec3 dv, float t) {
-        leaf = glm::clamp(glm::ivec3(glm::floor((local + dv * t) / f.leaf)), glm::ivec3(0),
-                          glm::ivec3(f.leafAxis - 1));
+    BrickRay(const Frame& f, glm::vec3 localIn, glm::vec3 dvIn, float t0In)
+        : local(localIn), dv(dvIn), t0(t0In), invStep(1.0f / f.stepMm), invLeaf(1.0f / f.leaf) {
         for (int a = 0; a < 3; ++a) {
             step[a] = dv[a] > 0.0f ? 1 : dv[a] < 0.0f ? -1 : 0;
-            if (step[a] == 0) {
-                tMax[a] = tDelta[a] = 3.0e38f;
-                continue;
-            }
-            tDelta[a] = f.leaf / std::abs(dv[a]);
-            tMax[a] = (float(leaf[a] + (step[a] > 0 ? 1 : 0)) * f.leaf - local[a]) / dv[a];
+            invDv[a] = step[a] == 0 ? 0.0f : 1.0f / dv[a];
         }
     }
-    float exit() const { return std::min({tMax.x, tMax.y, tMax.z}); }
-    /// To the next leaf; false once the ray has left the grid.
-    bool advance(int leafAxis) {
-        const int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
-        leaf[a] += step[a];
-        tMax[a] += tDelta[a];
-        return leaf[a] >= 0 && leaf[a] < leafAxis;
+    /// The first sample index at or after parameter t (the scalar walk's rounding, to within
+    /// an ulp of the node exit: a sample that close to a face is transparent if either leaf is,
+    /// render/OCCUPANCY.md).
+    int sampleAt(float t) const { return int(std::ceil((t - t0) * invStep - 0.5f)); }
+    /// Where the ray leaves the axis-aligned cube [lo, lo + size] (exitParameter()).
+    float exitOf(glm::vec3 lo, float size) const {
+        float t = 3.0e38f;
+        for (int a = 0; a < 3; ++a)
+            if (step[a] != 0)
+                t = std::min(t, (lo[a] + (step[a] > 0 ? size : 0.0f) - local[a]) * invDv[a]);
+        return t;
     }
 };
 
@@ -316,11 +404,6 @@ int coarsestEmpty(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
     return 1;
 }
 
-/// The first sample index at or after parameter t (the scalar walk's rounding).
-int sampleAt(const Frame& f, float t, float t0) {
-    return int(std::ceil((t - t0) / f.stepMm - 0.5f));
-}
-
 /// marchBrick() of CpuRay.h, with the same octree: the run of samples through consecutive
 /// sampled leaves (found by a leaf DDA) is gathered until it fills a vector, meets an empty
 /// node or reaches the brick's end, and taken at once; an empty node is leapt over as the
@@ -329,45 +412,26 @@ int sampleAt(const Frame& f, float t, float t0) {
 /// so a sample is only skipped inside an empty node and the image is the scalar one.
 template <class T>
 bool marchBrickT(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
-                 glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Rgba& acc, RayCount& n) {
+                 glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Accum& acc, RayCount& n) {
     const int lanes = int(hn::Lanes(DF()));
     const glm::vec3 rel = local + (float(f.apron) - 0.5f);
-    int runEnd = words ? k : kEnd; // samples [k, runEnd) lie in sampled leaves
-    LeafWalk walk;
-    bool fresh = true;
+    const BrickRay ray(f, local, dv, t0);
     while (k < kEnd) {
-        while (runEnd < kEnd && runEnd - k < lanes) {
-            if (fresh) walk.start(f, local, dv, t0 + (float(runEnd) + 0.5f) * f.stepMm);
-            fresh = false;
-            if (leafSampled(f, words, walk.leaf)) {
-                runEnd = std::max(runEnd, std::min(sampleAt(f, walk.exit(), t0), kEnd));
-                if (!walk.advance(f.leafAxis)) runEnd = kEnd; // past the grid: by rounding only
-                continue;
-            }
-            if (runEnd > k) break; // take the run first
-            const int l = coarsestEmpty(f, words, walk.leaf);
-            if (l == f.octDepth) { // the leaf alone: leap within the DDA
-                const int kNext = std::min(sampleAt(f, walk.exit(), t0), kEnd);
-                if (kNext > k) {
-                    ++n.leaps;
-                    k = runEnd = kNext;
-                }
-                if (!walk.advance(f.leafAxis)) runEnd = kEnd;
-                continue;
-            }
-            const float size = f.leaf * float(1 << (f.octDepth - l));
-            const glm::vec3 lo = glm::vec3(walk.leaf >> (f.octDepth - l)) * size;
-            const int kNext = std::min(sampleAt(f, exitParameter(local, dv, lo, size), t0), kEnd);
-            if (kNext > k) { // the node holds samples k .. kNext - 1: leap
+        if (words) {
+            const float t = t0 + (float(k) + 0.5f) * f.stepMm;
+            const glm::ivec3 leaf =
+                glm::clamp(glm::ivec3(glm::floor((local + dv * t) * ray.invLeaf)), glm::ivec3(0),
+                           glm::ivec3(f.leafAxis - 1));
+            if (!leafSampled(f, words, leaf)) {
+                const int l = coarsestEmpty(f, words, leaf);
+                const float size = f.leaf * float(1 << (f.octDepth - l));
+                const glm::vec3 lo = glm::vec3(leaf >> (f.octDepth - l)) * size;
                 ++n.leaps;
-                k = runEnd = kNext;
-                fresh = true;
-            } else if (!walk.advance(f.leafAxis)) { // crossed between two samples
-                runEnd = kEnd;
+                k = std::max(k + 1, std::min(ray.sampleAt(ray.exitOf(lo, size)), kEnd));
+                continue;
             }
         }
-        const int count = std::min(lanes, runEnd - k);
-        if (count <= 0) continue;
+        const int count = std::min(lanes, kEnd - k);
         if (!marchChunk(f, v, rel, dv, dir, t0, k, count, acc, n)) return false;
         k += count;
     }
@@ -376,7 +440,7 @@ bool marchBrickT(const Frame& f, const T* v, const std::uint32_t* words, glm::ve
 
 bool MarchBrick(brickstore::VoxelType type, const Frame& f, const void* voxels,
                 const std::uint32_t* words, glm::vec3 local, glm::vec3 dv, glm::vec3 dir, float t0,
-                int& k, int kEnd, Rgba& acc, RayCount& n) {
+                int& k, int kEnd, Accum& acc, RayCount& n) {
     switch (type) {
     case brickstore::VoxelType::U8:
         return marchBrickT(f, static_cast<const std::uint8_t*>(voxels), words, local, dv, dir, t0,
@@ -414,7 +478,7 @@ HWY_EXPORT(LaneCount);
 
 bool marchBrickSimd(brickstore::VoxelType type, const Frame& f, const void* voxels,
                     const std::uint32_t* words, glm::vec3 local, glm::vec3 dv, glm::vec3 dir,
-                    float t0, int& k, int kEnd, Rgba& acc, RayCount& n) {
+                    float t0, int& k, int kEnd, Accum& acc, RayCount& n) {
     return HWY_DYNAMIC_DISPATCH(MarchBrick)(type, f, voxels, words, local, dv, dir, t0, k, kEnd,
                                             acc, n);
 }

@@ -16,7 +16,7 @@ namespace bc::render::detail {
 /// Samples where the fused gradient does not apply go through the scalar code.
 bool marchBrickSimd(brickstore::VoxelType type, const Frame& f, const void* voxels,
                     const std::uint32_t* words, glm::vec3 local, glm::vec3 dv, glm::vec3 dir,
-                    float t0, int& k, int kEnd, Rgba& acc, RayCount& n);
+                    float t0, int& k, int kEnd, Accum& acc, RayCount& n);
 
 /// The instruction set marchBrickSimd() runs on this host ("AVX3", "AVX2", "SSE4", ...).
 std::string simdTargetName();

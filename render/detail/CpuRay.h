@@ -37,7 +37,7 @@ struct Frame {
     const float* tf = nullptr;
     int entries = 2;
     float tfScale = 1, tfOffset = 0; ///< native value -> table position
-    float ert = 2;
+    float ertT = -1; ///< stop a ray once its transmittance is at most this (-1: never)
     bool shading = true;
     bool simd = true; ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
     glm::vec3 gradScale{1};
@@ -82,12 +82,19 @@ inline Rgba shade(const Frame& f, Rgba c, glm::vec3 diffs, glm::vec3 dir) {
     return {lit(c.r), lit(c.g), lit(c.b), c.a};
 }
 
-inline void composite(Rgba& acc, const Rgba& c) {
-    const float w = (1.0f - acc.a) * c.a;
+/// A ray's colour so far (premultiplied) and its transmittance t = 1 - alpha. Compositing
+/// front to back multiplies t by 1 - a per sample: one multiply is all that chains one sample
+/// to the next (the SIMD march composites lane by lane along that chain).
+struct Accum {
+    float r = 0, g = 0, b = 0, t = 1;
+};
+
+inline void composite(Accum& acc, const Rgba& c) {
+    const float w = acc.t * c.a;
     acc.r += w * c.r;
     acc.g += w * c.g;
     acc.b += w * c.b;
-    acc.a += w;
+    acc.t *= 1.0f - c.a;
 }
 
 /// The coarsest octree level whose node holding `leaf` is empty, or 0 (the shader's walk).
@@ -121,7 +128,7 @@ struct RayCount {
 /// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque.
 template <class T>
 bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
-                glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Rgba& acc, RayCount& n) {
+                glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Accum& acc, RayCount& n) {
     const glm::vec3 rel = local + (float(f.apron) - 0.5f);
     glm::ivec3 checked(-1);
     for (; k < kEnd; ++k) {
@@ -164,7 +171,7 @@ bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec
                       fused ? detail::cellGradient(cell) : detail::sixFetchGradient(v, f.edge, q),
                       dir);
         composite(acc, c);
-        if (acc.a >= f.ert) return false;
+        if (acc.t <= f.ertT) return false;
     }
     return true;
 }

@@ -59,10 +59,10 @@ void expectSame(TestStore& t, const TransferFunction& tf, const Camera& c, const
     EXPECT_TRUE(test::allFinite(simd.image)) << what;
     EXPECT_GT(test::alphaSum(scalar.image), 0.01 * o.width * o.height)
         << what << ": the view shows almost nothing, so proves nothing";
-    // A run may take a sample or two the scalar walk leaps over by rounding (transparent ones).
-    EXPECT_NEAR(double(simd.stats.samples), double(scalar.stats.samples),
-                0.01 * double(scalar.stats.samples) + 16.0)
-        << what;
+    // The SIMD march checks the octree once per vector of samples, not per sample: it takes
+    // more samples (transparent ones) than the scalar loop, never fewer, and not many more.
+    EXPECT_GE(double(simd.stats.samples), 0.99 * double(scalar.stats.samples)) << what;
+    EXPECT_LE(double(simd.stats.samples), 2.0 * double(scalar.stats.samples) + 16.0) << what;
 }
 
 struct Case {
