@@ -178,7 +178,7 @@ void check(Rules& r, const SetRenderOptions& m) {
     r.realRange("stepVoxels", o.stepVoxels, 0, 64, true, false);
     checkTechniques(r, o.techniques);
     r.realRange("ertThreshold", o.ertThreshold, 0, 1, true, false);
-    r.enumValue("renderer", std::uint8_t(o.renderer), 4);
+    r.enumValue("renderer", std::uint8_t(o.renderer), std::uint8_t(Renderer::Auto));
     r.enumValue("quality", std::uint8_t(o.quality), 2);
     r.enumValue("codec", std::uint8_t(o.codec), std::uint8_t(Codec::Png));
     if (r.ok()) checkCodecQuality(r, o.codec, o.codecQuality);

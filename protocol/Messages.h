@@ -93,7 +93,7 @@ struct RenderOptions {
     float stepVoxels = 1;
     std::uint32_t techniques = kTechAll; ///< Technique bits
     float ertThreshold = 0.99f;
-    Renderer renderer = Renderer::GpuRaycaster;
+    Renderer renderer = Renderer::Auto;
     Quality quality = Quality::Adaptive;
     Codec codec = Codec::Zstd;
     std::uint8_t codecQuality = 0; ///< JPEG 1..100, zstd 1..19, 0 for the codec's default

@@ -105,6 +105,9 @@ enum class Renderer : std::uint8_t {
     Reference = 2,
     Splatter = 3,    ///< hybrid forward splatting on the CPU
     GpuSplatter = 4, ///< the same model drawn by OpenGL
+    /// The server's choice, made once: the GPU raycaster on a hardware GPU, the CPU raycaster
+    /// where its OpenGL is a software rasteriser or it has none. Since 2026-12-03.
+    Auto = 5,
 };
 enum class Quality : std::uint8_t { Adaptive = 0, Refined = 1, Interactive = 2 };
 enum class FrameMode : std::uint8_t { Once = 0, ContinuousOn = 1, ContinuousOff = 2 };

@@ -1,6 +1,7 @@
 #include "render/EglContext.h"
 
 #include "render/Error.h"
+#include "render/RendererChoice.h"
 #include "render/detail/Gl.h"
 
 #include <EGL/egl.h>
@@ -177,6 +178,7 @@ EglContext::EglContext(const EglContextConfig& config) : mImpl(std::make_unique<
         return s ? std::string(reinterpret_cast<const char*>(s)) : std::string("?");
     };
     mRenderer = text(GL_RENDERER);
+    mVendor = text(GL_VENDOR);
     mVersion = text(GL_VERSION);
     if (config.debugOutput) {
         glEnable(GL_DEBUG_OUTPUT);
@@ -187,8 +189,7 @@ EglContext::EglContext(const EglContextConfig& config) : mImpl(std::make_unique<
 EglContext::~EglContext() = default;
 
 bool EglContext::software() const {
-    return mRenderer.find("llvmpipe") != std::string::npos ||
-           mRenderer.find("softpipe") != std::string::npos;
+    return isSoftwareRasterizer(mRenderer, mVendor);
 }
 
 } // namespace bc::render

@@ -23,17 +23,19 @@ class EglContext {
 
     /// GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" or "NVIDIA H100 ...".
     const std::string& renderer() const { return mRenderer; }
+    /// GL_VENDOR, e.g. "Mesa" or "NVIDIA Corporation".
+    const std::string& vendor() const { return mVendor; }
     /// GL_VERSION.
     const std::string& version() const { return mVersion; }
     /// Which EGL path succeeded: "device N", "surfaceless", or "default display".
     const std::string& platform() const { return mPlatform; }
-    /// True for Mesa's llvmpipe / softpipe.
+    /// True for a software rasteriser (Mesa's llvmpipe, softpipe...: isSoftwareRasterizer).
     bool software() const;
 
   private:
     struct Impl;
     std::unique_ptr<Impl> mImpl;
-    std::string mRenderer, mVersion, mPlatform;
+    std::string mRenderer, mVendor, mVersion, mPlatform;
 };
 
 } // namespace bc::render

@@ -127,6 +127,11 @@ struct FrameStats {
     double renderMs = 0.0;
     double readbackMs = 0.0;
     double totalMs = 0.0;
+    /// The registry's name of the renderer that drew the frame and why it was chosen
+    /// (RendererChoice: "auto: cpu (GL_RENDERER '...' is a software rasteriser)", "asked for
+    /// gpu"). Set by whoever chose the renderer (the daemon, the CLI), not by the renderer;
+    /// empty when nobody did.
+    std::string renderer, rendererChoice;
 };
 
 } // namespace bc::render

@@ -59,8 +59,9 @@ std::unique_ptr<Renderer> RendererRegistry::create(std::string_view name) const 
         std::string list;
         for (const auto& k : mKinds)
             list += (list.empty() ? "" : ", ") + k.name;
-        throw std::invalid_argument("no renderer named '" + std::string(name) +
-                                    "' (renderers: " + list + ")");
+        throw std::invalid_argument(
+            "no renderer named '" + std::string(name) + "' (renderers: " + list +
+            (name == "auto" ? "; auto is resolved to one of them by resolveRenderer)" : ")"));
     }
     return kind->create();
 }

@@ -1,6 +1,8 @@
 #pragma once
 // Renderers by name: the daemon, the command-line tools and the benchmarks create them here
-// instead of switching over the kinds they know (OSPRay's renderer factory).
+// instead of switching over the kinds they know (OSPRay's renderer factory). "auto", the
+// default of the programs, is not a kind: resolveRenderer (RendererChoice.h) turns it into
+// "gpu" or "cpu" once, before a renderer is created here.
 #include "render/Renderer.h"
 
 #include <functional>

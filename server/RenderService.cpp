@@ -5,6 +5,7 @@
 #include "render/BrickPool.h"
 #include "render/Classification.h"
 #include "render/EglContext.h"
+#include "render/RendererChoice.h"
 #include "render/RendererRegistry.h"
 #include "render/View.h"
 #include "server/Catalog.h"
@@ -224,6 +225,7 @@ struct FrameDrawing {
     render::FrameStats stats;
     const render::BrickPool* pool = nullptr;
     Clock::time_point start;
+    std::string rendererChoice; ///< why d.kind draws it (RendererChoice::reason)
 
     /// A refined frame drawn because an adaptive session's camera came to rest.
     bool refinement() const {
@@ -254,6 +256,8 @@ struct SessionRenderers {
 
 struct RenderService::Renderers {
     std::unique_ptr<render::EglContext> context;
+    /// What `auto` draws with on this server: decided at its first frame, once (autoChoice).
+    std::optional<render::RendererChoice> autoChoice;
     std::map<const Volume*, VolumeRenderers> volumes;
     std::map<const RenderSlot*, SessionRenderers> sessions;
 
@@ -361,6 +365,8 @@ const char* rendererName(protocol::Renderer r) {
         return "splat";
     case protocol::Renderer::GpuSplatter:
         return "splat-gpu";
+    case protocol::Renderer::Auto:
+        return "auto";
     }
     return "unknown";
 }
@@ -397,7 +403,7 @@ std::optional<std::string> RenderService::gpuUnavailable() {
     return mGpuUnavailable;
 }
 
-void RenderService::makeContext() {
+void RenderService::makeContext(const char* forWhat) {
     if (mRenderers->context) return;
     if (auto why = gpuUnavailable()) throw std::runtime_error(*why);
     try {
@@ -411,9 +417,24 @@ void RenderService::makeContext() {
         throw std::runtime_error(why);
     }
     mLog.info("render: " + mRenderers->context->renderer() + " (" +
-              mRenderers->context->platform() + "), made for the first GPU frame");
+              mRenderers->context->platform() + "), made for " + forWhat);
     std::lock_guard lock(mMutex);
     mCounters->gpuContext = 1;
+}
+
+const render::RendererChoice& RenderService::autoChoice() {
+    auto& choice = mRenderers->autoChoice;
+    if (choice) return *choice;
+    try {
+        makeContext("the first frame asking for auto, to choose its renderer");
+        choice = render::chooseAuto(mRenderers->context->renderer(), mRenderers->context->vendor());
+    } catch (const std::exception& e) { // makeContext has logged why
+        choice = render::chooseAutoWithoutGl(e.what());
+    }
+    mLog.info("render: " + choice->reason + ", for every session that asks for auto");
+    std::lock_guard lock(mMutex);
+    mAutoChoice = *choice;
+    return *choice;
 }
 
 void RenderService::collect(MetricSet& m) {
@@ -484,6 +505,11 @@ void RenderService::collect(MetricSet& m) {
             "The render thread's OpenGL context: 0 not made (no GPU frame asked for yet), 1 "
             "made, -1 unavailable (GPU frames are refused)",
             mGpuUnavailable ? -1.0 : c.gpuContext);
+    if (mAutoChoice)
+        m.gauge("auto_renderer",
+                "1 for the renderer the sessions asking for auto draw with, and why (decided at "
+                "the first such frame, from the OpenGL context: GL_RENDERER, GL_VENDOR)",
+                1.0, {{"renderer", mAutoChoice->name}, {"reason", mAutoChoice->reason}});
     std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
     for (const auto& [name, live] : c.poolLive)
         pools[name] += live;
@@ -784,7 +810,13 @@ void RenderService::prepare(FrameDrawing& d) {
     d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
     d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
-    const std::string_view name = rendererName(o.renderer);
+    std::string_view name = rendererName(o.renderer);
+    d.rendererChoice = "asked for " + std::string(name);
+    if (o.renderer == protocol::Renderer::Auto) {
+        const render::RendererChoice& choice = autoChoice();
+        name = choice.name;
+        d.rendererChoice = choice.reason;
+    }
     d.kind = render::RendererRegistry::builtin().find(name);
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
     if (d.kind->needsGl) makeContext();
@@ -976,6 +1008,8 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
 protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRecord& rec) {
     const auto& s = d.job.state;
     const auto& o = s.options;
+    d.stats.renderer = d.kind->name;
+    d.stats.rendererChoice = d.rendererChoice;
     const render::FrameStats& stats = d.stats;
     std::vector<std::uint8_t> rgba8 = std::move(d.rgba8);
     // An interactive frame is scaled up here, or sent as drawn for the client to scale.

@@ -18,6 +18,7 @@
 // volume out of service (Catalog::markFailed): later frames of it are refused at once.
 #include "protocol/FrameCodec.h"
 #include "protocol/Messages.h"
+#include "render/RendererChoice.h"
 #include "render/TransferFunction.h"
 
 #include <chrono>
@@ -148,7 +149,8 @@ class RenderService {
     /// Starts the render thread. It makes its GL context when the first frame of a GPU
     /// renderer asks for one, never before (a server that draws on the CPU only never loads
     /// the driver); when it cannot, that frame and every later GPU frame fail with RenderFailed
-    /// saying why, and the CPU renderers still serve.
+    /// saying why, and the CPU renderers still serve. The first frame asking for auto makes the
+    /// context too, to decide between the GPU and the CPU raycaster (autoChoice).
     RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log,
                   VolumeFailed volumeFailed = {});
     /// Stops and joins the thread (within about one slice); frames not yet drawn are not drawn.
@@ -179,9 +181,13 @@ class RenderService {
         double bricksDeferred = 0, bricksRequested = 0; ///< ray-guided residency
     };
     void run();
-    /// Makes the GL context on the first call (render thread); later calls return at once.
+    /// Makes the GL context on the first call (render thread), logging that it was made
+    /// `forWhat`; later calls return at once.
     /// @throw std::runtime_error saying why when it cannot be made (then and every time after).
-    void makeContext();
+    void makeContext(const char* forWhat = "the first GPU frame");
+    /// What `auto` draws with (render thread): decided at the first call from the GL context
+    /// (made then if need be) and logged; the same on every call after. Never throws.
+    const render::RendererChoice& autoChoice();
     void notify();
     /// The next slot due, or nullptr after waiting (not at all when `mayWait` is false) for one.
     std::shared_ptr<RenderSlot> nextReady(std::unique_lock<std::mutex>& lock, bool mayWait);
@@ -220,8 +226,9 @@ class RenderService {
     std::vector<std::weak_ptr<RenderSlot>> mSlots;
     std::size_t mNextSlot = 0;
     bool mStop = false;
-    std::optional<std::string> mGpuUnavailable; ///< set once by makeContext()
-    std::unique_ptr<Renderers> mRenderers;      // render thread only
+    std::optional<std::string> mGpuUnavailable;        ///< set once by makeContext()
+    std::optional<render::RendererChoice> mAutoChoice; ///< set once by autoChoice(), for metrics
+    std::unique_ptr<Renderers> mRenderers;             // render thread only
     /// Measured speed of each renderer in cost units (upper bounds of samples) per millisecond,
     /// from the whole frames it drew: whether a frame is sliced (render thread only).
     std::map<std::string, double, std::less<>> mCostPerMs;

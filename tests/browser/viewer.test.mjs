@@ -210,7 +210,7 @@ async function assertHealthy({ page, pageErrors }) {
 }
 
 /**
- * Picks the CPU raycaster (the page starts on the GPU one where the server offers it), opens
+ * Picks the CPU raycaster (the page starts on auto, the server's choice), opens
  * `name` through the page's volume picker and waits for its first frame.
  */
 async function chooseVolume(page, name) {

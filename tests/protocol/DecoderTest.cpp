@@ -494,7 +494,7 @@ TEST(DecoderRejects, OutOfRangeValueOfEveryEnumField) {
                    "SetTransferFunction.shadingSource");
     expectRejected(patched<std::uint8_t>(samplePoints(), 5, 3), ErrorCode::OutOfRange,
                    "SetTransferFunction.points[0].placement");
-    expectRejected(patched<std::uint8_t>(SetRenderOptions{}, 16, 5), ErrorCode::OutOfRange,
+    expectRejected(patched<std::uint8_t>(SetRenderOptions{}, 16, 6), ErrorCode::OutOfRange,
                    "SetRenderOptions.renderer");
     expectRejected(patched<std::uint8_t>(SetRenderOptions{}, 17, 3), ErrorCode::OutOfRange,
                    "SetRenderOptions.quality");

@@ -234,6 +234,28 @@ TEST(Messages, SetRenderOptionsGoldenBytesRoundTrip) {
     expectGolden(SetRenderOptions{o}, 6, golden);
 }
 
+// Renderer 5 (auto, since 2026-12-03) is the default: the server picks the GPU raycaster on a
+// hardware GPU and the CPU raycaster otherwise.
+TEST(Messages, SetRenderOptionsDefaultsToTheAutoRendererGoldenBytesRoundTrip) {
+    const Bytes golden = {
+        BC_HEADER(0x0A, 24, 8),
+        0x00, 0x01,             // width 256
+        0x00, 0x01,             // height 256
+        0x00, 0x00, 0x80, 0x3F, // stepVoxels 1
+        0x3F, 0x00, 0x00, 0x00, // techniques: all six
+        0xA4, 0x70, 0x7D, 0x3F, // ertThreshold 0.99f
+        0x05,                   // renderer: auto
+        0x00,                   // quality: adaptive
+        0x01,                   // codec: zstd
+        0x00,                   // codecQuality: the codec's default
+        0xFF,                   // level: automatic
+        0x00,                   // refinedCodec: none
+        0x00, 0x00,             // flags
+    };
+    expectGolden(SetRenderOptions{}, 8, golden);
+    EXPECT_EQ(RenderOptions{}.renderer, Renderer::Auto);
+}
+
 TEST(Messages, RequestFrameGoldenBytesRoundTrip) {
     expectGolden(RequestFrame{FrameMode::ContinuousOn}, 7,
                  Bytes{BC_HEADER(0x0B, 1, 7), 0x01 /* mode: continuous on */});

@@ -46,5 +46,29 @@ TEST(ClientCli, ListsFliesACameraFileSavesPngsAndPrintsLatency) {
     EXPECT_NE(missing.find("UnknownVolume"), std::string::npos) << missing;
 }
 
+// Without --renderer the client asks for auto (the main job does), and prints the server's
+// choice and why: on llvmpipe (the dev VM, CI) the CPU raycaster.
+TEST(ClientCli, WithoutARendererAsksForAutoAndPrintsTheServersChoice) {
+    TempDir dir;
+    TestDaemon d(generatedConfig(dir, {{"alpha", 32}}));
+    const std::string exe = std::string(BC_CLIENT_EXE) + " --port " + std::to_string(d.port);
+    const auto [status, out] = run(exe + " --volume alpha --frames 2 --size 40,32");
+    EXPECT_EQ(status, 0) << out;
+    EXPECT_NE(out.find("2 frames of alpha"), std::string::npos) << out;
+    const auto at = out.find("renderer auto: ");
+    ASSERT_NE(at, std::string::npos) << out;
+    const std::string line = out.substr(at, out.find('\n', at) - at);
+    EXPECT_TRUE(line.starts_with("renderer auto: cpu (") ||
+                line.starts_with("renderer auto: gpu ("))
+        << line;
+    if (line.find("llvmpipe") != std::string::npos) {
+        EXPECT_TRUE(line.starts_with("renderer auto: cpu (GL_RENDERER 'llvmpipe")) << line;
+        EXPECT_TRUE(line.ends_with("' is a software rasteriser)")) << line;
+    }
+    const auto [namedStatus, named] = run(exe + " --volume alpha --frames 1 --renderer cpu");
+    EXPECT_EQ(namedStatus, 0) << named;
+    EXPECT_EQ(named.find("renderer auto"), std::string::npos) << "printed for a named renderer";
+}
+
 } // namespace
 } // namespace bc::server::test

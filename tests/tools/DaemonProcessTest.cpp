@@ -178,6 +178,19 @@ TEST(DaemonProcess, WithoutEglAGpuFrameGetsAnErrorSayingWhyAndTheCpuRenderersSer
             EXPECT_EQ(e->code, protocol::ErrorCode::OutOfRange);
             EXPECT_NE(e->message.find("no OpenGL 4.5 context"), std::string::npos) << e->message;
         }
+        // auto, the default, is the CPU raycaster here: the same frame as asking for it.
+        client::Client automatic(daemon.client), cpuAgain(daemon.client);
+        std::vector<std::vector<std::uint8_t>> images;
+        for (auto* c : {&automatic, &cpuAgain}) {
+            c->openVolume("p");
+            auto o = smallCpuFrames(32);
+            o.renderer = c == &automatic ? protocol::Renderer::Auto : o.renderer;
+            c->setRenderOptions(o);
+            c->setCamera(orbitCamera(v, 40, 3));
+            c->requestFrame();
+            images.push_back(c->nextFrame().rgba);
+        }
+        EXPECT_TRUE(images[0] == images[1]) << "auto without EGL is not the CPU raycaster";
     }
     ASSERT_EQ(::kill(daemon.pid, SIGTERM), 0);
     const std::optional<int> status = waitForExit(daemon.pid, 5000);

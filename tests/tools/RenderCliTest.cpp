@@ -36,8 +36,9 @@ class RenderCli : public ::testing::Test {
 TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
     const std::string gpu = dir.file("gpu.png"), ref = dir.file("ref.png"),
                       stats = dir.file("s.json");
-    auto a = brickcast("render " + store + " -o " + gpu +
-                       " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --stats " + stats);
+    auto a = brickcast(
+        "render " + store + " -o " + gpu +
+        " --size 96,64 --tf ct-bone --orbit 40,25 --ert off --renderer gpu --stats " + stats);
     ASSERT_EQ(a.exitCode, 0) << a.text;
     auto b = brickcast("render " + store + " -o " + ref +
                        " --size 96,64 --tf ct-bone --orbit 40,25 --reference");
@@ -51,6 +52,8 @@ TEST_F(RenderCli, GpuFrameMatchesTheReferenceFrameAndWritesStats) {
     EXPECT_GT(j.at("samples").get<double>(), 0.0);
     EXPECT_EQ(j.at("level").get<int>(), 0);
     EXPECT_EQ(j.at("batches").get<int>(), 1);
+    EXPECT_EQ(j.at("rendererName"), "gpu");
+    EXPECT_EQ(j.at("rendererChoice"), "asked for gpu");
     auto c = brickcast("compare " + gpu + " " + ref);
     EXPECT_EQ(c.exitCode, 0) << c.text;
 }
@@ -123,11 +126,62 @@ TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
 }
 
 // GLVND with no vendor library: EGL offers no display at all.
+const std::string kNoEgl =
+    "__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent.json EGL_PLATFORM=surfaceless";
+
 TEST_F(RenderCli, NoUsableEglIsAClearErrorNotACrash) {
-    auto r = brickcast("render " + store + " -o " + dir.file("x.png"),
-                       "__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent.json EGL_PLATFORM=surfaceless");
+    auto r = brickcast("render " + store + " -o " + dir.file("x.png") + " --renderer gpu", kNoEgl);
     EXPECT_EQ(r.exitCode, 1) << r.text;
     EXPECT_TRUE(contains(r.text, "no usable EGL")) << r.text;
+}
+
+// The default, auto, with no EGL at all: the CPU raycaster draws, and the stats and the log
+// say why; the image is --renderer cpu's.
+TEST_F(RenderCli, AutoWithoutEglDrawsOnTheCpuRaycasterAndSaysWhy) {
+    const std::string autoPng = dir.file("auto.png"), cpuPng = dir.file("cpu.png"),
+                      stats = dir.file("auto.json");
+    const std::string args = " --size 64,48 --tf ct-bone --orbit 40,25";
+    auto a = brickcast("render " + store + " -o " + autoPng + args + " --stats " + stats, kNoEgl);
+    ASSERT_EQ(a.exitCode, 0) << a.text;
+    EXPECT_TRUE(contains(a.text, "render: auto: cpu (no EGL context: no usable EGL")) << a.text;
+    std::ifstream f(stats);
+    const auto j = nlohmann::json::parse(f);
+    EXPECT_EQ(j.at("rendererName"), "cpu");
+    EXPECT_TRUE(contains(j.at("rendererChoice").get<std::string>(),
+                         "auto: cpu (no EGL context: no usable EGL"))
+        << j.at("rendererChoice");
+    auto c = brickcast("render " + store + " -o " + cpuPng + args + " --renderer cpu", kNoEgl);
+    ASSERT_EQ(c.exitCode, 0) << c.text;
+    EXPECT_FALSE(contains(c.text, "render: auto")) << "a named renderer is not announced";
+    EXPECT_EQ(compareImages(readPng(autoPng), readPng(cpuPng)).maxAbs, 0.0);
+}
+
+// GL: `brickcast render` without --renderer is auto, decided from this machine's GL_RENDERER
+// (on llvmpipe, the dev VM and CI: the CPU raycaster), and draws --renderer NAME's image.
+TEST_F(RenderCli, AutoIsTheDefaultAndFollowsThisMachinesGlRenderer) {
+    const EglContext& gl = test::glContext();
+    const std::string expected = gl.software() ? "cpu" : "gpu";
+    if (contains(gl.renderer(), "llvmpipe")) {
+        EXPECT_EQ(expected, "cpu") << gl.renderer();
+    }
+    const std::string autoPng = dir.file("auto.png"), namedPng = dir.file("named.png"),
+                      stats = dir.file("auto.json");
+    const std::string args = " --size 64,48 --tf ct-bone --orbit 40,25";
+    auto a = brickcast("render " + store + " -o " + autoPng + args + " --stats " + stats);
+    ASSERT_EQ(a.exitCode, 0) << a.text;
+    const std::string why = "auto: " + expected + " (GL_RENDERER '" + gl.renderer() + "' is a " +
+                            (gl.software() ? "software rasteriser)" : "hardware GPU)");
+    EXPECT_TRUE(contains(a.text, "render: " + why)) << a.text;
+    std::ifstream f(stats);
+    const auto j = nlohmann::json::parse(f);
+    EXPECT_EQ(j.at("rendererName"), expected);
+    EXPECT_EQ(j.at("rendererChoice"), why);
+    if (gl.software()) {
+        EXPECT_TRUE(contains(j.at("renderer").get<std::string>(), "CPU raycaster"));
+    }
+    auto n = brickcast("render " + store + " -o " + namedPng + args + " --renderer " + expected);
+    ASSERT_EQ(n.exitCode, 0) << n.text;
+    EXPECT_EQ(compareImages(readPng(autoPng), readPng(namedPng)).maxAbs, 0.0);
 }
 
 } // namespace

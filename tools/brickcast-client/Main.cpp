@@ -16,13 +16,16 @@
 #include <fstream>
 #include <new>
 #include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace {
 
 using namespace bc;
 
 struct Options {
-    std::string host = "127.0.0.1", token, volume, tf, tfSwitch, codec = "zstd", renderer = "gpu",
+    std::string host = "127.0.0.1", token, volume, tf, tfSwitch, codec = "zstd", renderer = "auto",
                 outputDir, cameraFile, size = "256,256";
     std::uint16_t port = 7411;
     int frames = 36, saveEvery = 1, quality = 0;
@@ -96,7 +99,9 @@ protocol::RenderOptions renderOptions(const Options& o) {
     r.codec = codecOf(o.codec);
     r.codecQuality = std::uint8_t(o.quality);
     r.quality = protocol::Quality::Refined;
-    if (o.renderer == "cpu")
+    if (o.renderer == "auto")
+        r.renderer = protocol::Renderer::Auto;
+    else if (o.renderer == "cpu")
         r.renderer = protocol::Renderer::CpuRaycaster;
     else if (o.renderer == "reference")
         r.renderer = protocol::Renderer::Reference;
@@ -104,9 +109,29 @@ protocol::RenderOptions renderOptions(const Options& o) {
         r.renderer = protocol::Renderer::Splatter;
     else if (o.renderer == "splat-gpu")
         r.renderer = protocol::Renderer::GpuSplatter;
-    else if (o.renderer != "gpu")
-        throw CLI::ValidationError("--renderer", "gpu, cpu, splat, splat-gpu or reference");
+    else if (o.renderer == "gpu")
+        r.renderer = protocol::Renderer::GpuRaycaster;
+    else
+        throw CLI::ValidationError("--renderer", "auto, gpu, cpu, splat, splat-gpu or reference");
     return r;
+}
+
+/// Why the server's auto drew with what it did, from its counters (the gauge
+/// auto_renderer{renderer="cpu",reason="auto: cpu (...)"}, cut at 128 bytes by the protocol);
+/// empty before it has decided.
+std::string autoRendererOf(const std::vector<std::pair<std::string, double>>& counters) {
+    const std::string prefix = "auto_renderer{renderer=\"", key = "reason=\"";
+    for (const auto& [name, value] : counters) {
+        const auto at = name.find(key);
+        if (!name.starts_with(prefix) || at == std::string::npos) continue;
+        std::string reason = name.substr(at + key.size());
+        if (reason.ends_with("\"}"))
+            reason.resize(reason.size() - 2);
+        else
+            reason += "...";
+        return reason;
+    }
+    return {};
 }
 
 int fly(const Options& o) {
@@ -179,6 +204,11 @@ int fly(const Options& o) {
                 percentile(latency, 99), percentile(latency, 100),
                 double(c.bytesReceived()) / (1 << 20),
                 double(bytes) / 1024.0 / std::max(frames, 1));
+    if (o.renderer == "auto") {
+        const std::string why = autoRendererOf(c.stats());
+        std::printf("renderer %s\n",
+                    why.empty() ? "auto (the server did not say which)" : why.c_str());
+    }
     c.bye();
     return 0;
 }
@@ -209,7 +239,9 @@ int main(int argc, char** argv) {
     app.add_option("--codec", o.codec, "raw, zstd, delta, jpeg or png")->capture_default_str();
     app.add_option("--quality", o.quality, "JPEG quality or zstd level (0 = default)")
         ->check(CLI::Range(0, 100));
-    app.add_option("--renderer", o.renderer, "gpu, cpu, splat, splat-gpu or reference")
+    app.add_option("--renderer", o.renderer,
+                   "auto (the server's choice: gpu on a hardware GPU, else cpu), gpu, cpu, "
+                   "splat, splat-gpu or reference")
         ->capture_default_str();
     app.add_flag("--continuous", o.continuous, "Continuous mode instead of one request a frame");
     app.add_option("-o,--output-dir", o.outputDir, "Save frames as PNG here");

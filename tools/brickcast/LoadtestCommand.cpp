@@ -38,7 +38,7 @@ using Clock = std::chrono::steady_clock;
 
 struct LoadtestOptions {
     std::string host = "127.0.0.1", token, volume = "phantom", paths = "orbit,zoom,jumps,tf-sweep",
-                size = "128,128", renderer = "cpu", codec = "zstd", csv;
+                size = "128,128", renderer = "auto", codec = "zstd", csv;
     std::uint16_t port = 7411;
     std::uint32_t clients = 4, frames = 60, tfEvery = 10;
     double durationS = 0, timeoutS = 600, step = 1.0;
@@ -54,11 +54,13 @@ struct FrameRow {
 };
 
 protocol::Renderer rendererOf(const std::string& name) {
+    if (name == "auto") return protocol::Renderer::Auto;
     if (name == "gpu") return protocol::Renderer::GpuRaycaster;
     if (name == "cpu") return protocol::Renderer::CpuRaycaster;
     if (name == "splat") return protocol::Renderer::Splatter;
     if (name == "splat-gpu") return protocol::Renderer::GpuSplatter;
-    throw std::invalid_argument("--renderer: '" + name + "' is not gpu, cpu, splat or splat-gpu");
+    throw std::invalid_argument("--renderer: '" + name +
+                                "' is not auto, gpu, cpu, splat or splat-gpu");
 }
 
 protocol::Codec codecOf(const std::string& name) {
@@ -328,7 +330,9 @@ void addLoadtestCommand(CLI::App& app) {
     cmd->add_option("--tf-every", o->tfEvery, "tf-sweep: frames between transfer functions")
         ->capture_default_str();
     cmd->add_option("--size", o->size, "Frame W,H")->capture_default_str();
-    cmd->add_option("--renderer", o->renderer, "gpu, cpu, splat or splat-gpu")
+    cmd->add_option("--renderer", o->renderer,
+                    "auto (the server's choice: gpu on a hardware GPU, else cpu), gpu, cpu, splat "
+                    "or splat-gpu")
         ->capture_default_str();
     cmd->add_option("--codec", o->codec, "raw, zstd, delta or jpeg")->capture_default_str();
     cmd->add_option("--step", o->step, "Sample step, voxels")->capture_default_str();

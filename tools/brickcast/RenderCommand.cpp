@@ -1,4 +1,5 @@
-// brickcast render STORE -o OUT.png: one frame on the GPU raycaster (or the CPU reference).
+// brickcast render STORE -o OUT.png: one frame on the renderer `auto` picks (the GPU raycaster on a
+// hardware GPU, else the CPU raycaster), one named by --renderer, or the CPU reference.
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "brickstore/Error.h"
@@ -11,6 +12,7 @@
 #include "render/Image.h"
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
+#include "render/RendererChoice.h"
 #include "render/TransferFunction.h"
 #include "tools/Parse.h"
 #include "tools/TransferFunctionFile.h"
@@ -34,7 +36,7 @@ namespace {
 
 struct RenderCliOptions {
     std::string store, output, size = "256,256", tf = "ct-skin", orbit, eye, target, up,
-                               ert = "0.99", skip = "all", statsPath, renderer = "gpu";
+                               ert = "0.99", skip = "all", statsPath, renderer = "auto";
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32;
     bool ortho = false, noShading = false, noSimd = false, reference = false, interactive = false;
@@ -94,6 +96,8 @@ nlohmann::json statsJson(const render::FrameStats& s, const std::string& rendere
                          const render::RenderOptions& o) {
     const double pixels = double(o.width) * o.height;
     return {{"renderer", renderer},
+            {"rendererName", s.renderer},
+            {"rendererChoice", s.rendererChoice},
             {"width", o.width},
             {"height", o.height},
             {"level", s.level},
@@ -161,13 +165,17 @@ void runRender(const RenderCliOptions& o) {
     render::FrameStats stats;
     render::Image image;
     std::string renderer;
-    if (o.renderer != "gpu" && o.renderer != "cpu" && o.renderer != "splat" &&
-        o.renderer != "splat-gpu")
+    if (o.renderer != "auto" && o.renderer != "gpu" && o.renderer != "cpu" &&
+        o.renderer != "splat" && o.renderer != "splat-gpu")
         throw std::invalid_argument("--renderer: '" + o.renderer +
-                                    "' is not gpu, cpu, splat or splat-gpu");
+                                    "' is not auto, gpu, cpu, splat or splat-gpu");
     // One renderer draws the view --repeat times: the later frames are warm (host cache, GPU
     // pool, octrees and, for the GPU raycaster, occlusion frustums of the same view).
     std::unique_ptr<render::EglContext> context;
+    const render::RendererChoice choice =
+        o.reference ? render::RendererChoice{"reference", "asked for reference (--reference)"}
+                    : render::resolveRenderer(o.renderer, context);
+    if (o.renderer == "auto") std::fprintf(stderr, "render: %s\n", choice.reason.c_str());
     std::unique_ptr<brickstore::BrickCache> cache;
     std::function<render::Image(render::FrameStats&)> draw;
     std::function<std::string()> describe;
@@ -185,11 +193,11 @@ void runRender(const RenderCliOptions& o) {
         };
         describe = [] { return std::string("CPU reference (double)"); };
     } else {
-        if (o.renderer == "gpu" || o.renderer == "splat-gpu")
+        if ((choice.name == "gpu" || choice.name == "splat-gpu") && !context)
             context = std::make_unique<render::EglContext>();
         cache = std::make_unique<brickstore::BrickCache>(
             *store, brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
-        if (o.renderer == "splat") {
+        if (choice.name == "splat") {
             auto splatter = std::make_shared<render::HybridSplatter>();
             draw = [&, splatter](render::FrameStats& s) {
                 return splatter->render(*store, *cache, tf, camera, options, s);
@@ -200,7 +208,7 @@ void runRender(const RenderCliOptions& o) {
                        std::to_string(f.splats) + " splats, " + std::to_string(f.culled) +
                        " culled)";
             };
-        } else if (o.renderer == "splat-gpu") {
+        } else if (choice.name == "splat-gpu") {
             auto splatter = std::make_shared<render::GpuSplatter>();
             draw = [&, splatter](render::FrameStats& s) {
                 return splatter->render(*store, *cache, tf, camera, options, s);
@@ -210,7 +218,7 @@ void runRender(const RenderCliOptions& o) {
                 return "hybrid splatter (" + context->renderer() + ", " + std::to_string(f.points) +
                        " points, " + std::to_string(f.splats) + " splats)";
             };
-        } else if (o.renderer == "cpu") {
+        } else if (choice.name == "cpu") {
             auto raycaster = std::make_shared<render::CpuRaycaster>();
             draw = [&, raycaster](render::FrameStats& s) {
                 return raycaster->render(*store, *cache, tf, camera, options, s);
@@ -232,6 +240,8 @@ void runRender(const RenderCliOptions& o) {
     std::vector<double> frameMs;
     for (std::uint32_t i = 0; i < o.repeat; ++i) {
         image = draw(stats);
+        stats.renderer = choice.name;
+        stats.rendererChoice = choice.reason;
         frameMs.push_back(stats.totalMs);
     }
     renderer = describe();
@@ -279,9 +289,8 @@ void renderStoreToPng(const std::string& storePath, const std::string& output,
 
 void addRenderCommand(CLI::App& app) {
     auto o = std::make_shared<RenderCliOptions>();
-    auto* cmd = app.add_subcommand(
-        "render",
-        "Render one frame of a store to PNG (GPU or CPU raycaster, or the CPU reference)");
+    auto* cmd = app.add_subcommand("render", "Render one frame of a store to PNG (GPU or CPU "
+                                             "raycaster, auto picks; or the CPU reference)");
     cmd->add_option("STORE", o->store, "Store file")->required();
     cmd->add_option("-o,--output", o->output, "PNG to write")->required();
     cmd->add_option("--size", o->size, "Image W,H")->capture_default_str();
@@ -331,8 +340,10 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_flag("--interactive", o->interactive,
                   "Draw a coarser level when the view exceeds the GPU budget");
     cmd->add_option("--renderer", o->renderer,
-                    "gpu (EGL raycaster), cpu (the CPU raycaster, fastest without a GPU), splat "
-                    "(hybrid forward splatting, CPU) or splat-gpu (the same, drawn by OpenGL)")
+                    "auto (gpu on a hardware GPU, cpu where OpenGL is a software rasteriser "
+                    "such as llvmpipe or there is none), gpu (EGL raycaster), cpu (the CPU "
+                    "raycaster, fastest without a GPU), splat (hybrid forward splatting, CPU) or "
+                    "splat-gpu (the same, drawn by OpenGL)")
         ->capture_default_str();
     cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
     cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");

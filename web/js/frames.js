@@ -96,3 +96,22 @@ export function residencyLine(counters, name) {
   }
   return parts.join('  ');
 }
+
+/**
+ * What the server's `auto` renderer draws with, from its Stats counters (the gauge
+ * auto_renderer{renderer="cpu",reason="auto: cpu (GL_RENDERER '…' is a software rasteriser)"}):
+ * {renderer, reason}, or null before the server has decided. The reason may be cut short: the
+ * protocol cuts counter names at 128 bytes.
+ */
+export function autoRendererOf(counters) {
+  const prefix = 'auto_renderer{renderer="';
+  const c = counters.find(({ name }) => name.startsWith(prefix));
+  if (!c) return null;
+  const rest = c.name.slice(prefix.length);
+  const end = rest.indexOf('"');
+  if (end < 0) return null;
+  const at = rest.indexOf('reason="', end);
+  let reason = at < 0 ? '' : rest.slice(at + 'reason="'.length);
+  reason = reason.endsWith('"}') ? reason.slice(0, -2) : `${reason}…`;
+  return { renderer: rest.slice(0, end), reason: reason.replace(/\\(["\\])/g, '$1') };
+}

@@ -41,7 +41,8 @@ export function errorName(code) {
 
 export const Capability = Object.freeze({ AuthRequired: 1, CpuRenderer: 2, GpuRenderer: 4, Continuous: 8 });
 export const Codec = Object.freeze({ Raw: 0, Zstd: 1, ZstdDelta: 2, Jpeg: 3, Png: 4 });
-export const Renderer = Object.freeze({ GpuRaycaster: 0, CpuRaycaster: 1, Reference: 2, Splatter: 3, GpuSplatter: 4 });
+// Auto (5, since 2026-12-03): the server picks the GPU raycaster on a hardware GPU, else the CPU raycaster.
+export const Renderer = Object.freeze({ GpuRaycaster: 0, CpuRaycaster: 1, Reference: 2, Splatter: 3, GpuSplatter: 4, Auto: 5 });
 export const Quality = Object.freeze({ Adaptive: 0, Refined: 1, Interactive: 2 });
 export const FrameMode = Object.freeze({ Once: 0, ContinuousOn: 1, ContinuousOff: 2 });
 export const Placement = Object.freeze({ Value: 0, Fraction: 1, Percentile: 2 });
@@ -245,7 +246,7 @@ function validateRenderOptions(o) {
   checkInt(o.techniques, 0, TECHNIQUES_ALL, 'techniques');
   checkFinite(o.ertThreshold, 'ertThreshold');
   if (!(o.ertThreshold > 0 && o.ertThreshold <= 1)) throw new ProtocolError('OutOfRange', `ertThreshold: ${o.ertThreshold} outside (0, 1]`);
-  checkInt(o.renderer, 0, 4, 'renderer');
+  checkInt(o.renderer, 0, Renderer.Auto, 'renderer');
   checkInt(o.quality, 0, 2, 'quality');
   checkInt(o.codec, 0, 255, 'codec');
   checkInt(o.codecQuality, 0, 100, 'codecQuality');

@@ -10,13 +10,13 @@ import {
 import { Trackball } from './trackball.js';
 import { attachControls } from './controls.js';
 import { TfEditor } from './tfeditor.js';
-import { FrameStats, formatBytes, frameSize, halfSize, residencyLine, volumeLabel } from './frames.js';
+import { FrameStats, autoRendererOf, formatBytes, frameSize, halfSize, residencyLine, volumeLabel } from './frames.js';
 
 const STATS_INTERVAL_MS = 3000;
 const RENDERER_NAMES = {
   [Renderer.GpuRaycaster]: 'GPU raycaster', [Renderer.CpuRaycaster]: 'CPU raycaster',
   [Renderer.Reference]: 'CPU reference (slow, exact)', [Renderer.Splatter]: 'splatting (CPU)',
-  [Renderer.GpuSplatter]: 'splatting (GPU)',
+  [Renderer.GpuSplatter]: 'splatting (GPU)', [Renderer.Auto]: 'auto (the server picks)',
 };
 const CODEC_NAMES = ['raw', 'zstd', 'zstd delta', 'JPEG', 'PNG'];
 const IMAGE_TYPES = { [Codec.Jpeg]: 'image/jpeg', [Codec.Png]: 'image/png' };
@@ -47,7 +47,7 @@ const state = {
   lastOptions: null,
   options: {
     width: 0, height: 0, stepVoxels: 1, techniques: TECHNIQUES_ALL, ertThreshold: 0.99,
-    renderer: Renderer.CpuRaycaster, quality: Quality.Adaptive, codec: Codec.Jpeg, codecQuality: 80,
+    renderer: Renderer.Auto, quality: Quality.Adaptive, codec: Codec.Jpeg, codecQuality: 80,
     level: LEVEL_AUTOMATIC, refinedCodec: Codec.Png + 1,
     // Interactive frames at the size drawn (half each edge): a quarter of the pixels to encode
     // and send; the canvas scales them up smoothly (draw()).
@@ -59,6 +59,7 @@ const state = {
   lastFrame: null,
   lastBitmap: null, // the last frame drawn, decoded, at its own size (lastFrameImage())
   residency: '',
+  autoRenderer: null, // {renderer, reason}: what the server's auto draws with (its Stats)
   frameCount: 0,
   decoding: false,
   pendingFrame: null,
@@ -219,6 +220,12 @@ conn.addEventListener('error', (e) => {
     setRenderOptions({ renderer: Renderer.CpuRaycaster });
     return;
   }
+  if (state.options.renderer === Renderer.Auto && err.code === ErrorCode.OutOfRange &&
+      err.offendingType === Type.SetRenderOptions && /renderer/.test(err.serverMessage)) {
+    // A server from before 2026-12-03 knows no auto (renderer 5): pick as the page did then.
+    setRenderOptions({ renderer: conn.can(Capability.GpuRenderer) ? Renderer.GpuRaycaster : Renderer.CpuRaycaster });
+    return;
+  }
   if (state.options.flags && err.offendingType === Type.SetRenderOptions && /reserved|flags/.test(err.serverMessage)) {
     // A server from before 2026-12-03 knows no RenderOptions flags (the bytes were reserved):
     // ask for full-size interactive frames instead.
@@ -252,16 +259,17 @@ function onReady() {
 }
 
 function fillRenderers() {
-  const allowed = [];
+  // auto first: the server draws on its GPU when it has a hardware one, else on the CPU.
+  const allowed = [Renderer.Auto];
   if (conn.can(Capability.GpuRenderer)) allowed.push(Renderer.GpuRaycaster);
   if (conn.can(Capability.CpuRenderer)) allowed.push(Renderer.CpuRaycaster, Renderer.Reference, Renderer.Splatter);
   if (conn.can(Capability.GpuRenderer)) allowed.push(Renderer.GpuSplatter);
-  if (allowed.length === 0) {
+  if (allowed.length === 1) {
     showStatus('The server reports neither a CPU nor a GPU renderer.');
     allowed.push(Renderer.CpuRaycaster);
   }
   els.renderer.replaceChildren(...allowed.map((r) => new Option(RENDERER_NAMES[r], String(r))));
-  // The first connection starts on the best renderer the server offers; later ones keep the user's choice.
+  // The first connection starts on auto; later ones keep the user's choice.
   if (!state.rendererChosen || !allowed.includes(state.options.renderer)) state.options.renderer = allowed[0];
   state.rendererChosen = true;
   els.renderer.value = String(state.options.renderer);
@@ -374,7 +382,16 @@ function showStats({ counters }) {
     : 'no counters';
   // The overlay gets one line for the open volume; the panel above keeps every counter.
   state.residency = state.volume ? residencyLine(counters, state.volume.name) : '';
+  showAutoRenderer(autoRendererOf(counters));
   drawOverlay();
+}
+
+/** The renderer control's auto entry and the overlay say what the server's auto chose. */
+function showAutoRenderer(choice) {
+  state.autoRenderer = choice;
+  const option = [...els.renderer.options].find((o) => o.value === String(Renderer.Auto));
+  if (option) option.textContent = choice ? `auto: ${choice.renderer} (the server's choice)` : RENDERER_NAMES[Renderer.Auto];
+  if (option && choice) option.title = choice.reason;
 }
 
 function formatCounter(v) {
@@ -607,6 +624,7 @@ function drawOverlay() {
     `bricks ${f.bricksDrawn} drawn, ${f.bricksSkipped} skipped  uploaded ${formatBytes(f.bytesUploaded)}`,
   ];
   if (state.residency) lines.push(state.residency);
+  if (state.options.renderer === Renderer.Auto && state.autoRenderer) lines.push(state.autoRenderer.reason);
   els.overlay.textContent = lines.join('\n');
 }
 

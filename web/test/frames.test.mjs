@@ -1,6 +1,6 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { frameSize, formatBytes, volumeLabel, FrameStats, halfSize, residencyLine } from '../js/frames.js';
+import { frameSize, formatBytes, volumeLabel, FrameStats, halfSize, residencyLine, autoRendererOf } from '../js/frames.js';
 
 test('frame size follows the canvas, capped by the configured max and 4096, aspect kept', () => {
   assert.deepEqual(frameSize(800, 600, 1024), { width: 800, height: 600 });
@@ -53,4 +53,21 @@ test('the residency line shows the open volume only', () => {
   assert.equal(residencyLine(idle, 'ct'), 'cache 13 / 64 MiB, hits —');
   // A name that is a suffix of another is not confused with it.
   assert.equal(residencyLine([c('host_cache_resident_bytes', 0, 'xct'), c('host_cache_hits_total', 1, 'xct')], 'ct'), '');
+});
+
+test("the server's auto renderer and why, from its Stats counters", () => {
+  const reason = "auto: cpu (GL_RENDERER 'llvmpipe (LLVM 15.0.6, 256 bits)' is a software rasteriser)";
+  const counters = [
+    { name: 'frames_total{renderer="cpu"}', value: 3 },
+    { name: `auto_renderer{renderer="cpu",reason="${reason}"}`, value: 1 },
+  ];
+  assert.deepEqual(autoRendererOf(counters), { renderer: 'cpu', reason });
+  assert.equal(autoRendererOf(counters.slice(0, 1)), null, 'not decided yet');
+  // Cut at 128 bytes by the protocol: the reason ends in an ellipsis.
+  const cut = { name: `auto_renderer{renderer="gpu",reason="auto: gpu (GL_RENDERER '${'X'.repeat(200)}`.slice(0, 128), value: 1 };
+  const got = autoRendererOf([cut]);
+  assert.equal(got.renderer, 'gpu');
+  assert.ok(got.reason.startsWith('auto: gpu (GL_RENDERER') && got.reason.endsWith('…'));
+  assert.deepEqual(autoRendererOf([{ name: 'auto_renderer{renderer="cpu",reason="say \\"hi\\""}', value: 1 }]),
+    { renderer: 'cpu', reason: 'say "hi"' });
 });

@@ -6,7 +6,7 @@ import {
   Type, ErrorCode, ProtocolError, encode, decode, decodeHeader, encodeHello, encodeSetCamera,
   encodeSetRenderOptions, encodeSetTransferFunction, encodeAuth, encodeOpenVolume,
   encodeRequestHistogram, encodeRequestFrame, encodeListVolumes, encodeRequestStats, encodeBye,
-  encodeError, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags,
+  encodeError, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags, Renderer,
 } from '../js/protocol.js';
 
 const header = (type, length, request) => [
@@ -132,6 +132,20 @@ test('SetRenderOptions: golden bytes of MessagesTest.cpp, refinedCodec at byte 2
   assert.ok(Math.abs(back.ertThreshold - 0.99) < 1e-6);
 });
 
+test('SetRenderOptions: renderer 5 is auto, golden bytes of MessagesTest.cpp (the default options)', () => {
+  const o = {
+    width: 256, height: 256, stepVoxels: 1, techniques: 0x3f, ertThreshold: 0.99, renderer: Renderer.Auto,
+    quality: 0, codec: 1, codecQuality: 0, level: 255, refinedCodec: 0, flags: 0,
+  };
+  const got = encodeSetRenderOptions(o, 8);
+  assert.deepEqual(bytes(got), [
+    ...header(0x0a, 24, 8), 0x00, 0x01, 0x00, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x3f, 0x00, 0x00, 0x00,
+    0xa4, 0x70, 0x7d, 0x3f, 0x05, 0x00, 0x01, 0x00, 0xff, 0x00, 0x00, 0x00,
+  ]);
+  assert.equal(decode(got).body.renderer, Renderer.Auto);
+  throwsCode(() => encodeSetRenderOptions({ ...o, renderer: 6 }), 'OutOfRange', /renderer/);
+});
+
 test('SetRenderOptions: flags (u16 at bytes 22..23), bit 0 unscaled interactive', () => {
   const o = {
     width: 640, height: 480, stepVoxels: 0.5, techniques: 0x3f, ertThreshold: 0.99, renderer: 1,
@@ -164,7 +178,7 @@ test('SetRenderOptions: ranges', () => {
   throwsCode(() => encodeSetRenderOptions({ ...o, stepVoxels: 0 }), 'OutOfRange', /stepVoxels/);
   throwsCode(() => encodeSetRenderOptions({ ...o, techniques: 64 }), 'OutOfRange', /techniques/);
   throwsCode(() => encodeSetRenderOptions({ ...o, level: 16 }), 'OutOfRange', /level/);
-  throwsCode(() => encodeSetRenderOptions({ ...o, renderer: 5 }), 'OutOfRange', /renderer/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, renderer: 6 }), 'OutOfRange', /renderer/);
 });
 
 test('OpenVolume: names that are not catalog names are refused', () => {
