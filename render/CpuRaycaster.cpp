@@ -57,7 +57,10 @@ struct RayState {
 
 /// One ray through the brick grid (the shader's main()), for the bricks of batch f.batch:
 /// it stops, state saved, at the first planned brick of a later batch it would sample.
-template <class T> void marchRay(const Frame& f, float sx, float sy, RayState& s, RayCount& n) {
+/// `shift`: where the ray's samples start, in steps, relative to the unjittered lattice
+/// (rayJitter() - 1/2 with RenderOptions::jitter, else 0).
+template <class T>
+void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayCount& n) {
     if (s.phase == RayPhase::Done) return;
     if (s.phase == RayPhase::Waiting && f.bricks[s.brick].batch != f.batch) return; // not yet
     const RayPhase phase = s.phase;
@@ -76,6 +79,7 @@ template <class T> void marchRay(const Frame& f, float sx, float sy, RayState& s
         t0 = std::max(t0, std::min(ta, tb));
         t1 = std::min(t1, std::max(ta, tb));
     }
+    t0 += shift * f.stepMm; // sample k at t0 + (k + 1/2) step: at the entry + (k + jitter) step
     const int total = int(std::ceil((t1 - t0) / f.stepMm - 0.5f));
     if (total <= 0) return;
     glm::ivec3 cell = s.cell, stepDir;
@@ -147,8 +151,9 @@ void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& r
                               for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
                                   const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
                                   const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
-                                  marchRay<T>(f, sx, sy, rays[std::size_t(y - y0) * w + (x - x0)],
-                                              n);
+                                  const float shift = f.jitter ? rayJitter(x, y) - 0.5f : 0.0f;
+                                  marchRay<T>(f, sx, sy, shift,
+                                              rays[std::size_t(y - y0) * w + (x - x0)], n);
                               }
                           samples += n.samples;
                           leaps += n.leaps;
@@ -196,6 +201,7 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.ertT = o.earlyTermination ? float(1.0 - o.ertThreshold) : -1.0f;
     f.shading = o.shading;
     f.simd = o.simd;
+    f.jitter = o.jitter;
     f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);
     return f;
 }

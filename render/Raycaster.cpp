@@ -186,6 +186,7 @@ void setFrameUniforms(GLuint p, const LevelGeometry& g, const ViewBasis& v, cons
     f1("uErt", o.earlyTermination ? o.ertThreshold : 2.0);
     i1("uShading", o.shading);
     i1("uHardwareFilter", o.hardwareFilter);
+    i1("uJitter", o.jitter);
     const double perVoxel = 0.5 * m.scale / span * g.minSpacing();
     vec3("uGradScale", perVoxel / g.spacing);
     f1("uGradFade", ShadingModel::kGradientFade);

@@ -24,6 +24,12 @@ const char* toString(SkipMode mode) {
     return "?";
 }
 
+float rayJitter(std::uint32_t x, std::uint32_t y) {
+    // 2^32 / plastic number and 2^32 / plastic number^2, rounded; wrap-around is the fract.
+    const std::uint32_t h = x * 3242174889u + y * 2447445414u;
+    return float(h >> 8) * 0x1p-24f;
+}
+
 void RenderOptions::validate() const {
     constexpr std::uint32_t kMaxEdge = 16384;
     if (width == 0 || height == 0 || width > kMaxEdge || height > kMaxEdge)

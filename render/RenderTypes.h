@@ -62,6 +62,11 @@ struct RenderOptions {
     /// widest instruction set; render/detail/CpuMarchSimd.cpp). The same image as the scalar
     /// loop, bit for bit; false draws with the scalar loop.
     bool simd = true;
+    /// Start each ray's samples at a per-pixel offset of [0, 1) step from the box entry
+    /// instead of half a step (rayJitter()): the fixed lattice's wood-grain rings become fine
+    /// noise (render/OPTICS.md). Deterministic per pixel, so skipping, slices and repeated
+    /// frames keep their images exactly. The raycasters and the reference honour it.
+    bool jitter = false;
     OccupancyConfig octree; ///< second-stage traversal (SkipMode::All)
     /// Start rays at the previous frame's occlusion frustums (same raycaster, same scene).
     bool occlusionFrustums = true;
@@ -77,6 +82,12 @@ struct RenderOptions {
     /// The pixels to draw: `region`, or the whole image when it is empty.
     PixelRect drawn() const { return region.whole() ? PixelRect{0, 0, width, height} : region; }
 };
+
+/// Where pixel (x, y) of the frame (y from the top) starts its samples under
+/// RenderOptions::jitter, in steps past the box entry, in [0, 1): the R2 low-discrepancy
+/// dither (Roberts 2018, fract(x a1 + y a2) with a1, a2 from the plastic number) in 32-bit
+/// fixed point, so that the shader computes the same float bit for bit.
+float rayJitter(std::uint32_t x, std::uint32_t y);
 
 /// Shading constants (headlight Blinn-Phong; the light sits at the eye).
 struct ShadingModel {

@@ -40,6 +40,7 @@ struct Frame {
     float ertT = -1; ///< stop a ray once its transmittance is at most this (-1: never)
     bool shading = true;
     bool simd = true; ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
+    bool jitter = false; ///< RenderOptions::jitter
     glm::vec3 gradScale{1};
     const std::uint32_t* occ = nullptr;
     int octDepth = 0, occWords = 0, leafAxis = 1;

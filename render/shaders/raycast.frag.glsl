@@ -35,7 +35,7 @@ uniform vec3 uInvPoolSize;
 uniform float uTfScale, uTfOffset;   // texel value -> TF entry position u (N - 1)
 uniform int uTfEntries;
 uniform float uErt;           // > 1 disables early termination
-uniform bool uShading, uFirstPass, uHardwareFilter;
+uniform bool uShading, uFirstPass, uHardwareFilter, uJitter;
 uniform vec3 uGradScale;      // texel difference -> TF-domain units per voxel of the smallest spacing
 uniform float uGradFade;
 uniform float uAmbient, uDiffuse, uSpecular, uShininess;
@@ -132,6 +132,13 @@ void main() {
         float ta = -ov[a] / dv[a], tb = (uDims[a] - ov[a]) / dv[a];
         t0 = max(t0, min(ta, tb));
         t1 = min(t1, max(ta, tb));
+    }
+    // RenderOptions::jitter: samples from the entry + (k + rayJitter()) step (RenderTypes.cpp,
+    // the same integers; y counted from the top as the CPU's pixels are).
+    if (uJitter) {
+        uint x = uint(gl_FragCoord.x), y = uint(uViewport.y) - 1u - uint(gl_FragCoord.y);
+        uint h = x * 3242174889u + y * 2447445414u;
+        t0 += (float(h >> 8u) * (1.0 / 16777216.0) - 0.5) * uStepMm;
     }
     int total = int(ceil((t1 - t0) / uStepMm - 0.5));
     if (total <= 0) { outColor = acc; return; }
