@@ -39,7 +39,7 @@ struct Frame {
     float tfScale = 1, tfOffset = 0; ///< native value -> table position
     float ertT = -1; ///< stop a ray once its transmittance is at most this (-1: never)
     bool shading = true;
-    bool simd = true; ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
+    bool simd = true;    ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
     bool jitter = false; ///< RenderOptions::jitter
     glm::vec3 gradScale{1};
     const std::uint32_t* occ = nullptr;
