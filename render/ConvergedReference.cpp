@@ -54,16 +54,30 @@ const char* toString(ConvergenceStop stop) {
 ConvergedReference renderConverged(Renderer& reference, const Scene& scene, const View& view,
                                    const RenderOptions& options, const ConvergenceConfig& config) {
     config.validate();
+    RenderOptions o = options;
+    o.stepVoxels = config.startStepVoxels;
+    while (0.5 * o.stepVoxels >= config.floorStepVoxels)
+        o.stepVoxels *= 0.5;
+    try { // the finest step too, so a bad floor fails now, not after minutes
+        o.validate();
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("convergence: the finest step it could reach, " +
+                                    std::to_string(o.stepVoxels) + " (floorStepVoxels " +
+                                    std::to_string(config.floorStepVoxels) + "): " + e.what());
+    }
     const auto start = std::chrono::steady_clock::now();
     ConvergedReference out;
-    RenderOptions o = options;
     for (double step = config.startStepVoxels;; step *= 0.5) {
         o.stepVoxels = step;
         FrameStats stats;
         Image image = reference.render(scene, view, o, stats);
-        ConvergenceStep s{step, stats.totalMs, stats.samples,
-                          std::numeric_limits<double>::quiet_NaN()};
-        if (!out.steps.empty()) s.maxAbsToPrevious = compareImages(out.image, image).maxAbs;
+        const double nan = std::numeric_limits<double>::quiet_NaN();
+        ConvergenceStep s{step, stats.totalMs, stats.samples, nan, nan};
+        if (!out.steps.empty()) {
+            const ImageComparison c = compareImages(out.image, image);
+            s.maxAbsToPrevious = c.maxAbs;
+            s.rmseToPrevious = c.rmse;
+        }
         out.steps.push_back(s);
         out.image = std::move(image);
         out.imageStepVoxels = out.stepVoxels = step;

@@ -21,8 +21,9 @@ struct ConvergenceConfig {
     /// Converged once the largest |a-b| over the four channels of all pixels of two successive
     /// frames (premultiplied RGBA in [0, 1], before any 8-bit rounding) is below this.
     double toleranceRgba = 0.5 / 255.0;
-    /// No frame at a step below this: the search stops there, not converged.
-    double floorStepVoxels = 1.0 / 128.0;
+    /// No frame at a step below this: the search stops there, not converged. (1/64: the
+    /// smallest power of two that RenderOptions accepts, which is 0.01.)
+    double floorStepVoxels = 1.0 / 64.0;
     /// 0: none. Otherwise no halving is started whose frame (predicted as twice the last
     /// one's time) would end after this many ms from the start: not converged.
     double timeLimitMs = 0.0;
@@ -39,6 +40,7 @@ struct ConvergenceStep {
     std::uint64_t samples = 0;
     /// Max abs difference (RGBA) to the frame at twice this step; NaN for the first frame.
     double maxAbsToPrevious = 0.0;
+    double rmseToPrevious = 0.0; ///< the same as RMSE over RGBA (NaN for the first frame)
 };
 
 enum class ConvergenceStop { Converged, FloorStep, TimeLimit };
@@ -63,7 +65,8 @@ struct ConvergedReference {
 /// below the floor, or the time limit would be passed. `reference` should be the float64
 /// reference renderer (any Renderer works; the result is that renderer's limit). Options other
 /// than stepVoxels are used as given.
-/// @throw std::invalid_argument on a bad config; what reference.render throws.
+/// @throw std::invalid_argument on a bad config or options (also at the finest step the search
+/// could reach), before anything is drawn; what reference.render throws.
 ConvergedReference renderConverged(Renderer& reference, const Scene& scene, const View& view,
                                    const RenderOptions& options, const ConvergenceConfig& config);
 

@@ -37,7 +37,7 @@ TEST(ConvergedReference, HeadsqAt64FindsAStepAndTheDifferencesShrink) {
     auto s = headsq();
     if (!s) return test::missingData("scan headsq");
     ReferenceRenderer reference;
-    ConvergenceConfig config; // 0.5/255 from step 1, floor 1/128
+    ConvergenceConfig config; // 0.5/255 from step 1, floor 1/64
     const ConvergedReference r =
         renderConverged(reference, s->scene(), s->view, s->options, config);
     for (const auto& step : r.steps)
@@ -82,8 +82,7 @@ TEST(ConvergedReference, TheTimeLimitStopsTheSearchNotConverged) {
     ReferenceRenderer reference;
     ConvergenceConfig config;
     config.toleranceRgba = 1e-12;
-    config.floorStepVoxels = 1e-6; // ~20 halvings: only the time limit ends it soon
-    config.timeLimitMs = 1e-3;
+    config.timeLimitMs = 1e-3; // before the second frame
     const ConvergedReference r =
         renderConverged(reference, s->scene(), s->view, s->options, config);
     EXPECT_FALSE(r.converged);
@@ -131,6 +130,14 @@ TEST(ConvergedReference, RefusesBadTolerancesStepsAndLimits) {
     zero.toleranceRgba = 0.0;
     EXPECT_THROW(renderConverged(reference, s->scene(), s->view, s->options, zero),
                  std::invalid_argument);
+    ConvergenceConfig tooFine; // 1/1024 is below the smallest step RenderOptions accepts
+    tooFine.floorStepVoxels = 1e-3;
+    try {
+        renderConverged(reference, s->scene(), s->view, s->options, tooFine);
+        ADD_FAILURE() << "a floor under the smallest step accepted";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("floorStepVoxels"), std::string::npos) << e.what();
+    }
 }
 
 } // namespace

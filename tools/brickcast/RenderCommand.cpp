@@ -45,7 +45,7 @@ struct RenderCliOptions {
     std::uint32_t repeat = 1;
     /// --converge [TOL]: empty when not given ("default" when given without a value).
     std::string converge;
-    double convergeFloor = 1.0 / 128.0, convergeTimeS = 0.0;
+    double convergeFloor = 1.0 / 64.0, convergeTimeS = 0.0;
 };
 
 glm::dvec3 vec3Of(const std::string& text, const std::string& what) {
@@ -178,12 +178,15 @@ nlohmann::json convergenceJson(const render::ConvergedReference& r,
                                const render::ConvergenceConfig& c) {
     nlohmann::json steps = nlohmann::json::array();
     for (const auto& s : r.steps)
-        steps.push_back({{"stepVoxels", s.stepVoxels},
-                         {"renderMs", s.renderMs},
-                         {"samples", s.samples},
-                         {"maxAbsToPrevious", std::isnan(s.maxAbsToPrevious)
-                                                  ? nlohmann::json(nullptr)
-                                                  : nlohmann::json(s.maxAbsToPrevious)}});
+        steps.push_back(
+            {{"stepVoxels", s.stepVoxels},
+             {"renderMs", s.renderMs},
+             {"samples", s.samples},
+             {"maxAbsToPrevious", std::isnan(s.maxAbsToPrevious)
+                                      ? nlohmann::json(nullptr)
+                                      : nlohmann::json(s.maxAbsToPrevious)},
+             {"rmseToPrevious", std::isnan(s.rmseToPrevious) ? nlohmann::json(nullptr)
+                                                             : nlohmann::json(s.rmseToPrevious)}});
     return {{"converged", r.converged},
             {"stop", render::toString(r.stop)},
             {"stepVoxels", r.stepVoxels},
@@ -213,8 +216,8 @@ render::Image convergedImage(const RenderCliOptions& o, const brickstore::BrickS
         reference, render::Scene{store, cache, tf, classifications},
         render::View::of(camera, options.width, options.height), options, config);
     for (const auto& s : r.steps)
-        std::printf("step %.6g: %.1f ms, max abs to the previous step %.3f/255\n", s.stepVoxels,
-                    s.renderMs, s.maxAbsToPrevious * 255.0);
+        std::printf("step %.6g: %.1f ms, to the previous step max abs %.3f/255, RMSE %.4f/255\n",
+                    s.stepVoxels, s.renderMs, s.maxAbsToPrevious * 255.0, s.rmseToPrevious * 255.0);
     std::printf("%s: step %.6g (image at %.6g), tolerance %.3f/255, %.1f ms in all\n",
                 r.converged ? "converged" : "NOT converged", r.stepVoxels, r.imageStepVoxels,
                 config.toleranceRgba * 255.0, r.totalMs);
