@@ -1,32 +1,32 @@
 #!/usr/bin/env python3
-"""brickcast against VTK: time and error against brickcast's float64 reference renderer.
+"""brickcast against VTK: time and error against the converged float64 reference.
 
-What it does
-  1. Loads stanford_cthead (256x256x113 uint16, spacing 1,1,2 mm) into vtkImageData, and
-     ingests the same raw file into a brickcast store (`brickcast ingest`, cached in --out).
-  2. Rebuilds brickcast's camera (Camera::orbit + ViewBasis), transfer functions
-     (configs/tf/*.json placed exactly as render/TransferFunction.cpp places them, from the
-     store's own histogram, and sampled into brickcast's 4096-entry table) and optical model
-     (render/OPTICS.md: per-unit-step opacity, headlight Blinn-Phong ambient 0.3, diffuse 0.7,
-     specular 0.25, shininess 24, black background, trilinear) in VTK for the presets
-     ct-bone and ct-skin.
-  3. Times VTK's CPU raycaster (vtkFixedPointVolumeRayCastMapper) and GPU raycaster
-     (vtkOpenGLGPUVolumeRayCastMapper, i.e. llvmpipe on a GPU-less machine): 2 warm-up frames,
-     then the median of N frames of the same view (render + framebuffer read-back), and the
-     first (cold) frame on its own.
-  4. Renders the brickcast float64 reference (`brickcast render --reference`) of each view, and
-     times brickcast's CPU and GPU raycasters (`--renderer cpu|gpu`) the way VTK is timed: one
-     invocation draws the view --warmup + --frames times with one renderer (`--repeat`), the
-     median of the --stats JSON's frameMs after the warm-up frames is the figure and the first
-     frame is the cold one (brick loads/uploads, octree build); process start-up is not counted.
-  5. Compares every image with the reference: linear [0,1] RGB, all pixels, 8-bit PNGs on
-     both sides. brickcast writes premultiplied RGBA (RGB already composited over black); VTK
-     renders over a black background, so both RGB triples are "over black" and alpha is
-     ignored. Prints PSNR, max abs difference and RMSE (and brickcast compare's SSIM) as a
-     markdown table, writes it to OUT/table.md and everything to OUT/results.json.
-  6. With --diagnostics (default on) it also renders the variants that isolate the parts of
-     VTK's model that cannot be matched (unshaded, no edge padding, TF control points only),
-     so the report can say how much each mismatch alone costs.
+What it does, for every scan x preset x view x size (--scans, --tfs, --views, --sizes)
+  1. Loads the raw scan (../shared/data; cthead, headsq, CT_AVM, frog, hydrogen) into
+     vtkImageData, and ingests the same raw file into a brickcast store (cached in OUT/stores).
+  2. Rebuilds brickcast's camera (Camera::orbit + ViewBasis), the scan's presets (configs/tf,
+     placed exactly as render/TransferFunction.cpp places them from the store's own histogram,
+     sampled into brickcast's 4096-entry table; the preset's "shading" default honoured on both
+     sides) and optical model (render/OPTICS.md: per-unit-step opacity, headlight Blinn-Phong
+     ambient 0.3, diffuse 0.7, specular 0.25, shininess 24, black background, trilinear) in VTK.
+  3. The true image: `brickcast render --reference --converge` (render/ConvergedReference.h):
+     the float64 reference at --conv-start, halved until the image changes by under --conv-tol
+     (max abs, RGBA) or --conv-floor / --conv-time-s is reached (then marked NOT converged).
+     It and the same-step references are cached in OUT/refcache under a hash of everything that
+     determines them (scan bytes, TF file, view, size, shading, step or convergence settings,
+     the model's sources), so reruns skip them.
+  4. Times VTK's CPU raycaster (vtkFixedPointVolumeRayCastMapper) at --step: --warmup frames,
+     then the median of --frames frames (render + framebuffer read-back); the first is the
+     cold frame.
+  5. Times brickcast's CPU raycaster at every --bc-steps step the same way (one `brickcast
+     render --renderer cpu --repeat` per step; median of the --stats frameMs after the warm-up).
+     The same step is --step; the equal-error point is the fastest step whose RMSE against the
+     converged image is no worse than VTK's.
+  6. Every error is linear [0,1] RGB over all pixels of 8-bit PNGs, against the converged
+     reference and against the reference at the renderer's own step. brickcast writes
+     premultiplied RGBA (RGB already over black); VTK renders over black: alpha is ignored.
+     Prints markdown tables (also OUT/table.md) and writes every number to OUT/results.json
+     (rewritten after every pair, so an interrupted run keeps what it measured).
 
 How to run (from the repository root; Debian 12):
     apt-get install python3-vtk9 xvfb          # benchmark-only peer, not a project dependency
@@ -384,14 +384,6 @@ def brickcast_render(args, store, out_png, tf, view, size, step, extra):
         stats = json.load(f)
     stats["wallMs"] = wall
     return stats
-
-
-def brickcast_compare(args, a, b):
-    try:
-        out = run([args.brickcast, "compare", a, b, "--json"], nice=False)
-        return json.loads(out)
-    except (SystemExit, ValueError):
-        return None
 
 
 # ---- metrics -------------------------------------------------------------------------------
