@@ -1,32 +1,32 @@
 #!/usr/bin/env python3
-"""brickcast against VTK: time and error against brickcast's float64 reference renderer.
+"""brickcast against VTK: time and error against the converged float64 reference.
 
-What it does
-  1. Loads stanford_cthead (256x256x113 uint16, spacing 1,1,2 mm) into vtkImageData, and
-     ingests the same raw file into a brickcast store (`brickcast ingest`, cached in --out).
-  2. Rebuilds brickcast's camera (Camera::orbit + ViewBasis), transfer functions
-     (configs/tf/*.json placed exactly as render/TransferFunction.cpp places them, from the
-     store's own histogram, and sampled into brickcast's 4096-entry table) and optical model
-     (render/OPTICS.md: per-unit-step opacity, headlight Blinn-Phong ambient 0.3, diffuse 0.7,
-     specular 0.25, shininess 24, black background, trilinear) in VTK for the presets
-     ct-bone and ct-skin.
-  3. Times VTK's CPU raycaster (vtkFixedPointVolumeRayCastMapper) and GPU raycaster
-     (vtkOpenGLGPUVolumeRayCastMapper, i.e. llvmpipe on a GPU-less machine): 2 warm-up frames,
-     then the median of N frames of the same view (render + framebuffer read-back), and the
-     first (cold) frame on its own.
-  4. Renders the brickcast float64 reference (`brickcast render --reference`) of each view, and
-     times brickcast's CPU and GPU raycasters (`--renderer cpu|gpu`) the way VTK is timed: one
-     invocation draws the view --warmup + --frames times with one renderer (`--repeat`), the
-     median of the --stats JSON's frameMs after the warm-up frames is the figure and the first
-     frame is the cold one (brick loads/uploads, octree build); process start-up is not counted.
-  5. Compares every image with the reference: linear [0,1] RGB, all pixels, 8-bit PNGs on
-     both sides. brickcast writes premultiplied RGBA (RGB already composited over black); VTK
-     renders over a black background, so both RGB triples are "over black" and alpha is
-     ignored. Prints PSNR, max abs difference and RMSE (and brickcast compare's SSIM) as a
-     markdown table, writes it to OUT/table.md and everything to OUT/results.json.
-  6. With --diagnostics (default on) it also renders the variants that isolate the parts of
-     VTK's model that cannot be matched (unshaded, no edge padding, TF control points only),
-     so the report can say how much each mismatch alone costs.
+What it does, for every scan x preset x view x size (--scans, --tfs, --views, --sizes)
+  1. Loads the raw scan (../shared/data; cthead, headsq, CT_AVM, frog, hydrogen) into
+     vtkImageData, and ingests the same raw file into a brickcast store (cached in OUT/stores).
+  2. Rebuilds brickcast's camera (Camera::orbit + ViewBasis), the scan's presets (configs/tf,
+     placed exactly as render/TransferFunction.cpp places them from the store's own histogram,
+     sampled into brickcast's 4096-entry table; the preset's "shading" default honoured on both
+     sides) and optical model (render/OPTICS.md: per-unit-step opacity, headlight Blinn-Phong
+     ambient 0.3, diffuse 0.7, specular 0.25, shininess 24, black background, trilinear) in VTK.
+  3. The true image: `brickcast render --reference --converge` (render/ConvergedReference.h):
+     the float64 reference at --conv-start, halved until the image changes by under --conv-tol
+     (max abs, RGBA) or --conv-floor / --conv-time-s is reached (then marked NOT converged).
+     It and the same-step references are cached in OUT/refcache under a hash of everything that
+     determines them (scan bytes, TF file, view, size, shading, step or convergence settings,
+     the model's sources), so reruns skip them.
+  4. Times VTK's CPU raycaster (vtkFixedPointVolumeRayCastMapper) at --step: --warmup frames,
+     then the median of --frames frames (render + framebuffer read-back); the first is the
+     cold frame.
+  5. Times brickcast's CPU raycaster at every --bc-steps step the same way (one `brickcast
+     render --renderer cpu --repeat` per step; median of the --stats frameMs after the warm-up).
+     The same step is --step; the equal-error point is the fastest step whose RMSE against the
+     converged image is no worse than VTK's.
+  6. Every error is linear [0,1] RGB over all pixels of 8-bit PNGs, against the converged
+     reference and against the reference at the renderer's own step. brickcast writes
+     premultiplied RGBA (RGB already over black); VTK renders over black: alpha is ignored.
+     Prints markdown tables (also OUT/table.md) and writes every number to OUT/results.json
+     (rewritten after every pair, so an interrupted run keeps what it measured).
 
 How to run (from the repository root; Debian 12):
     apt-get install python3-vtk9 xvfb          # benchmark-only peer, not a project dependency
@@ -50,8 +50,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.normpath(os.path.join(HERE, "..", ".."))
-DEFAULT_DATA = os.path.normpath(
-    os.path.join(REPO, "..", "shared", "data", "stanford_cthead_256x256x113_uint16.raw"))
+DEFAULT_DATA_DIR = os.path.normpath(os.path.join(REPO, "..", "shared", "data"))
 
 INSTALL_HINT = ("VTK for Python is missing. On Debian 12:\n"
                 "    apt-get install python3-vtk9 python3-numpy xvfb\n"
@@ -172,7 +171,7 @@ def load_tf(path, stats):
     dmin = stats.vmin
     dmax = stats.vmax if stats.vmax > stats.vmin else stats.vmin + 1.0
     return {"name": doc.get("name", os.path.basename(path)), "points": points,
-            "domain": (dmin, dmax)}
+            "domain": (dmin, dmax), "shading": bool(doc.get("shading", True))}
 
 
 def tf_evaluate(points, value):
@@ -208,10 +207,15 @@ def tf_table(tf, entries=4096):
 
 # ---- VTK -----------------------------------------------------------------------------------
 
-def load_volume(vtk, np, path, dims, spacing, pad):
+RAW_TYPES = {"u8": ("<u1", "VTK_UNSIGNED_CHAR"), "u16": ("<u2", "VTK_UNSIGNED_SHORT"),
+             "i16": ("<i2", "VTK_SHORT"), "f32": ("<f4", "VTK_FLOAT")}
+
+
+def load_volume(vtk, np, path, dims, spacing, pad, voxel_type="u16"):
     from vtk.util import numpy_support
     nx, ny, nz = dims
-    data = np.fromfile(path, dtype="<u2")
+    dtype, vtk_type = RAW_TYPES[voxel_type]
+    data = np.fromfile(path, dtype=dtype)
     if data.size != nx * ny * nz:
         raise SystemExit(f"{path}: {data.size} voxels, expected {nx}x{ny}x{nz}")
     vol = data.reshape(nz, ny, nx)
@@ -228,7 +232,7 @@ def load_volume(vtk, np, path, dims, spacing, pad):
     image.SetDimensions(vol.shape[2], vol.shape[1], vol.shape[0])
     image.SetSpacing(*spacing)
     image.SetOrigin(*origin)
-    arr = numpy_support.numpy_to_vtk(vol.ravel(), deep=True, array_type=vtk.VTK_UNSIGNED_SHORT)
+    arr = numpy_support.numpy_to_vtk(vol.ravel(), deep=True, array_type=getattr(vtk, vtk_type))
     arr.SetName("scalars")
     image.GetPointData().SetScalars(arr)
     return image
@@ -365,12 +369,11 @@ def run(cmd, nice=True):
     return p.stdout
 
 
-def brickcast_render(args, store, out_png, tf, view, extra, step=None):
+def brickcast_render(args, store, out_png, tf, view, size, step, extra):
     stats_path = out_png[:-4] + ".json"
     cmd = [args.brickcast, "render", store, "-o", out_png, "--tf", tf,
            "--orbit", ",".join("%g" % v for v in view["orbit"]),
-           "--size", f"{args.size},{args.size}",
-           "--step", "%g" % (args.step if step is None else step),
+           "--size", f"{size},{size}", "--step", "%g" % step,
            "--fov", "%g" % args.fov, "--stats", stats_path] + extra
     if view["up"]:
         cmd += ["--up", ",".join("%g" % u for u in view["up"])]
@@ -381,14 +384,6 @@ def brickcast_render(args, store, out_png, tf, view, extra, step=None):
         stats = json.load(f)
     stats["wallMs"] = wall
     return stats
-
-
-def brickcast_compare(args, a, b):
-    try:
-        out = run([args.brickcast, "compare", a, b, "--json"], nice=False)
-        return json.loads(out)
-    except (SystemExit, ValueError):
-        return None
 
 
 # ---- metrics -------------------------------------------------------------------------------
@@ -415,40 +410,246 @@ def metrics(np, img, ref):
             "meanSigned": float(np.mean(d))}
 
 
+# ---- the scans and their presets -----------------------------------------------------------
+
+# Every scan of ../shared/data that VTK reads as raw (MANIFEST.md), with brickcast's presets for
+# its modality (configs/tf/README.md, bench/BenchDatasets.cpp).
+SCANS = {
+    "cthead": {"file": "stanford_cthead_256x256x113_uint16.raw", "dims": (256, 256, 113),
+               "type": "u16", "spacing": (1, 1, 2), "tfs": ["ct-bone", "ct-skin"]},
+    "headsq": {"file": "vtk_headsq_quarter_64x64x93_uint16.raw", "dims": (64, 64, 93),
+               "type": "u16", "spacing": (3.2, 3.2, 1.5), "tfs": ["ct-bone", "ct-skin"]},
+    "CT_AVM": {"file": "CT_AVM_256x242x154_uint8.raw", "dims": (256, 242, 154),
+               "type": "u8", "spacing": (0.72, 0.721, 1.0), "tfs": ["vessels"]},
+    "frog": {"file": "frog_500x470x136_uint8.raw", "dims": (500, 470, 136),
+             "type": "u8", "spacing": (1, 1, 1.5), "tfs": ["mr"]},
+    "hydrogen": {"file": "hydrogen_64x64x64_float32.raw", "dims": (64, 64, 64),
+                 "type": "f32", "spacing": (1, 1, 1), "tfs": ["smoke"]},
+}
+
+# What the float64 reference's image depends on besides its inputs: a change to any of these
+# files invalidates the cached references (a rebuilt brickcast with other raycasters does not).
+MODEL_SOURCES = ["render/ReferenceRenderer.cpp", "render/ConvergedReference.cpp",
+                 "render/TransferFunction.cpp", "render/Camera.cpp", "render/View.cpp",
+                 "render/RenderTypes.cpp", "render/Classification.cpp", "render/OPTICS.md"]
+
+
+def sha256_of(path, chunk=1 << 20):
+    import hashlib
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(chunk), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def model_hash():
+    import hashlib
+    h = hashlib.sha256()
+    for rel in MODEL_SOURCES:
+        path = os.path.join(REPO, rel)
+        if os.path.exists(path):
+            h.update(rel.encode() + b"\0" + open(path, "rb").read())
+    return h.hexdigest()[:16]
+
+
+class ReferenceCache:
+    """Reference frames on disk in OUT/refcache, named by a hash of everything that determines
+    them: the scan's bytes, dims, type, spacing, the TF file, view, fov, size, shading, the step
+    (or the convergence settings) and the model's sources. Reruns reuse them."""
+
+    def __init__(self, args):
+        self.args = args
+        self.folder = os.path.join(args.out, "refcache")
+        os.makedirs(self.folder, exist_ok=True)
+        self.model = model_hash()
+        self.scan_ids = {}
+
+    def _key(self, scan, tf, view, size, shade, what):
+        import hashlib
+        spec = SCANS[scan]
+        if scan not in self.scan_ids:
+            self.scan_ids[scan] = sha256_of(os.path.join(self.args.data_dir, spec["file"]))
+        tf_path = os.path.join(REPO, "configs", "tf", tf + ".json")
+        key = {"scan": self.scan_ids[scan], "dims": spec["dims"], "type": spec["type"],
+               "spacing": spec["spacing"], "tf": sha256_of(tf_path), "view": view["text"],
+               "fov": self.args.fov, "size": size, "shade": shade, "model": self.model, **what}
+        digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:20]
+        return key, digest
+
+    def same_step(self, store, scan, tf, view, size, shade, step):
+        key, digest = self._key(scan, tf, view, size, shade, {"step": step})
+        png = os.path.join(self.folder, f"ref_{scan}_{tf}_{size}_{digest}.png")
+        if not os.path.exists(png):
+            brickcast_render(self.args, store, png, tf, view, size, step,
+                             ["--reference"] + ([] if shade else ["--no-shading"]))
+        return png
+
+    def converged(self, store, scan, tf, view, size, shade):
+        a = self.args
+        key, digest = self._key(scan, tf, view, size, shade,
+                                {"tolerance": a.conv_tol, "start": a.conv_start,
+                                 "floor": a.conv_floor})
+        png = os.path.join(self.folder, f"conv_{scan}_{tf}_{size}_{digest}.png")
+        stats_path = png[:-4] + ".json"
+        if os.path.exists(png) and os.path.exists(stats_path):
+            with open(stats_path) as f:
+                cached = json.load(f)
+            c = cached["convergence"]
+            limit = c["timeLimitMs"] / 1e3
+            if c["converged"] or c["stop"] == "floor step" or (
+                    limit and (not a.conv_time_s or a.conv_time_s <= limit)):
+                return png, c, True
+        print(f"[compare_vtk]   converging the reference ({scan} {tf} {view['text']} {size}^2)",
+              flush=True)
+        stats = brickcast_render(
+            a, store, png, tf, view, size, a.conv_start,
+            ["--reference", "--converge", "%.17g" % a.conv_tol, "--converge-floor",
+             "%.17g" % a.conv_floor, "--converge-time-s", "%g" % a.conv_time_s]
+            + ([] if shade else ["--no-shading"]))
+        with open(png[:-4] + ".key.json", "w") as f:
+            json.dump(key, f, indent=2)
+        return png, stats["convergence"], False
+
+
+# ---- one pair: scan x preset x view x size --------------------------------------------------
+
+def ingest_scan(args, scan):
+    spec = SCANS[scan]
+    store = os.path.join(args.out, "stores", scan + ".bcs")
+    if not os.path.exists(store):
+        os.makedirs(os.path.dirname(store), exist_ok=True)
+        print(f"[compare_vtk] ingesting {spec['file']} -> {store}", flush=True)
+        run([args.brickcast, "ingest", os.path.join(args.data_dir, spec["file"]),
+             "--dims", ",".join(map(str, spec["dims"])), "--type", spec["type"],
+             "--spacing", ",".join("%g" % v for v in spec["spacing"]), "--endian", "little",
+             "-o", store, "-q"])
+    return store
+
+
+def errors(np, vtk, png, conv_png, same_png):
+    """Linear RGB over black against the converged and the same-step reference."""
+    img = read_rgb(vtk, np, png)
+    return {"vsConverged": metrics(np, img, read_rgb(vtk, np, conv_png)),
+            "vsSameStep": metrics(np, img, read_rgb(vtk, np, same_png))}
+
+
+def bc_sweep(args, ctx, store, scan, tf, view, size, shade, conv_png):
+    """brickcast cpu at every --bc-steps step: warm median ms and errors."""
+    np, vtk, cache = ctx["np"], ctx["vtk"], ctx["cache"]
+    out = []
+    for step in args.bc_step_list:
+        png = os.path.join(args.out, "frames", f"bc_{scan}_{tf}_{view['name']}_{size}_s{step:g}.png")
+        stats = brickcast_render(args, store, png, tf, view, size, step,
+                                 ["--renderer", "cpu", "--ert", args.bc_ert,
+                                  "--repeat", str(args.warmup + args.frames)]
+                                 + ([] if shade else ["--no-shading"]))
+        same = cache.same_step(store, scan, tf, view, size, shade, step)
+        out.append({"step": step, "medianMs": statistics.median(stats["frameMs"][args.warmup:]),
+                    "firstMs": stats["frameMs"][0], "timesMs": stats["frameMs"][args.warmup:],
+                    "samplesPerPixel": stats["samplesPerPixel"], "png": png, "sameStepRef": same,
+                    **errors(np, vtk, png, conv_png, same)})
+    return out
+
+
+def vtk_fixed_point(args, ctx, scan, tf, tfd, view, size, shade):
+    """VTK's fixed-point mapper at --step: first (cold) frame, warm median, the PNG."""
+    vtk, np = ctx["vtk"], ctx["np"]
+    spec = SCANS[scan]
+    if ctx.get("volume_of") != scan:
+        ctx["image"] = load_volume(vtk, np, os.path.join(args.data_dir, spec["file"]),
+                                   spec["dims"], spec["spacing"], True, spec["type"])
+        ctx["volume_of"] = scan
+    if size not in ctx["scenes"]:
+        ctx["scenes"][size] = VtkScene(vtk, size, size)
+    scene = ctx["scenes"][size]
+    box_max = [d * s for d, s in zip(spec["dims"], spec["spacing"])]
+    step_mm = args.step * min(spec["spacing"])
+    mapper = make_mapper(vtk, "vtk-cpu", ctx["image"], step_mm, ([0.0] * 3, box_max))
+    scene.set_volume(mapper, vtk_property(vtk, tfd, args.tf_nodes, shade, min(spec["spacing"])))
+    scene.set_camera(orbit_camera(box_max, *view["orbit"][:2],
+                                  dist=view["orbit"][2] if len(view["orbit"]) > 2 else 1.0,
+                                  fov_deg=args.fov, up=view["up"]))
+    first = scene.frame()
+    for _ in range(max(0, args.warmup - 1)):
+        scene.frame()
+    times = [scene.frame() for _ in range(args.frames)]
+    png = os.path.join(args.out, "frames", f"vtk_{scan}_{tf}_{view['name']}_{size}.png")
+    scene.save_png(png)
+    if ctx.get("gl") is None:
+        ctx["gl"] = scene.gl_renderer()
+    return {"medianMs": statistics.median(times), "firstMs": first, "timesMs": times, "png": png}
+
+
+def run_pair(args, ctx, scan, tf, view, size):
+    store = ctx["stores"][scan]
+    np, vtk, cache = ctx["np"], ctx["vtk"], ctx["cache"]
+    tfd = load_tf(os.path.join(REPO, "configs", "tf", tf + ".json"), ctx["stats"][scan])
+    shade = tfd["shading"]
+    t = time.perf_counter()
+    conv_png, conv, cached = cache.converged(store, scan, tf, view, size, shade)
+    conv_s = time.perf_counter() - t
+    same_png = cache.same_step(store, scan, tf, view, size, shade, args.step)
+    v = vtk_fixed_point(args, ctx, scan, tf, tfd, view, size, shade)
+    v.update(errors(np, vtk, v["png"], conv_png, same_png))
+    sweep = bc_sweep(args, ctx, store, scan, tf, view, size, shade, conv_png)
+    same = next(b for b in sweep if b["step"] == args.step)
+    target = v["vsConverged"]["rmse"]
+    fits = [b for b in sweep if b["vsConverged"]["rmse"] <= target]
+    equal = min(fits, key=lambda b: b["medianMs"]) if fits else None
+    return {"scan": scan, "tf": tf, "view": view["text"], "size": size, "shading": shade,
+            "converged": {"png": conv_png, "cached": cached, "wallS": conv_s, **conv},
+            "vtk": v, "bcSweep": sweep, "bcSameStep": same, "bcEqualError": equal,
+            "ratioSameStep": same["medianMs"] / v["medianMs"],
+            "ratioEqualError": equal["medianMs"] / v["medianMs"] if equal else None}
+
+
 # ---- main ----------------------------------------------------------------------------------
 
-def main():
+def parse_args():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--brickcast", default=os.path.join(REPO, "build", "tools", "brickcast"))
     ap.add_argument("--out", default="/tmp/vtkcmp")
-    ap.add_argument("--data", default=DEFAULT_DATA)
-    ap.add_argument("--dims", default="256,256,113")
-    ap.add_argument("--spacing", default="1,1,2")
-    ap.add_argument("--tfs", default="ct-bone,ct-skin")
-    ap.add_argument("--views", default="30,20;210,10/0,0,-1",
+    ap.add_argument("--data-dir", default=DEFAULT_DATA_DIR)
+    ap.add_argument("--scans", default=",".join(SCANS), help="comma list of " + ", ".join(SCANS))
+    ap.add_argument("--tfs", default="",
+                    help="comma list of presets for every scan (default: each scan's own)")
+    ap.add_argument("--sizes", default="256,512", help="comma list of image edges")
+    ap.add_argument("--views", default="30,20;120,-30;210,10/0,0,-1",
                     help="';'-separated AZ,EL[,DIST][/UX,UY,UZ] (brickcast --orbit [--up])")
-    ap.add_argument("--size", type=int, default=256)
-    ap.add_argument("--step", type=float, default=1.0, help="voxels of the smallest spacing")
+    ap.add_argument("--step", type=float, default=1.0,
+                    help="VTK's step and brickcast's same step (voxels of the smallest spacing)")
+    ap.add_argument("--bc-steps", default="1,1.25,1.5,2,2.5,3,4",
+                    help="brickcast cpu steps; the fastest whose error against the converged "
+                         "image is no worse than VTK's is the equal-error point")
     ap.add_argument("--fov", type=float, default=30.0)
-    ap.add_argument("--frames", type=int, default=10, help="timed VTK frames per view")
+    ap.add_argument("--frames", type=int, default=10, help="timed frames per renderer and pair")
     ap.add_argument("--warmup", type=int, default=2)
-    ap.add_argument("--bc-reps", type=int, default=1,
-                    help="brickcast invocations per renderer (each draws --warmup + --frames frames)")
     ap.add_argument("--bc-ert", default="0.99", help="brickcast --ert (its default 0.99)")
-    ap.add_argument("--bc-steps", default="",
-                    help="also run brickcast's raycasters at these coarser steps (comma list), "
-                         "still against the reference at --step: the equal-error points")
-    ap.add_argument("--orbit-azimuths", default="",
-                    help="also time an orbit at these azimuths (comma list), first view's EL")
-    ap.add_argument("--renderers", default="vtk-cpu,vtk-gpu,bc-cpu,bc-gpu")
     ap.add_argument("--tf-nodes", choices=["table", "control"], default="table",
                     help="give VTK brickcast's 4096-entry table or the control points only")
-    ap.add_argument("--no-pad", action="store_true",
-                    help="no edge padding + cropping (VTK samples only between voxel centres)")
-    ap.add_argument("--diagnostics", dest="diagnostics", action="store_true", default=True)
-    ap.add_argument("--no-diagnostics", dest="diagnostics", action="store_false")
+    ap.add_argument("--conv-tol", type=float, default=0.5 / 255.0,
+                    help="converged: halving the step changes the image by less (max abs, RGBA)")
+    ap.add_argument("--conv-start", type=float, default=1.0)
+    ap.add_argument("--conv-floor", type=float, default=1.0 / 64.0,
+                    help="finest step tried (RenderOptions accepts >= 0.01)")
+    ap.add_argument("--conv-time-s", type=float, default=0.0,
+                    help="no halving that would end after this (per reference; 0 = none)")
     args = ap.parse_args()
+    args.scan_list = [s for s in args.scans.split(",") if s]
+    for s in args.scan_list:
+        if s not in SCANS:
+            ap.error(f"--scans: unknown scan '{s}' (known: {', '.join(SCANS)})")
+    args.size_list = [int(v) for v in args.sizes.split(",") if v]
+    args.bc_step_list = sorted({float(v) for v in args.bc_steps.split(",") if v} | {args.step})
+    args.view_list = [parse_view(v) for v in args.views.split(";") if v]
+    if not (args.conv_tol > 0 and math.isfinite(args.conv_tol)):
+        ap.error("--conv-tol must be a finite number > 0")
+    return args
 
+
+def main():
+    args = parse_args()
     ensure_environment()
     import numpy as np
     import vtk
@@ -457,172 +658,39 @@ def main():
     args.brickcast = os.path.abspath(args.brickcast)
     if not os.access(args.brickcast, os.X_OK):
         raise SystemExit(f"{args.brickcast}: not an executable (build brickcast first)")
-    os.makedirs(args.out, exist_ok=True)
-    dims = [int(v) for v in args.dims.split(",")]
-    spacing = [float(v) for v in args.spacing.split(",")]
-    box_max = [d * s for d, s in zip(dims, spacing)]
-    step_mm = args.step * min(spacing)
-    unit_distance = min(spacing)  # TF alpha is per voxel of the smallest spacing
-    views = [parse_view(v) for v in args.views.split(";") if v]
-    tfs = [t for t in args.tfs.split(",") if t]
-    renderers = [r for r in args.renderers.split(",") if r]
-
-    store = os.path.join(args.out, "cthead.bcs")
-    if not os.path.exists(store):
-        print(f"[compare_vtk] ingesting {args.data} -> {store}", flush=True)
-        run([args.brickcast, "ingest", args.data, "--dims", args.dims, "--type", "u16",
-             "--spacing", args.spacing, "--endian", "little", "-o", store])
-    info = json.loads(run([args.brickcast, "info", store, "--json"], nice=False))
-    stats = StoreStats(info)
-
-    pad = not args.no_pad
-    image = load_volume(vtk, np, args.data, dims, spacing, pad)
-    crop = ([0.0, 0.0, 0.0], box_max) if pad else None
-    scene = VtkScene(vtk, args.size, args.size)
+    os.makedirs(os.path.join(args.out, "frames"), exist_ok=True)
+    ctx = {"np": np, "vtk": vtk, "cache": ReferenceCache(args), "scenes": {}, "stores": {},
+           "stats": {}}
+    start = time.perf_counter()
     results = {"machine": {"cpus": os.cpu_count(), "uname": " ".join(os.uname())},
-               "vtk": vtk.vtkVersion.GetVTKVersion(), "display": os.environ.get("DISPLAY"),
-               "xvfb": os.environ.get("BC_VTK_REEXEC_X") == "1",
-               "args": vars(args), "rows": [], "diagnostics": [], "orbit": []}
-    gl = None
+               "vtk": vtk.vtkVersion.GetVTKVersion(), "command": " ".join(sys.argv),
+               "args": {k: v for k, v in vars(args).items() if not k.endswith("_list")},
+               "pairs": []}
+    for scan in args.scan_list:
+        store = ingest_scan(args, scan)
+        ctx["stores"][scan] = store
+        ctx["stats"][scan] = StoreStats(
+            json.loads(run([args.brickcast, "info", store, "--json"], nice=False)))
+        tfs = [t for t in args.tfs.split(",") if t] or SCANS[scan]["tfs"]
+        for size in args.size_list:
+            for view in args.view_list:
+                for tf in tfs:
+                    print(f"[compare_vtk] {scan} {tf} {view['text']} {size}^2", flush=True)
+                    results["pairs"].append(run_pair(args, ctx, scan, tf, view, size))
+                    write_results(args, results, ctx, start)
+    table = write_results(args, results, ctx, start)
+    print(table)
 
-    def vtk_render(kind, tfd, view, shade=True, nodes=None, use_pad=None, timed=True,
-                   png=None, light_ambient=1.0):
-        nonlocal gl
-        scene.light.SetAmbientColor(light_ambient, light_ambient, light_ambient)
-        use_pad = pad if use_pad is None else use_pad
-        img = image if use_pad == pad else load_volume(vtk, np, args.data, dims, spacing,
-                                                       use_pad)
-        mapper = make_mapper(vtk, kind, img, step_mm, ([0.0] * 3, box_max) if use_pad else None)
-        prop = vtk_property(vtk, tfd, nodes or args.tf_nodes, shade, unit_distance)
-        scene.set_volume(mapper, prop)
-        cam = orbit_camera(box_max, *view["orbit"][:2],
-                           dist=view["orbit"][2] if len(view["orbit"]) > 2 else 1.0,
-                           fov_deg=args.fov, up=view["up"])
-        scene.set_camera(cam)
-        first = scene.frame()
-        if gl is None:
-            gl = scene.gl_renderer()
-        times = []
-        if timed:
-            for _ in range(max(0, args.warmup - 1)):
-                scene.frame()
-            times = [scene.frame() for _ in range(args.frames)]
-        if png:
-            scene.save_png(png)
-        return first, times
 
-    def row(renderer, tf, view, png, ref_png, ms, extra):
-        m = metrics(np, read_rgb(vtk, np, png), read_rgb(vtk, np, ref_png))
-        cmp = brickcast_compare(args, png, ref_png)
-        r = {"renderer": renderer, "tf": tf, "view": view["text"], "png": png,
-             "medianMs": ms, **m, "ssim": (cmp or {}).get("ssim")}
-        r.update(extra)
-        return r
-
-    for view in views:
-        for tf in tfs:
-            tfd = load_tf(os.path.join(REPO, "configs", "tf", tf + ".json"), stats)
-            tag = f"{tf}_{view['name']}"
-            ref_png = os.path.join(args.out, f"ref_{tag}.png")
-            print(f"[compare_vtk] {tag}: reference", flush=True)
-            ref = brickcast_render(args, store, ref_png, tf, view, ["--reference"])
-            results["rows"].append({"renderer": "brickcast reference (float64)", "tf": tf,
-                                    "view": view["text"], "png": ref_png,
-                                    "medianMs": ref["totalMs"], "psnr": float("inf"),
-                                    "maxAbs": 0.0, "rmse": 0.0, "ssim": 1.0})
-            for kind in renderers:
-                print(f"[compare_vtk] {tag}: {kind}", flush=True)
-                png = os.path.join(args.out, f"{kind}_{tag}.png")
-                if kind.startswith("vtk-"):
-                    first, times = vtk_render(kind, tfd, view, png=png)
-                    results["rows"].append(row(
-                        kind, tf, view, png, ref_png, statistics.median(times),
-                        {"firstMs": first, "timesMs": times,
-                         "label": ("VTK vtkFixedPointVolumeRayCastMapper" if kind == "vtk-cpu"
-                                   else f"VTK vtkOpenGLGPUVolumeRayCastMapper ({gl})")}))
-                else:
-                    which = kind.split("-")[1]
-                    steps = [None] + [float(v) for v in args.bc_steps.split(",") if v]
-                    for step in steps:
-                        p = png if step is None else png[:-4] + f"_step{step:g}.png"
-                        runs = [brickcast_render(args, store, p, tf, view,
-                                                 ["--renderer", which, "--ert", args.bc_ert,
-                                                  "--repeat", str(args.warmup + args.frames)],
-                                                 step=step)
-                                for _ in range(args.bc_reps)]
-                        warm = [t for r in runs for t in r["frameMs"][args.warmup:]]
-                        results["rows"].append(row(
-                            kind if step is None else f"{kind}@step{step:g}", tf, view, p,
-                            ref_png, statistics.median(warm),
-                            {"firstMs": statistics.median(r["frameMs"][0] for r in runs),
-                             "renderMs": statistics.median(r["renderMs"] for r in runs),
-                             "uploadMs": statistics.median(r["uploadMs"] for r in runs),
-                             "wallMs": statistics.median(r["wallMs"] for r in runs),
-                             "timesMs": warm,
-                             "step": args.step if step is None else step,
-                             "samplesPerPixel": runs[0]["samplesPerPixel"],
-                             "label": f"brickcast {runs[0]['renderer']}"}))
-
-    if args.diagnostics and views and tfs:
-        view = views[0]
-        for tf in tfs:
-            tfd = load_tf(os.path.join(REPO, "configs", "tf", tf + ".json"), stats)
-            tag = f"{tf}_{view['name']}"
-            ref_png = os.path.join(args.out, f"ref_{tag}.png")
-            ref_ns = os.path.join(args.out, f"ref_noshade_{tag}.png")
-            print(f"[compare_vtk] diagnostics {tag}", flush=True)
-            brickcast_render(args, store, ref_ns, tf, view, ["--reference", "--no-shading"])
-            bc_ns = os.path.join(args.out, f"bc-cpu_noshade_{tag}.png")
-            brickcast_render(args, store, bc_ns, tf, view,
-                             ["--renderer", "cpu", "--ert", args.bc_ert, "--no-shading"])
-            results["diagnostics"].append(row("bc-cpu", tf, view, bc_ns, ref_ns, None,
-                                              {"variant": "unshaded (both sides)"}))
-            for kind in [k for k in renderers if k.startswith("vtk-")]:
-                variants = [("unshaded (both sides)", dict(shade=False), ref_ns),
-                            ("no edge pad/crop" if pad else "edge pad + crop",
-                             dict(use_pad=not pad), ref_png),
-                            ("TF control points only" if args.tf_nodes == "table"
-                             else "TF 4096-entry table",
-                             dict(nodes="control" if args.tf_nodes == "table" else "table"),
-                             ref_png),
-                            ("VTK default light (black ambient colour)",
-                             dict(light_ambient=0.0), ref_png)]
-                for name, kw, rp in variants:
-                    short = name.split()[0] + ("_" + name.split()[1] if " " in name else "")
-                    png = os.path.join(args.out, f"{kind}_diag_{short}_{tag}.png")
-                    vtk_render(kind, tfd, view, timed=False, png=png, **kw)
-                    results["diagnostics"].append(row(kind, tf, view, png, rp, None,
-                                                      {"variant": name}))
-
-    if args.orbit_azimuths:
-        view = views[0]
-        azs = [float(a) for a in args.orbit_azimuths.split(",")]
-        for tf in tfs:
-            tfd = load_tf(os.path.join(REPO, "configs", "tf", tf + ".json"), stats)
-            for kind in renderers:
-                times = []
-                for az in azs:
-                    v = dict(view, orbit=[az] + view["orbit"][1:])
-                    if kind.startswith("vtk-"):
-                        times.append(statistics.median(vtk_render(kind, tfd, v)[1]))
-                    else:
-                        png = os.path.join(args.out, f"orbit_{kind}_{tf}.png")
-                        frames = brickcast_render(
-                            args, store, png, tf, v,
-                            ["--renderer", kind.split("-")[1], "--ert", args.bc_ert,
-                             "--repeat", str(args.warmup + args.frames)])["frameMs"]
-                        times.append(statistics.median(frames[args.warmup:]))
-                results["orbit"].append({"renderer": kind, "tf": tf, "azimuths": azs,
-                                         "msPerAzimuth": times,
-                                         "medianMs": statistics.median(times)})
-
-    results["glRenderer"] = gl
+def write_results(args, results, ctx, start):
+    results["glRenderer"] = ctx.get("gl")
+    results["wallS"] = time.perf_counter() - start
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(results, f, indent=2, default=str)
     table = format_tables(results, args)
     with open(os.path.join(args.out, "table.md"), "w") as f:
         f.write(table)
-    print(table)
+    return table
 
 
 def fmt(v, spec):
@@ -633,49 +701,41 @@ def fmt(v, spec):
     return format(v, spec)
 
 
-def format_tables(results, args):
-    lines = [f"VTK {results['vtk']} (OpenGL: {results.get('glRenderer')}; "
-             f"{'Xvfb' if results['xvfb'] else 'DISPLAY ' + str(results['display'])}), "
-             f"{os.cpu_count()} CPUs, {args.size}x{args.size}, step {args.step:g} voxel, shaded. "
-             f"VTK: median of {args.frames} frames after {args.warmup} warm-up (first = cold "
-             f"frame); brickcast the same (`render --repeat`, --stats frameMs; renderMs = the "
-             f"last frame's march only), x{args.bc_reps} invocations, --ert {args.bc_ert}. Errors: "
-             f"linear RGB over black against the float64 reference of the same view.", "",
-             "| renderer | view | TF | median ms | first/cold ms | renderMs | PSNR dB vs reference "
-             "| max abs | RMSE | SSIM |",
-             "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
-    names = {"vtk-cpu": "VTK FixedPoint (CPU)", "vtk-gpu": "VTK GPU mapper (llvmpipe)",
-             "bc-cpu": "brickcast --renderer cpu", "bc-gpu": "brickcast --renderer gpu (llvmpipe)",
-             "brickcast reference (float64)": "brickcast --reference (float64)"}
-    def name_of(key):
-        base, _, step = key.partition("@step")
-        return names.get(base, base) + (f" --step {step}" if step else "")
+def err_text(e):
+    """PSNR vs converged / vs same step (dB)."""
+    return f"{fmt(e['vsConverged']['psnr'], '.1f')} / {fmt(e['vsSameStep']['psnr'], '.1f')}"
 
-    for r in results["rows"]:
-        lines.append("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |".format(
-            name_of(r["renderer"]), r["view"], r["tf"],
-            fmt(r["medianMs"], ".1f"), fmt(r.get("firstMs"), ".1f"),
-            fmt(r.get("renderMs"), ".1f"), fmt(r["psnr"], ".2f"),
-            fmt(r["maxAbs"] * 255.0, ".0f") + "/255", fmt(r["rmse"], ".4f"),
-            fmt(r.get("ssim"), ".4f")))
-    if results["diagnostics"]:
-        lines += ["", "Diagnostics (first view): each variant against the matching reference "
-                  "(unshaded variants against `--reference --no-shading`).", "",
-                  "| renderer | TF | variant | PSNR dB | max abs | RMSE | mean signed diff |",
-                  "|---|---|---|---:|---:|---:|---:|"]
-        for r in results["diagnostics"]:
-            lines.append("| {} | {} | {} | {} | {} | {} | {} |".format(
-                names.get(r["renderer"], r["renderer"]), r["tf"], r["variant"],
-                fmt(r["psnr"], ".2f"), fmt(r["maxAbs"] * 255.0, ".0f") + "/255",
-                fmt(r["rmse"], ".4f"), fmt(r["meanSigned"], "+.4f")))
-    if results["orbit"]:
-        lines += ["", "Orbit (first view's elevation, per-azimuth median ms, then the median):", "",
-                  "| renderer | TF | azimuths | ms per azimuth | median ms |", "|---|---|---|---|---:|"]
-        for o in results["orbit"]:
-            lines.append("| {} | {} | {} | {} | {:.1f} |".format(
-                names.get(o["renderer"], o["renderer"]), o["tf"],
-                ",".join("%g" % a for a in o["azimuths"]),
-                ", ".join("%.0f" % t for t in o["msPerAzimuth"]), o["medianMs"]))
+
+def format_tables(results, args):
+    lines = [f"VTK {results['vtk']} vtkFixedPointVolumeRayCastMapper (step {args.step:g}) against "
+             f"brickcast --renderer cpu (--ert {args.bc_ert}), {os.cpu_count()} CPUs; times: "
+             f"median of {args.frames} frames after {args.warmup} warm-up. Errors: PSNR dB of "
+             f"linear RGB over black, against the converged reference / against the float64 "
+             f"reference at the renderer's own step. Ratios: brickcast ms / VTK ms. "
+             f"Run took {results['wallS'] / 60:.1f} min.", "",
+             "| scan | TF | view | size | VTK ms | VTK dB | bc same step ms | dB | ratio "
+             "| bc equal error: step | ms | dB | ratio |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for p in results["pairs"]:
+        v, s, e = p["vtk"], p["bcSameStep"], p["bcEqualError"]
+        lines.append("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |".format(
+            p["scan"], p["tf"], p["view"], p["size"], fmt(v["medianMs"], ".1f"), err_text(v),
+            fmt(s["medianMs"], ".1f"), err_text(s), fmt(p["ratioSameStep"], ".2f") + "x",
+            fmt(e["step"], "g") if e else "none", fmt(e["medianMs"], ".1f") if e else "n/a",
+            err_text(e) if e else "n/a",
+            fmt(p["ratioEqualError"], ".2f") + "x" if e else "n/a"))
+    lines += ["", "Converged references (max abs RGBA difference between successive halvings; "
+              f"tolerance {args.conv_tol * 255:.2f}/255):", "",
+              "| scan | TF | view | size | converged | step (image at) | differences /255 "
+              "| seconds per frame |", "|---|---|---|---:|---|---:|---|---|"]
+    for p in results["pairs"]:
+        c = p["converged"]
+        lines.append("| {} | {} | {} | {} | {} | {:g} ({:g}) | {} | {} |".format(
+            p["scan"], p["tf"], p["view"], p["size"],
+            "yes" if c["converged"] else "NO (" + c["stop"] + ")", c["stepVoxels"],
+            c["imageStepVoxels"],
+            ", ".join("%.2f" % (s["maxAbsToPrevious"] * 255) for s in c["steps"][1:]),
+            ", ".join("%.1f" % (s["renderMs"] / 1e3) for s in c["steps"])))
     return "\n".join(lines) + "\n"
 
 

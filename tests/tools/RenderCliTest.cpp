@@ -102,6 +102,33 @@ TEST_F(RenderCli, RepeatDrawsWarmFramesOfTheSameImage) {
     EXPECT_TRUE(contains(bad.text, "--repeat")) << bad.text;
 }
 
+// --reference --converge: the step found and every halving's difference go into --stats; bad
+// tolerances and a --converge without --reference are refused before anything is drawn.
+TEST_F(RenderCli, ConvergeWritesTheStepAndTheDifferencesAndRefusesBadTolerances) {
+    const std::string png = dir.file("conv.png"), stats = dir.file("conv.json");
+    const std::string args = " --size 32,24 --tf ct-skin --orbit 40,25 --reference";
+    auto a = brickcast("render " + store + " -o " + png + args +
+                       " --converge 0.02 --converge-floor 0.25 --stats " + stats);
+    ASSERT_EQ(a.exitCode, 0) << a.text;
+    std::ifstream f(stats);
+    const auto c = nlohmann::json::parse(f).at("convergence");
+    const auto& steps = c.at("steps");
+    ASSERT_GE(steps.size(), 2u);
+    EXPECT_TRUE(steps[0].at("maxAbsToPrevious").is_null());
+    EXPECT_EQ(c.at("toleranceRgba").get<double>(), 0.02);
+    const double last = steps.back().at("maxAbsToPrevious").get<double>();
+    EXPECT_EQ(c.at("converged").get<bool>(), last < 0.02) << a.text;
+    EXPECT_EQ(c.at("imageStepVoxels").get<double>(), steps.back().at("stepVoxels").get<double>());
+    for (const std::string bad : {"0", "-0.1", "nan", "inf", "x"}) {
+        auto r = brickcast("render " + store + " -o " + png + args + " --converge " + bad);
+        EXPECT_NE(r.exitCode, 0) << bad;
+        EXPECT_TRUE(contains(r.text, "--converge")) << r.text;
+    }
+    auto r = brickcast("render " + store + " -o " + png + " --size 8,8 --converge");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_TRUE(contains(r.text, "--converge needs --reference")) << r.text;
+}
+
 TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
     const std::string out = dir.file("x.png");
     auto size = brickcast("render " + store + " -o " + out + " --size 0,64");

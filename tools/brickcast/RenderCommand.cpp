@@ -5,6 +5,7 @@
 #include "brickstore/Error.h"
 #include "render/BrickPlan.h"
 #include "render/Camera.h"
+#include "render/ConvergedReference.h"
 #include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
 #include "render/GpuSplatter.h"
@@ -12,6 +13,7 @@
 #include "render/Image.h"
 #include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
+#include "render/Renderer.h"
 #include "render/RendererChoice.h"
 #include "render/TransferFunction.h"
 #include "tools/Parse.h"
@@ -44,6 +46,9 @@ struct RenderCliOptions {
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
     std::uint32_t repeat = 1;
+    /// --converge [TOL]: empty when not given ("default" when given without a value).
+    std::string converge;
+    double convergeFloor = 1.0 / 64.0, convergeTimeS = 0.0;
 };
 
 glm::dvec3 vec3Of(const std::string& text, const std::string& what) {
@@ -158,7 +163,81 @@ void checkLeafTables(const brickstore::BrickStore& store, std::uint32_t level) {
         "; no image written");
 }
 
+render::ConvergenceConfig convergenceConfigOf(const RenderCliOptions& o) {
+    render::ConvergenceConfig c;
+    if (o.converge != "default") {
+        const double tol = tools::parseNumbers(o.converge, "--converge", 1, 1)[0];
+        if (!std::isfinite(tol) || tol <= 0.0)
+            throw std::invalid_argument("--converge: the tolerance '" + o.converge +
+                                        "' must be a finite number > 0 (RGBA in [0, 1])");
+        c.toleranceRgba = tol;
+    }
+    c.startStepVoxels = o.step;
+    c.floorStepVoxels = std::min(o.convergeFloor, o.step);
+    if (!std::isfinite(o.convergeTimeS) || o.convergeTimeS < 0.0)
+        throw std::invalid_argument("--converge-time-s must be finite and >= 0");
+    c.timeLimitMs = o.convergeTimeS * 1e3;
+    c.validate();
+    return c;
+}
+
+nlohmann::json convergenceJson(const render::ConvergedReference& r,
+                               const render::ConvergenceConfig& c) {
+    nlohmann::json steps = nlohmann::json::array();
+    for (const auto& s : r.steps)
+        steps.push_back(
+            {{"stepVoxels", s.stepVoxels},
+             {"renderMs", s.renderMs},
+             {"samples", s.samples},
+             {"maxAbsToPrevious", std::isnan(s.maxAbsToPrevious)
+                                      ? nlohmann::json(nullptr)
+                                      : nlohmann::json(s.maxAbsToPrevious)},
+             {"rmseToPrevious", std::isnan(s.rmseToPrevious) ? nlohmann::json(nullptr)
+                                                             : nlohmann::json(s.rmseToPrevious)}});
+    return {{"converged", r.converged},
+            {"stop", render::toString(r.stop)},
+            {"stepVoxels", r.stepVoxels},
+            {"imageStepVoxels", r.imageStepVoxels},
+            {"toleranceRgba", c.toleranceRgba},
+            {"startStepVoxels", c.startStepVoxels},
+            {"floorStepVoxels", c.floorStepVoxels},
+            {"timeLimitMs", c.timeLimitMs},
+            {"metric", "max abs difference over RGBA (premultiplied, [0,1], float) of "
+                       "successive frames"},
+            {"totalMs", r.totalMs},
+            {"steps", steps}};
+}
+
+/// --reference --converge: the reference at --step, --step/2, ... until halving changes the
+/// image by under the tolerance; prints each frame's step, time and difference.
+render::Image convergedImage(const RenderCliOptions& o, const brickstore::BrickStore& store,
+                             brickstore::BrickCache& cache, const render::TransferFunction& tf,
+                             const render::Camera& camera, const render::RenderOptions& options,
+                             render::FrameStats& stats, nlohmann::json& convergence) {
+    const render::ConvergenceConfig config = convergenceConfigOf(o);
+    render::ReferenceRendererConfig referenceConfig;
+    referenceConfig.maxVoxels = std::numeric_limits<std::uint64_t>::max();
+    render::ReferenceRenderer reference(referenceConfig);
+    render::ClassificationCache classifications;
+    render::ConvergedReference r = render::renderConverged(
+        reference, render::Scene{store, cache, tf, classifications},
+        render::View::of(camera, options.width, options.height), options, config);
+    for (const auto& s : r.steps)
+        std::printf("step %.6g: %.1f ms, to the previous step max abs %.3f/255, RMSE %.4f/255\n",
+                    s.stepVoxels, s.renderMs, s.maxAbsToPrevious * 255.0, s.rmseToPrevious * 255.0);
+    std::printf("%s: step %.6g (image at %.6g), tolerance %.3f/255, %.1f ms in all\n",
+                r.converged ? "converged" : "NOT converged", r.stepVoxels, r.imageStepVoxels,
+                config.toleranceRgba * 255.0, r.totalMs);
+    convergence = convergenceJson(r, config);
+    stats = render::FrameStats{};
+    stats.samples = r.steps.back().samples;
+    stats.totalMs = r.totalMs;
+    return std::move(r.image);
+}
+
 void runRender(const RenderCliOptions& o) {
+    if (!o.converge.empty() && !o.reference)
+        throw std::invalid_argument("--converge needs --reference");
     auto store = brickstore::BrickStore::open(o.store);
     const render::RenderOptions options = renderOptionsOf(o);
     const auto tf =
@@ -240,11 +319,18 @@ void runRender(const RenderCliOptions& o) {
         }
     }
     std::vector<double> frameMs;
-    for (std::uint32_t i = 0; i < o.repeat; ++i) {
-        image = draw(stats);
-        stats.renderer = choice.name;
-        stats.rendererChoice = choice.reason;
+    nlohmann::json convergence;
+    if (!o.converge.empty()) {
+        image = convergedImage(o, *store, *cache, tf, camera, options, stats, convergence);
         frameMs.push_back(stats.totalMs);
+        describe = [] { return std::string("CPU reference (double), converged"); };
+    } else {
+        for (std::uint32_t i = 0; i < o.repeat; ++i) {
+            image = draw(stats);
+            stats.renderer = choice.name;
+            stats.rendererChoice = choice.reason;
+            frameMs.push_back(stats.totalMs);
+        }
     }
     renderer = describe();
     checkLeafTables(*store, stats.level);
@@ -268,6 +354,7 @@ void runRender(const RenderCliOptions& o) {
     if (!o.statsPath.empty()) {
         auto j = statsJson(stats, renderer, options);
         j["frameMs"] = frameMs; // every frame's totalMs; the other fields are the last frame's
+        if (!convergence.is_null()) j["convergence"] = convergence;
         std::ofstream f(o.statsPath);
         f << j.dump(2) << "\n";
         if (!f) throw std::runtime_error(o.statsPath + ": cannot write the stats");
@@ -350,6 +437,18 @@ void addRenderCommand(CLI::App& app) {
                     "splat-gpu (the same, drawn by OpenGL)")
         ->capture_default_str();
     cmd->add_flag("--reference", o->reference, "Render with the CPU reference renderer");
+    cmd->add_option("--converge", o->converge,
+                    "With --reference: halve --step until the image changes by under TOL (max "
+                    "abs over RGBA in [0,1]; default 0.5/255); the step and the differences go "
+                    "into --stats")
+        ->expected(0, 1)
+        ->default_str("default");
+    cmd->add_option("--converge-floor", o->convergeFloor,
+                    "--converge: smallest step tried (voxels); reaching it is NOT converged")
+        ->capture_default_str();
+    cmd->add_option("--converge-time-s", o->convergeTimeS,
+                    "--converge: no halving that would end after this many seconds (0 = none)")
+        ->capture_default_str();
     cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");
     cmd->add_option("--repeat", o->repeat,
                     "Draw the view this many times with one renderer (later frames warm); the "
