@@ -110,9 +110,12 @@ struct RayProgress {
 /// Adds the ray's samples to `samples` when it ends, and to `oracle` those with non-zero
 /// opacity taken before the ray's opacity reaches the early termination threshold (what an
 /// ideal skipping renderer would have to take).
+/// Pixel (x, y)'s samples start at the box entry + (k + rayJitter(x, y)) step under
+/// RenderOptions::jitter (the raycasters' offsets, in double), else + (k + 1/2) step.
 template <class VolumeAt>
-void marchRay(const RayContext& c, const Ray& ray, const VolumeAt& volumeAt, RayProgress& s,
-              std::uint64_t& samples, std::uint64_t& oracle) {
+void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_t y,
+              const VolumeAt& volumeAt, RayProgress& s, std::uint64_t& samples,
+              std::uint64_t& oracle) {
     if (s.done) return;
     const LevelGeometry& g = c.geometry;
     const glm::dvec3 ov = ray.origin / g.spacing, dv = ray.direction / g.spacing;
@@ -121,6 +124,7 @@ void marchRay(const RayContext& c, const Ray& ray, const VolumeAt& volumeAt, Ray
     auto [t0, t1] = intersectBox({ov, dv}, voxelBox);
     t0 = std::max(t0, 0.0);
     const double step = c.options.stepVoxels * g.minSpacing();
+    if (c.options.jitter) t0 += (double(rayJitter(x, y)) - 0.5) * step;
     const double count = std::ceil((t1 - t0) / step - 0.5);
     const auto total = count > 0 ? std::int64_t(count) : 0;
     std::array<double, 4>& acc = s.acc;
@@ -269,7 +273,7 @@ void renderBricked(const Scene& scene, const RayContext& c, const ViewBasis& vie
             config.threads, region,
             [&](std::uint32_t x, std::uint32_t y, std::size_t i, std::uint64_t& samples,
                 std::uint64_t& oracle) {
-                marchRay(c, view.ray(x, y, w, h), volumeAt, rays[i], samples, oracle);
+                marchRay(c, view.ray(x, y, w, h), x, y, volumeAt, rays[i], samples, oracle);
             },
             stats);
     }
@@ -311,7 +315,7 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
         config.threads, region,
         [&](std::uint32_t x, std::uint32_t y, std::size_t i, std::uint64_t& samples,
             std::uint64_t& oracle) {
-            marchRay(context, view.ray(x, y, w, h), whole, rays[i], samples, oracle);
+            marchRay(context, view.ray(x, y, w, h), x, y, whole, rays[i], samples, oracle);
         },
         stats);
     stats.level = level;

@@ -78,6 +78,23 @@ TEST(Jitter, SkippingSimdAndSlicesKeepTheImageExactly) {
     EXPECT_GT(compareImages(b, cpu(*t, tf, c, fixed)).maxAbs, 1.0 / 255.0);
 }
 
+TEST(Jitter, TheReferenceTakesTheSameSamples) {
+    auto spec = test::realScan("headsq");
+    if (!spec) return test::missingData("scan headsq");
+    auto t = test::ingestSpec(*spec, {32, 2, 8});
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
+    const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
+    RenderOptions o = jittered();
+    o.earlyTermination = false;
+    const Image ref = test::referenceFrame(*t, tf, c, o);
+    const auto cmp = compareImages(cpu(*t, tf, c, o), ref);
+    test::printComparison("headsq jittered, CPU raycaster vs reference", cmp);
+    EXPECT_GE(cmp.psnrDb, 60.0);
+    RenderOptions fixed = o;
+    fixed.jitter = false;
+    EXPECT_LT(compareImages(cpu(*t, tf, c, fixed), ref).psnrDb, 50.0);
+}
+
 TEST(JitterGl, GpuRaycasterTakesTheSameJitteredSamples) {
     auto spec = test::realScan("headsq");
     if (!spec) return test::missingData("scan headsq");
