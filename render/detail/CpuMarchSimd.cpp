@@ -20,6 +20,7 @@
 
 #include "render/detail/CpuMarchSimd.h"
 
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <type_traits>
@@ -410,6 +411,48 @@ int coarsestEmpty(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
 /// scalar walk does. The DDA's leaf of a sample can differ from floor()'s by rounding at a
 /// leaf face; the leaf ranges reach a voxel beyond what a sample reads (render/OCCUPANCY.md),
 /// so a sample is only skipped inside an empty node and the image is the scalar one.
+/// The first of samples [k, k + count) whose own leaf is sampled, or -1: the scalar walk's
+/// per-sample leaf test for a vector of samples at once (positions, leaves and the bits of
+/// their leaves by the scalar formulas), so a run of transparent leaves costs no chain of
+/// dependent scalar steps.
+int firstSampled(const Frame& f, const std::uint32_t* words, glm::vec3 local, glm::vec3 dv,
+                 float t0, int k, int count) {
+    const DF df;
+    const DI di;
+    const VI index = hn::Min(hn::Add(hn::Set(di, k), hn::Iota(di, 0)), hn::Set(di, k + count - 1));
+    const VF t =
+        hn::Add(hn::Set(df, t0), hn::Mul(hn::Add(hn::ConvertTo(df, index), hn::Set(df, 0.5f)),
+                                         hn::Set(df, f.stepMm)));
+    const VI top = hn::Set(di, f.leafAxis - 1);
+    // p / leaf as the scalar walk divides; a power-of-two leaf (the default 8) multiplies by
+    // its exact reciprocal instead, the same float and a fraction of a vector division's cost.
+    const bool pow2 = f.leaf >= 1.0f && std::has_single_bit(unsigned(f.leaf)) &&
+                      float(unsigned(f.leaf)) == f.leaf;
+    const VF leaf = hn::Set(df, f.leaf), invLeaf = hn::Set(df, 1.0f / f.leaf);
+    auto leafOf = [&](float l0, float d) {
+        const VF p = hn::Add(hn::Set(df, l0), hn::Mul(hn::Set(df, d), t));
+        const VF q = pow2 ? hn::Mul(p, invLeaf) : hn::Div(p, leaf);
+        return hn::Min(hn::Max(hn::ConvertTo(di, hn::Floor(q)), hn::Zero(di)), top);
+    };
+    const VI lx = leafOf(local.x, dv.x), ly = leafOf(local.y, dv.y), lz = leafOf(local.z, dv.z);
+    const int s = 1 << f.octDepth;
+    const VI sv = hn::Set(di, s);
+    const VI bit = hn::Add(hn::Set(di, ((1 << (3 * f.octDepth)) - 8) / 7),
+                           hn::Add(hn::Mul(hn::Add(hn::Mul(lz, sv), ly), sv), lx));
+    const VI word =
+        hn::GatherIndex(di, reinterpret_cast<const std::int32_t*>(words), hn::ShiftRight<5>(bit));
+    const VI one = hn::Set(di, 1);
+    const auto sampled =
+        hn::Ne(hn::And(hn::Shr(word, hn::And(bit, hn::Set(di, 31))), one), hn::Zero(di));
+    return int(hn::FindFirstTrue(di, hn::And(sampled, hn::FirstN(di, std::size_t(count)))));
+}
+
+/// marchBrick() of CpuRay.h with the same octree, a vector of samples at a time: samples in
+/// leaves whose bit is clear are skipped (each tested at its own position, as the scalar walk
+/// does), a vector wholly in such leaves leaps on over the empty node its last sample lies in,
+/// and a vector is taken from its first sample in a sampled leaf. Samples of the vector that
+/// lie in empty leaves after that are taken too: they are transparent (render/OCCUPANCY.md),
+/// so the image is the scalar one.
 template <class T>
 bool marchBrickT(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
                  glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Accum& acc, RayCount& n) {
@@ -417,21 +460,25 @@ bool marchBrickT(const Frame& f, const T* v, const std::uint32_t* words, glm::ve
     const glm::vec3 rel = local + (float(f.apron) - 0.5f);
     const BrickRay ray(f, local, dv, t0);
     while (k < kEnd) {
+        int count = std::min(lanes, kEnd - k);
         if (words) {
-            const float t = t0 + (float(k) + 0.5f) * f.stepMm;
-            const glm::ivec3 leaf =
-                glm::clamp(glm::ivec3(glm::floor((local + dv * t) * ray.invLeaf)), glm::ivec3(0),
-                           glm::ivec3(f.leafAxis - 1));
-            if (!leafSampled(f, words, leaf)) {
+            const int first = firstSampled(f, words, local, dv, t0, k, count);
+            if (first < 0) { // all empty: leap over the node of the last one
+                const int last = k + count - 1;
+                const float t = t0 + (float(last) + 0.5f) * f.stepMm;
+                const glm::ivec3 leaf =
+                    glm::clamp(glm::ivec3(glm::floor((local + dv * t) / f.leaf)), glm::ivec3(0),
+                               glm::ivec3(f.leafAxis - 1));
                 const int l = coarsestEmpty(f, words, leaf);
                 const float size = f.leaf * float(1 << (f.octDepth - l));
                 const glm::vec3 lo = glm::vec3(leaf >> (f.octDepth - l)) * size;
                 ++n.leaps;
-                k = std::max(k + 1, std::min(ray.sampleAt(ray.exitOf(lo, size)), kEnd));
+                k = std::max(last + 1, std::min(ray.sampleAt(ray.exitOf(lo, size)), kEnd));
                 continue;
             }
+            k += first;
+            count = std::min(lanes, kEnd - k);
         }
-        const int count = std::min(lanes, kEnd - k);
         if (!marchChunk(f, v, rel, dv, dir, t0, k, count, acc, n)) return false;
         k += count;
     }
