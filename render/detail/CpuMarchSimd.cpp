@@ -356,15 +356,15 @@ bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::ve
     return true;
 }
 
-/// One ray in one brick, with the reciprocals the leaf walk multiplies by (a division per
-/// leaf is most of a leaf step's latency).
+/// One ray in one brick, with the reciprocals a leap multiplies by (divisions are most of a
+/// leap's latency).
 struct BrickRay {
     glm::vec3 local, dv, invDv; ///< invDv: 0 on an axis the ray does not move along
     glm::ivec3 step;
-    float t0, invStep, invLeaf;
+    float t0, invStep;
 
     BrickRay(const Frame& f, glm::vec3 localIn, glm::vec3 dvIn, float t0In)
-        : local(localIn), dv(dvIn), t0(t0In), invStep(1.0f / f.stepMm), invLeaf(1.0f / f.leaf) {
+        : local(localIn), dv(dvIn), t0(t0In), invStep(1.0f / f.stepMm) {
         for (int a = 0; a < 3; ++a) {
             step[a] = dv[a] > 0.0f ? 1 : dv[a] < 0.0f ? -1 : 0;
             invDv[a] = step[a] == 0 ? 0.0f : 1.0f / dv[a];
@@ -384,17 +384,10 @@ struct BrickRay {
     }
 };
 
-/// Whether the leaf's own bit is set (sampled). Then no ancestor is empty (a node is sampled
-/// when it holds a non-empty leaf or its parent is drawn whole), so emptyLevel() is 0.
-bool leafSampled(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
-    const int s = 1 << f.octDepth;
-    const int bit = ((1 << (3 * f.octDepth)) - 8) / 7 + (leaf.z * s + leaf.y) * s + leaf.x;
-    return ((words[bit >> 5] >> (bit & 31)) & 1u) != 0u;
-}
-
 /// emptyLevel() for a leaf whose own bit is clear, walked up from the leaf: the level below
-/// its deepest sampled ancestor (a node that is not sampled has no sampled child, so this is
-/// the coarsest empty level), usually found at the first step.
+/// its deepest sampled ancestor, usually found at the first step. (A node is sampled when it
+/// holds a non-empty leaf or its parent is drawn whole, so a node that is not sampled has no
+/// sampled child, and this is the coarsest empty level.)
 int coarsestEmpty(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
     for (int l = f.octDepth - 1; l >= 1; --l) {
         const glm::ivec3 node = leaf >> (f.octDepth - l);
@@ -405,12 +398,6 @@ int coarsestEmpty(const Frame& f, const std::uint32_t* words, glm::ivec3 leaf) {
     return 1;
 }
 
-/// marchBrick() of CpuRay.h, with the same octree: the run of samples through consecutive
-/// sampled leaves (found by a leaf DDA) is gathered until it fills a vector, meets an empty
-/// node or reaches the brick's end, and taken at once; an empty node is leapt over as the
-/// scalar walk does. The DDA's leaf of a sample can differ from floor()'s by rounding at a
-/// leaf face; the leaf ranges reach a voxel beyond what a sample reads (render/OCCUPANCY.md),
-/// so a sample is only skipped inside an empty node and the image is the scalar one.
 /// The first of samples [k, k + count) whose own leaf is sampled, or -1: the scalar walk's
 /// per-sample leaf test for a vector of samples at once (positions, leaves and the bits of
 /// their leaves by the scalar formulas), so a run of transparent leaves costs no chain of

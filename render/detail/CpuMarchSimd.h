@@ -9,11 +9,12 @@
 
 namespace bc::render::detail {
 
-/// marchBrick() of CpuRay.h for voxels of `type`, same samples and same arguments: walks the
-/// octree per ray, gathers runs of samples in non-empty leaves and takes them a vector at a
-/// time (value, classification, then gradient and shading only where some sample is
-/// visible), compositing lane by lane so early termination stops at the same sample.
-/// Samples where the fused gradient does not apply go through the scalar code.
+/// marchBrick() of CpuRay.h for voxels of `type`, same arguments and the same image: tests
+/// the octree a vector of samples at a time, skips the samples in empty leaves and leaps over
+/// empty nodes, and takes the rest a vector at a time (value, classification, then gradient
+/// and shading only where some sample is visible), compositing lane by lane so early
+/// termination stops at the same sample. Samples where the fused gradient does not apply go
+/// through the scalar code. It may take a few more (transparent) samples than marchBrick().
 bool marchBrickSimd(brickstore::VoxelType type, const Frame& f, const void* voxels,
                     const std::uint32_t* words, glm::vec3 local, glm::vec3 dv, glm::vec3 dir,
                     float t0, int& k, int kEnd, Accum& acc, RayCount& n);
