@@ -51,22 +51,27 @@ HWY_INLINE PairF pairAt(const std::uint8_t* v, VI o) {
     return {hn::ConvertTo(df, hn::And(w, byte)),
             hn::ConvertTo(df, hn::And(hn::ShiftRight<8>(w), byte))};
 }
-HWY_INLINE PairF pairAt(const std::uint16_t* v, VI o) {
+/// The two 16-bit voxels packed in each 32-bit lane of w (little-endian: the first in the low
+/// half), as floats, sign-extended for int16.
+template <class T> HWY_INLINE PairF unpack16(VI w) {
     const DF df;
     const DI di;
-    const VI w =
-        hn::GatherOffset(di, reinterpret_cast<const std::int32_t*>(v), hn::ShiftLeft<1>(o));
+    if constexpr (std::is_signed_v<T>)
+        return {hn::ConvertTo(df, hn::ShiftRight<16>(hn::ShiftLeft<16>(w))),
+                hn::ConvertTo(df, hn::ShiftRight<16>(w))};
     const VI half = hn::Set(di, 0xFFFF);
     return {hn::ConvertTo(df, hn::And(w, half)),
             hn::ConvertTo(df, hn::And(hn::ShiftRight<16>(w), half))};
 }
+template <class T> HWY_INLINE PairF pair16(const T* v, VI o) {
+    return unpack16<T>(
+        hn::GatherOffset(DI(), reinterpret_cast<const std::int32_t*>(v), hn::ShiftLeft<1>(o)));
+}
+HWY_INLINE PairF pairAt(const std::uint16_t* v, VI o) {
+    return pair16(v, o);
+}
 HWY_INLINE PairF pairAt(const std::int16_t* v, VI o) {
-    const DF df;
-    const DI di;
-    const VI w =
-        hn::GatherOffset(di, reinterpret_cast<const std::int32_t*>(v), hn::ShiftLeft<1>(o));
-    return {hn::ConvertTo(df, hn::ShiftRight<16>(hn::ShiftLeft<16>(w))),
-            hn::ConvertTo(df, hn::ShiftRight<16>(w))};
+    return pair16(v, o);
 }
 HWY_INLINE PairF pairAt(const float* v, VI o) {
     const DF df;
@@ -110,7 +115,6 @@ template <class T> HWY_INLINE QuadF quad16(const T* v, VI o) {
 #if HWY_TARGET == HWY_SCALAR
     return {pairAt(v, o), outerAt(v, o)};
 #else
-    const DF df;
     const DI di;
     const hn::Repartition<std::int64_t, DF> d64;
     const hn::Half<DI> dh;
@@ -121,19 +125,8 @@ template <class T> HWY_INLINE QuadF quad16(const T* v, VI o) {
     // Lane i of q holds v[o-1] | v[o] << 16 in its low 32 bits and v[o+1] | v[o+2] << 16 above.
     const VI w01 = hn::ConcatEven(di, hn::BitCast(di, q1), hn::BitCast(di, q0));
     const VI w23 = hn::ConcatOdd(di, hn::BitCast(di, q1), hn::BitCast(di, q0));
-    auto low = [&](VI w) {
-        if constexpr (std::is_signed_v<T>)
-            return hn::ConvertTo(df, hn::ShiftRight<16>(hn::ShiftLeft<16>(w)));
-        else
-            return hn::ConvertTo(df, hn::And(w, hn::Set(di, 0xFFFF)));
-    };
-    auto high = [&](VI w) {
-        if constexpr (std::is_signed_v<T>)
-            return hn::ConvertTo(df, hn::ShiftRight<16>(w));
-        else
-            return hn::ConvertTo(df, hn::And(hn::ShiftRight<16>(w), hn::Set(di, 0xFFFF)));
-    };
-    return {{high(w01), low(w23)}, {low(w01), high(w23)}};
+    const PairF p01 = unpack16<T>(w01), p23 = unpack16<T>(w23);
+    return {{p01.hi, p23.lo}, {p01.lo, p23.hi}};
 #endif
 }
 HWY_INLINE QuadF quadAt(const std::uint16_t* v, VI o) {
