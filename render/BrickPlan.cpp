@@ -141,25 +141,53 @@ namespace {
 enum class Verdict { Cull, Skip, Draw };
 
 /// Every brick of the level that `verdict(key, index, record)` keeps, sorted front to back
-/// (stable: index order among equal keys), with the counts of those culled and skipped.
+/// (stable: index order among equal keys), with the counts of those culled and skipped. A
+/// skipped brick within `keepNear` bricks (per axis) of a kept one is kept too.
 template <typename VerdictOf>
 BrickPlan planLevel(const brickstore::BrickStore& store, const LevelGeometry& g,
-                    const ViewBasis& view, const VerdictOf& verdict) {
+                    const ViewBasis& view, const VerdictOf& verdict, std::uint32_t keepNear = 0) {
     BrickPlan plan;
     plan.total = g.brickCount();
+    std::vector<Verdict> verdicts(plan.total);
     std::uint64_t index = 0;
     for (std::uint32_t z = 0; z < g.bricks[2]; ++z)
         for (std::uint32_t y = 0; y < g.bricks[1]; ++y)
             for (std::uint32_t x = 0; x < g.bricks[0]; ++x, ++index) {
                 const brickstore::BrickKey key{g.level, {x, y, z}};
+                verdicts[index] = verdict(key, index, store.record(key));
+            }
+    const auto kept = [&](std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+        const auto r = std::int64_t(keepNear);
+        const std::int64_t p[3] = {x, y, z};
+        std::int64_t lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::max<std::int64_t>(p[a] - r, 0);
+            hi[a] = std::min<std::int64_t>(p[a] + r, std::int64_t(g.bricks[a]) - 1);
+        }
+        for (std::int64_t k = lo[2]; k <= hi[2]; ++k)
+            for (std::int64_t j = lo[1]; j <= hi[1]; ++j)
+                for (std::int64_t i = lo[0]; i <= hi[0]; ++i)
+                    if (verdicts[std::uint64_t((k * g.bricks[1] + j) * g.bricks[0] + i)] ==
+                        Verdict::Draw)
+                        return true;
+        return false;
+    };
+    index = 0;
+    for (std::uint32_t z = 0; z < g.bricks[2]; ++z)
+        for (std::uint32_t y = 0; y < g.bricks[1]; ++y)
+            for (std::uint32_t x = 0; x < g.bricks[0]; ++x, ++index) {
+                const brickstore::BrickKey key{g.level, {x, y, z}};
                 const auto& record = store.record(key);
-                switch (verdict(key, index, record)) {
+                switch (verdicts[index]) {
                 case Verdict::Cull:
                     ++plan.culled;
                     continue;
                 case Verdict::Skip:
-                    ++plan.skipped;
-                    continue;
+                    if (keepNear == 0 || !kept(x, y, z)) {
+                        ++plan.skipped;
+                        continue;
+                    }
+                    break;
                 case Verdict::Draw:
                     break;
                 }
@@ -177,35 +205,37 @@ BrickPlan planLevel(const brickstore::BrickStore& store, const LevelGeometry& g,
 
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
                      const TransferFunctionTable& table, const ViewBasis& view,
-                     const std::vector<Plane>& cull, SkipMode skip,
-                     const OccupancyTrees* occupancy) {
-    return planLevel(store, g, view,
-                     [&](const brickstore::BrickKey& key, std::uint64_t index,
-                         const brickstore::BrickRecord& record) {
-                         if (outsidePlanes(g.brickBox(key.pos), view, cull)) return Verdict::Cull;
-                         const bool leavesEmpty = skip == SkipMode::All && occupancy &&
-                                                  record.stored() &&
-                                                  !occupancy->occupied(index, 0, {});
-                         if (leavesEmpty || (skip != SkipMode::None &&
-                                             table.transparent(record.range.min, record.range.max)))
-                             return Verdict::Skip;
-                         return Verdict::Draw;
-                     });
+                     const std::vector<Plane>& cull, SkipMode skip, const OccupancyTrees* occupancy,
+                     std::uint32_t keepNear) {
+    return planLevel(
+        store, g, view,
+        [&](const brickstore::BrickKey& key, std::uint64_t index,
+            const brickstore::BrickRecord& record) {
+            if (outsidePlanes(g.brickBox(key.pos), view, cull)) return Verdict::Cull;
+            const bool leavesEmpty = skip == SkipMode::All && occupancy && record.stored() &&
+                                     !occupancy->occupied(index, 0, {});
+            if (leavesEmpty ||
+                (skip != SkipMode::None && table.transparent(record.range.min, record.range.max)))
+                return Verdict::Skip;
+            return Verdict::Draw;
+        },
+        keepNear);
 }
 
 } // namespace
 
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
                      const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
-                     const OccupancyTrees* occupancy) {
-    return planBricks(store, g, table, view, viewPlanes(view), skip, occupancy);
+                     const OccupancyTrees* occupancy, std::uint32_t keepNear) {
+    return planBricks(store, g, table, view, viewPlanes(view), skip, occupancy, keepNear);
 }
 
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& g,
                      const TransferFunctionTable& table, const View& view, const PixelRect& region,
-                     SkipMode skip, const OccupancyTrees* occupancy) {
+                     SkipMode skip, const OccupancyTrees* occupancy, std::uint32_t keepNear) {
     return planBricks(store, g, table, view.basis,
-                      regionPlanes(view.basis, region, view.width, view.height), skip, occupancy);
+                      regionPlanes(view.basis, region, view.width, view.height), skip, occupancy,
+                      keepNear);
 }
 
 BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometry& g,

@@ -58,16 +58,20 @@ struct BrickPlan {
 /// opacity is never culled or skipped. The order is a valid front-to-back order for every
 /// ray, so batches of consecutive bricks composite correctly. With `occupancy` (its octrees up
 /// to date for `table`), SkipMode::All also skips bricks none of whose leaves is visible.
+/// A brick that would be skipped but lies within `keepNear` bricks (per axis) of a drawn one
+/// is drawn: under pre-integration a segment from a drawn brick into a transparent one reads
+/// the transparent one's value (keepNear: ceil(step / brick voxels), at least 1).
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& geometry,
                      const TransferFunctionTable& table, const ViewBasis& view, SkipMode skip,
-                     const OccupancyTrees* occupancy = nullptr);
+                     const OccupancyTrees* occupancy = nullptr, std::uint32_t keepNear = 0);
 
 /// The same for the rays of one region of the view's image alone (a slice of a frame the
 /// daemon draws in slices): bricks outside the region's own frustum are culled too, so a
 /// slice pins and loads only what its rays can reach. A whole() region is the whole view.
 BrickPlan planBricks(const brickstore::BrickStore& store, const LevelGeometry& geometry,
                      const TransferFunctionTable& table, const View& view, const PixelRect& region,
-                     SkipMode skip, const OccupancyTrees* occupancy = nullptr);
+                     SkipMode skip, const OccupancyTrees* occupancy = nullptr,
+                     std::uint32_t keepNear = 0);
 
 /// Every brick of the level, front to back, nothing culled or skipped (for the reference, which
 /// samples wherever a ray goes).

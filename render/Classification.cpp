@@ -62,9 +62,18 @@ std::shared_ptr<const TransferFunctionTable> Classification::table(double stepVo
     return made;
 }
 
+std::shared_ptr<const PreintegratedTable> Classification::preintegrated() const {
+    std::lock_guard lock(mTablesMutex);
+    if (!mPreintegrated)
+        mPreintegrated = std::make_shared<const PreintegratedTable>(
+            mTf.preintegrated(kClassificationTableEntries));
+    return mPreintegrated;
+}
+
 std::uint64_t Classification::bytes() const {
     std::uint64_t n = sizeof(*this) + (mOccupancy ? mOccupancy->bytes() : 0);
     std::lock_guard lock(mTablesMutex);
+    if (mPreintegrated) n += mPreintegrated->table.size() * sizeof(PreintegratedTable::Entry);
     for (const auto& [step, table] : mTables)
         n += tableBytes(*table);
     return n;

@@ -64,6 +64,9 @@ class Classification {
     /// The table at `stepVoxels` (kClassificationTableEntries entries), made on first use and
     /// kept for the most recent steps. @throw std::invalid_argument on a bad step.
     std::shared_ptr<const TransferFunctionTable> table(double stepVoxels) const;
+    /// The pre-integration table (kClassificationTableEntries entries; one serves every
+    /// step), made on first use.
+    std::shared_ptr<const PreintegratedTable> preintegrated() const;
     /// Host memory held: octrees and tables.
     std::uint64_t bytes() const;
 
@@ -75,6 +78,7 @@ class Classification {
     OccupancyRebuild mBuild;
     mutable std::mutex mTablesMutex;
     mutable std::list<std::pair<double, std::shared_ptr<const TransferFunctionTable>>> mTables;
+    mutable std::shared_ptr<const PreintegratedTable> mPreintegrated;
 };
 
 struct ClassificationCacheConfig {

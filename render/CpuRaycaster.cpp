@@ -48,6 +48,7 @@ enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
 /// its DDA state at that brick (so the next pass goes on with the same floats).
 struct RayState {
     Accum acc;
+    detail::Front front; ///< under pre-integration
     glm::ivec3 cell{0};
     glm::vec3 tMax{0.0f};
     int k = 0;
@@ -116,11 +117,28 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayC
         if (b.slot == Slot::Sampled && kEnd > k) {
             const std::uint32_t* words = f.occ ? f.occ + std::size_t(index) * f.occWords : nullptr;
             const glm::vec3 local = ov - glm::vec3(cell * f.brick);
-            const bool more = f.simd ? detail::marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words,
-                                                              local, dv, d, t0, k, kEnd, acc, n)
-                                     : detail::marchBrick(f, static_cast<const T*>(b.voxels), words,
-                                                          local, dv, d, t0, k, kEnd, acc, n);
+            const T* voxels = static_cast<const T*>(b.voxels);
+            const bool more =
+                f.pre    ? detail::marchBrickPre(f, voxels, words, local, dv, d, t0, k, kEnd, acc,
+                                                 s.front, n)
+                : f.simd ? detail::marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words, local, dv,
+                                                  d, t0, k, kEnd, acc, n)
+                         : detail::marchBrick(f, voxels, words, local, dv, d, t0, k, kEnd, acc, n);
             if (!more) return;
+        } else if (b.slot == Slot::Constant && kEnd > k && f.pre) {
+            // One value throughout: the first segment runs from the last sample's value to it,
+            // every later one is that value alone.
+            const PreintegratedTable::End e = f.pre->end(double(b.constant));
+            n.samples += std::uint64_t(kEnd - k);
+            const Rgba inside = segmentColour(f, detail::Front{e, k}, k + 1, e);
+            for (; k < kEnd; ++k) {
+                const Rgba c =
+                    k > 0 && s.front.k == k - 1 ? segmentColour(f, s.front, k, e) : inside;
+                s.front = {e, k};
+                if (c.a <= 0.0f) continue;
+                composite(acc, c);
+                if (acc.t <= f.ertT) return;
+            }
         } else if (b.slot == Slot::Constant && kEnd > k) {
             const Rgba c = classify(f, b.constant);
             n.samples += std::uint64_t(kEnd - k);
@@ -202,6 +220,7 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.shading = o.shading;
     f.simd = o.simd;
     f.jitter = o.jitter;
+    f.segment = o.stepVoxels;
     f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);
     return f;
 }
@@ -280,8 +299,14 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     const bool octree = occupancy != nullptr;
     // A slice (options.region) plans the bricks its own rays reach: under a host budget the
     // frame's slices then load each brick about once, not once per slice.
+    // Under pre-integration a segment may run from a drawn brick into a transparent one,
+    // whose value it reads: transparent bricks next to drawn ones are drawn too.
+    const auto keepNear =
+        options.preintegrate
+            ? std::max(1u, std::uint32_t(std::ceil(options.stepVoxels / g.brickVoxels)))
+            : 0u;
     const BrickPlan plan =
-        planBricks(store, g, table, view, options.region, options.skip, occupancy);
+        planBricks(store, g, table, view, options.region, options.skip, occupancy, keepNear);
     recordPlan(plan, level, stats);
 
     // Batches of the front-to-back order whose bricks fit the host budget, drawn one after
@@ -291,6 +316,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     std::vector<BrickRef> bricks = brickRefs(plan, ends, g.brickCount());
     Frame f = frameOf(g, view.basis, options, table);
     f.bricks = bricks.data();
+    f.pre = classified.preintegrated.get();
     if (octree && occupancy->depth() > 0) {
         f.occ = occupancy->words().data();
         f.octDepth = int(occupancy->depth());

@@ -411,6 +411,7 @@ Raycaster::Prepared Raycaster::prepare(const Scene& scene, const View& view,
                                        const RenderOptions& options, FrameStats& stats) {
     options.validate();
     checkView(view, options, true);
+    refusePreintegration(options, "GPU raycaster");
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <thread>
 
 #include <glm/geometric.hpp>
@@ -75,6 +76,7 @@ struct RayContext {
     const LevelGeometry& geometry;
     const RenderOptions& options;
     glm::dvec3 gradScale; ///< value difference -> TF-domain units per voxel of the smallest spacing
+    const PreintegratedTable* pre = nullptr; ///< with RenderOptions::preintegrate
 };
 
 template <class Volume>
@@ -103,6 +105,7 @@ struct RayProgress {
     std::array<double, 4> acc{0, 0, 0, 0};
     std::int64_t k = 0;
     bool done = false;
+    PreintegratedTable::End front; ///< pre-integration: sample k - 1's (k > 0)
 };
 
 /// Marches one ray from progress.k on; `volumeAt(p)` is the volume that samples point p, or
@@ -135,8 +138,17 @@ void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_
             s.k = k;
             return;
         }
-        const auto f = c.table.lookup(volume->sample(p.x, p.y, p.z));
-        std::array<double, 4> rgba{f[0], f[1], f[2], f[3]};
+        const double value = volume->sample(p.x, p.y, p.z);
+        std::array<double, 4> rgba;
+        if (c.pre) {
+            // The segment from sample k - 1 to k (the first sample's: its value alone).
+            const PreintegratedTable::End back = c.pre->end(value);
+            rgba = c.pre->segment(k == 0 ? back : s.front, back, c.options.stepVoxels);
+            s.front = back;
+        } else {
+            const auto f = c.table.lookup(value);
+            rgba = {f[0], f[1], f[2], f[3]};
+        }
         if (rgba[3] <= 0.0) continue;
         if (acc[3] < c.options.ertThreshold) ++oracle;
         if (c.options.shading) rgba = shade(c, *volume, rgba, p, ray.direction);
@@ -287,15 +299,16 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
                       const RenderOptions& options, FrameStats& stats,
                       const ReferenceConfig& config) {
     options.validate();
+    const auto pre = options.preintegrate ? std::make_optional(tf.preintegrated()) : std::nullopt;
     return renderReference(store, volume, tf.table(options.stepVoxels),
                            ViewBasis::from(camera, options.width, options.height), options, stats,
-                           config);
+                           config, pre ? &*pre : nullptr);
 }
 
 Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume& volume,
                       const TransferFunctionTable& table, const ViewBasis& view,
                       const RenderOptions& options, FrameStats& stats,
-                      const ReferenceConfig& config) {
+                      const ReferenceConfig& config, const PreintegratedTable* preintegrated) {
     const auto start = std::chrono::steady_clock::now();
     options.validate();
     stats = FrameStats{};
@@ -305,8 +318,12 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
     if (geometry.dims != volume.dims())
         throw std::invalid_argument("reference volume is not the requested level");
     const double span = table.domainMax - table.domainMin;
+    if (options.preintegrate && preintegrated == nullptr)
+        throw std::invalid_argument("renderReference: preintegrate without a pre-integration "
+                                    "table");
     const RayContext context{table, geometry, options,
-                             0.5 / span * geometry.minSpacing() / geometry.spacing};
+                             0.5 / span * geometry.minSpacing() / geometry.spacing,
+                             options.preintegrate ? preintegrated : nullptr};
     const std::uint32_t w = options.width, h = options.height;
     const PixelRect region = options.drawn();
     std::vector<RayProgress> rays(region.pixels());
@@ -348,13 +365,15 @@ Image ReferenceRenderer::render(const Scene& scene, const View& view, const Rend
     const FrameClassification classified =
         classifyFrame(scene, level, tablesOnly, options.stepVoxels, ignored);
     const LevelGeometry g = LevelGeometry::of(scene.store, level);
-    if (g.apronVoxels < 2) return renderWhole(scene, *classified.table, view, options, stats);
+    if (g.apronVoxels < 2)
+        return renderWhole(scene, *classified.table, classified.preintegrated.get(), view, options,
+                           stats);
     const auto start = std::chrono::steady_clock::now();
     mVolume.reset(); // a level held whole for an earlier store goes
     stats = FrameStats{};
     const double span = classified.table->domainMax - classified.table->domainMin;
-    const RayContext context{*classified.table, g, options,
-                             0.5 / span * g.minSpacing() / g.spacing};
+    const RayContext context{*classified.table, g, options, 0.5 / span * g.minSpacing() / g.spacing,
+                             classified.preintegrated.get()};
     std::vector<RayProgress> rays(options.drawn().pixels());
     switch (scene.store.info().volume.type) {
     case brickstore::VoxelType::U8:
@@ -377,8 +396,8 @@ Image ReferenceRenderer::render(const Scene& scene, const View& view, const Rend
 }
 
 Image ReferenceRenderer::renderWhole(const Scene& scene, const TransferFunctionTable& table,
-                                     const View& view, const RenderOptions& options,
-                                     FrameStats& stats) {
+                                     const PreintegratedTable* preintegrated, const View& view,
+                                     const RenderOptions& options, FrameStats& stats) {
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     if (!mVolume || mStoreInstance != scene.store.instance() || mLevel != level) {
@@ -388,7 +407,7 @@ Image ReferenceRenderer::renderWhole(const Scene& scene, const TransferFunctionT
         mLevel = level;
     }
     return renderReference(scene.store, *mVolume, table, view.basis, options, stats,
-                           mConfig.threads);
+                           mConfig.threads, preintegrated);
 }
 
 } // namespace bc::render

@@ -46,11 +46,13 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
                       const RenderOptions& options, FrameStats& stats,
                       const ReferenceConfig& config = {});
 /// The same for a validated view and the table it classifies through (full precision: the
-/// table must hold the step's opacities).
+/// table must hold the step's opacities), and the pre-integration table when
+/// options.preintegrate (std::invalid_argument without one).
 Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume& volume,
                       const TransferFunctionTable& table, const ViewBasis& view,
                       const RenderOptions& options, FrameStats& stats,
-                      const ReferenceConfig& config = {});
+                      const ReferenceConfig& config = {},
+                      const PreintegratedTable* preintegrated = nullptr);
 
 struct ReferenceRendererConfig {
     /// Largest level it draws (it takes every sample of every ray, however slow).
@@ -76,7 +78,8 @@ class ReferenceRenderer final : public Renderer {
     using Renderer::render;
 
   private:
-    Image renderWhole(const Scene& scene, const TransferFunctionTable& table, const View& view,
+    Image renderWhole(const Scene& scene, const TransferFunctionTable& table,
+                      const PreintegratedTable* preintegrated, const View& view,
                       const RenderOptions& options, FrameStats& stats);
 
     ReferenceRendererConfig mConfig;

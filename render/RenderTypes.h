@@ -67,6 +67,12 @@ struct RenderOptions {
     /// noise (render/OPTICS.md). Deterministic per pixel, so skipping, slices and repeated
     /// frames keep their images exactly. The raycasters and the reference honour it.
     bool jitter = false;
+    /// Classify each sample's segment (from the previous sample to it) through the
+    /// pre-integrated transfer function instead of the sample's value alone
+    /// (PreintegratedTable, render/OPTICS.md): thin features of the function between two
+    /// samples' values are no longer missed, so a coarser step reaches a given error. The CPU
+    /// raycaster and the reference honour it; other renderers refuse it.
+    bool preintegrate = false;
     OccupancyConfig octree; ///< second-stage traversal (SkipMode::All)
     /// Start rays at the previous frame's occlusion frustums (same raycaster, same scene).
     bool occlusionFrustums = true;

@@ -26,6 +26,7 @@ FrameClassification classifyFrame(const Scene& scene, std::uint32_t level,
                                                  octrees ? &options.octree : nullptr, &built);
     f.table = f.classification->table(stepVoxels);
     f.occupancy = octrees ? f.classification->occupancy() : nullptr;
+    if (options.preintegrate) f.preintegrated = f.classification->preintegrated();
     stats.octreeBricksRebuilt = built ? f.classification->build().bricksRebuilt : 0;
     stats.octreeRebuildMs = built ? f.classification->build().ms : 0.0;
     return f;
@@ -39,6 +40,13 @@ void Renderer::checkView(const View& view, const RenderOptions& options, bool dr
                                     std::to_string(options.height));
     if (!drawsRegions && !options.region.whole())
         throw std::invalid_argument("region: this renderer draws whole images only");
+}
+
+void Renderer::refusePreintegration(const RenderOptions& options, const char* renderer) {
+    if (options.preintegrate)
+        throw std::invalid_argument(std::string("preintegrate: the ") + renderer +
+                                    " does not pre-integrate (the CPU raycaster and the reference "
+                                    "do)");
 }
 
 } // namespace bc::render

@@ -35,6 +35,8 @@ struct FrameClassification {
     std::shared_ptr<const Classification> classification;
     std::shared_ptr<const TransferFunctionTable> table;
     const OccupancyTrees* occupancy = nullptr; ///< null: no second-stage skipping this frame
+    /// With RenderOptions::preintegrate: the classification's pre-integration table.
+    std::shared_ptr<const PreintegratedTable> preintegrated;
 };
 
 /// The one place a frame gets its classification: octrees when options.skip is All (and the
@@ -89,6 +91,9 @@ class Renderer {
     /// ask for a region of the image from a renderer that draws whole images only.
     static void checkView(const View& view, const RenderOptions& options,
                           bool drawsRegions = false);
+    /// @throw std::invalid_argument naming `renderer` when the options ask for
+    /// pre-integration (RenderOptions::preintegrate), which it does not do.
+    static void refusePreintegration(const RenderOptions& options, const char* renderer);
 
   private:
     std::unique_ptr<ClassificationCache> mOwnClassifications;

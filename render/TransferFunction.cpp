@@ -411,6 +411,35 @@ TransferFunctionTable TransferFunction::table(double stepVoxels, std::uint32_t e
     return TransferFunctionTable(mDomainMin, mDomainMax, std::move(rgba));
 }
 
+PreintegratedTable TransferFunction::preintegrated(std::uint32_t entries) const {
+    const TransferFunctionTable plain = table(1.0, entries);
+    PreintegratedTable pre;
+    pre.domainMin = mDomainMin;
+    pre.domainMax = mDomainMax;
+    pre.entries = entries;
+    pre.table.resize(entries);
+    for (std::uint32_t i = 0; i < entries; ++i) {
+        const float* c = &plain.rgba[4 * std::size_t(i)];
+        const double alpha = double(c[3]);
+        const double tau = alpha >= 1.0
+                               ? PreintegratedTable::kMaxExtinction
+                               : std::min(-std::log1p(-alpha), PreintegratedTable::kMaxExtinction);
+        auto& e = pre.table[i];
+        e.rate[0] = float(tau);
+        for (int k = 0; k < 3; ++k)
+            e.rate[k + 1] = float(double(e.rate[0]) * double(c[k]));
+    }
+    // Trapezoids are exact for functions linear between entries; zero rates add exactly 0.
+    for (int k = 0; k < 4; ++k)
+        pre.table[0].integral[k] = 0.0;
+    for (std::uint32_t i = 1; i < entries; ++i)
+        for (int k = 0; k < 4; ++k)
+            pre.table[i].integral[k] =
+                pre.table[i - 1].integral[k] +
+                0.5 * (double(pre.table[i - 1].rate[k]) + double(pre.table[i].rate[k]));
+    return pre;
+}
+
 void TransferFunction::snapPeaks(std::vector<float>& rgba, std::uint32_t entries) const {
     // A point more opaque than both entries around it is a peak the linear table would
     // flatten (or, narrower than a cell, lose): the nearer entry takes its RGBA.

@@ -4,6 +4,7 @@
 // march through one brick. The vectorised march (render/detail/CpuMarchSimd.cpp) takes the
 // same samples with the same formulas, many at once, and falls back to these per sample.
 #include "render/RenderTypes.h"
+#include "render/TransferFunction.h"
 #include "render/detail/CpuSampling.h"
 
 #include <algorithm>
@@ -41,6 +42,10 @@ struct Frame {
     bool shading = true;
     bool simd = true;    ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
     bool jitter = false; ///< RenderOptions::jitter
+    /// RenderOptions::preintegrate: segments classify through this table (the scalar
+    /// marchBrickPre), `segment` long in the opacity's units (the step in voxels).
+    const PreintegratedTable* pre = nullptr;
+    double segment = 1.0;
     glm::vec3 gradScale{1};
     const std::uint32_t* occ = nullptr;
     int octDepth = 0, occWords = 0, leafAxis = 1;
@@ -126,6 +131,32 @@ struct RayCount {
     std::uint64_t samples = 0, leaps = 0;
 };
 
+/// A sample's value at q and, where no fetch of the six-fetch gradient would be clamped
+/// (every sample of the payload once the apron is 2 or more), the cell whose weights give the
+/// gradient too: 8 loads for the value, 24 more only for a visible shaded sample.
+template <class T> struct Sample {
+    const T* v;
+    int edge;
+    glm::vec3 q;
+    bool fused;
+    detail::Cell<T> cell;
+    float value;
+
+    Sample(const T* voxels, int edgeVoxels, glm::vec3 at)
+        : v(voxels), edge(edgeVoxels), q(at), fused(detail::fusedInRange(edge, q)) {
+        if (fused) {
+            cell = detail::cellAt(v, edge, q);
+            value = detail::cellValue(cell); // bit for bit detail::fetch(v, edge, q)
+        } else {
+            value = detail::fetch(v, edge, q);
+        }
+    }
+    /// v(q + e_a) - v(q - e_a).
+    glm::vec3 diffs() const {
+        return fused ? detail::cellGradient(cell) : detail::sixFetchGradient(v, edge, q);
+    }
+};
+
 /// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque.
 template <class T>
 bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
@@ -151,28 +182,88 @@ bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec
                 checked = leaf;
             }
         }
-        const glm::vec3 q = rel + dv * t;
-        // Where no fetch of the six-fetch gradient would be clamped (every sample of the
-        // payload once the apron is 2 or more), the value's weights give the gradient too:
-        // 8 loads for the value, 24 more only for a visible shaded sample.
-        const bool fused = detail::fusedInRange(f.edge, q);
-        detail::Cell<T> cell;
-        float value;
-        if (fused) {
-            cell = detail::cellAt(v, f.edge, q);
-            value = detail::cellValue(cell); // bit for bit detail::fetch(v, f.edge, q)
-        } else {
-            value = detail::fetch(v, f.edge, q);
-        }
-        Rgba c = classify(f, value);
+        const Sample<T> sample(v, f.edge, rel + dv * t);
+        Rgba c = classify(f, sample.value);
         ++n.samples;
         if (c.a <= 0.0f) continue;
-        if (f.shading)
-            c = shade(f, c,
-                      fused ? detail::cellGradient(cell) : detail::sixFetchGradient(v, f.edge, q),
-                      dir);
+        if (f.shading) c = shade(f, c, sample.diffs(), dir);
         composite(acc, c);
         if (acc.t <= f.ertT) return false;
+    }
+    return true;
+}
+
+/// The pre-integrated march's link from one sample to the next: the segment end of the last
+/// sample whose value was read, and which sample that was (-1: none yet).
+struct Front {
+    PreintegratedTable::End end;
+    int k = -1;
+};
+
+/// Sample k's segment (from sample k - 1 to it): `front` when it holds sample k - 1, the
+/// sample itself when k is the ray's first (a segment of one value).
+inline Rgba segmentColour(const Frame& f, const Front& front, int k,
+                          const PreintegratedTable::End& back) {
+    const auto c = f.pre->segment(k > 0 && front.k == k - 1 ? front.end : back, back, f.segment);
+    return {float(c[0]), float(c[1]), float(c[2]), float(c[3])};
+}
+
+/// marchBrick under pre-integration. A sample is skipped only when its whole segment lies in
+/// one empty octree node (it and sample k - 1 in the node): every value between theirs is
+/// then transparent, so the segment is exactly transparent. The first sample after a leap
+/// reads sample k - 1's value first, and a brick left after a leap reads its last sample's,
+/// so the next sample's segment starts where the unskipped march's would.
+template <class T>
+bool marchBrickPre(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
+                   glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Accum& acc,
+                   Front& front, RayCount& n) {
+    const glm::vec3 rel = local + (float(f.apron) - 0.5f);
+    auto at = [&](int j) { return t0 + (float(j) + 0.5f) * f.stepMm; };
+    auto leafOf = [&](int j) { return glm::ivec3(glm::floor((local + dv * at(j)) / f.leaf)); };
+    glm::ivec3 checked(-1);
+    for (; k < kEnd; ++k) {
+        const float t = at(k);
+        if (words) {
+            const glm::ivec3 leaf =
+                glm::clamp(leafOf(k), glm::ivec3(0), glm::ivec3(f.leafAxis - 1));
+            if (leaf != checked) {
+                const int l = emptyLevel(f, words, leaf);
+                const int shift = f.octDepth - l;
+                const glm::ivec3 prev = leafOf(k - 1);
+                const bool prevInside =
+                    k == 0 || (glm::all(glm::greaterThanEqual(prev, glm::ivec3(0))) &&
+                               glm::all(glm::lessThan(prev, glm::ivec3(f.leafAxis))) &&
+                               (prev >> shift) == (leaf >> shift));
+                if (l > 0 && prevInside) {
+                    const float size = f.leaf * float(1 << shift);
+                    const glm::vec3 lo = glm::vec3(leaf >> shift) * size;
+                    const float tExit = exitParameter(local, dv, lo, size);
+                    const int kNext = int(std::ceil((tExit - t0) / f.stepMm - 0.5f));
+                    ++n.leaps;
+                    k = std::max(k, std::min(kNext, kEnd) - 1);
+                    continue;
+                }
+                if (l == 0) checked = leaf;
+            }
+        }
+        if (front.k != k - 1 && k > 0) {
+            front.end = f.pre->end(double(detail::fetch(v, f.edge, rel + dv * at(k - 1))));
+            front.k = k - 1;
+        }
+        const Sample<T> sample(v, f.edge, rel + dv * t);
+        const PreintegratedTable::End back = f.pre->end(double(sample.value));
+        Rgba c = segmentColour(f, front, k, back);
+        front.end = back;
+        front.k = k;
+        ++n.samples;
+        if (c.a <= 0.0f) continue;
+        if (f.shading) c = shade(f, c, sample.diffs(), dir);
+        composite(acc, c);
+        if (acc.t <= f.ertT) return false;
+    }
+    if (front.k != kEnd - 1 && kEnd > 0) {
+        front.end = f.pre->end(double(detail::fetch(v, f.edge, rel + dv * at(kEnd - 1))));
+        front.k = kEnd - 1;
     }
     return true;
 }

@@ -14,11 +14,7 @@ using test::TestStore;
 
 Image cpu(TestStore& t, const TransferFunction& tf, const Camera& c, const RenderOptions& o,
           FrameStats* stats = nullptr) {
-    CpuRaycaster r;
-    FrameStats s;
-    Image image = r.render(*t.store, *t.cache, tf, c, o, s);
-    if (stats) *stats = s;
-    return image;
+    return test::cpuFrame(t, tf, c, o, stats);
 }
 
 RenderOptions jittered(std::uint32_t edge = 96) {

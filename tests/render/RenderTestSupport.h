@@ -8,6 +8,7 @@
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
 #include "render/BrickPlan.h"
+#include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
 #include "render/ImageMetrics.h"
 #include "render/Raycaster.h"
@@ -109,6 +110,17 @@ inline render::Image gpuFrame(TestStore& t, render::Raycaster& raycaster,
                               const render::TransferFunction& tf, const render::Camera& camera,
                               const render::RenderOptions& options,
                               render::FrameStats* statsOut = nullptr) {
+    render::FrameStats stats;
+    render::Image image = raycaster.render(*t.store, *t.cache, tf, camera, options, stats);
+    if (statsOut) *statsOut = stats;
+    return image;
+}
+
+/// CPU raycaster frame of a test store (a raycaster of its own).
+inline render::Image cpuFrame(TestStore& t, const render::TransferFunction& tf,
+                              const render::Camera& camera, const render::RenderOptions& options,
+                              render::FrameStats* statsOut = nullptr) {
+    render::CpuRaycaster raycaster;
     render::FrameStats stats;
     render::Image image = raycaster.render(*t.store, *t.cache, tf, camera, options, stats);
     if (statsOut) *statsOut = stats;

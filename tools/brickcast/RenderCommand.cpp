@@ -41,8 +41,8 @@ struct RenderCliOptions {
                                ert = "0.99", skip = "all", statsPath, renderer = "auto";
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32;
-    bool ortho = false, noShading = false, noSimd = false, jitter = false, reference = false,
-         interactive = false;
+    bool ortho = false, noShading = false, noSimd = false, jitter = false, preintegrate = false,
+         reference = false, interactive = false;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
     std::uint32_t repeat = 1;
@@ -91,6 +91,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.shading = !o.noShading;
     r.simd = !o.noSimd;
     r.jitter = o.jitter;
+    r.preintegrate = o.preintegrate;
     r.level = o.level;
     r.interactive = o.interactive;
     r.octree.ratioThreshold = o.octreeRatio;
@@ -422,6 +423,9 @@ void addRenderCommand(CLI::App& app) {
                   "CPU raycaster: the scalar sample loop instead of the SIMD one (same image)");
     cmd->add_flag("--jitter", o->jitter,
                   "Start each ray's samples at a per-pixel offset (noise instead of rings)");
+    cmd->add_flag("--preintegrate", o->preintegrate,
+                  "Classify segments between samples through the pre-integrated transfer function "
+                  "(CPU raycaster and reference)");
     cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")
         ->capture_default_str();
     cmd->add_option("--host-budget-mb", o->hostBudgetMb, "Host brick cache budget")
