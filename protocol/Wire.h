@@ -95,7 +95,10 @@ enum Technique : std::uint32_t {
     kTechOcclusionFrustums = 1u << 3, ///< needs kTechBrickSkipping
     kTechShading = 1u << 4,
     kTechRayGuided = 1u << 5, ///< GPU raycaster: defer bricks behind saturated rays
-    kTechAll = (1u << 6) - 1,
+    /// Raycasters: jittered ray starts (render::RenderOptions::jitter): fine noise instead of a
+    /// fixed lattice's wood-grain rings; on by default (bench/frontier/README.md says why).
+    kTechJitter = 1u << 6,
+    kTechAll = (1u << 7) - 1,
 };
 
 enum class Codec : std::uint8_t { Raw = 0, Zstd = 1, ZstdDelta = 2, Jpeg = 3, Png = 4 };

@@ -9,6 +9,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 // The filter loops are most of the time; where the compiler can, it also builds an AVX2
 // version of them, picked at load time on CPUs that have it (about twice as fast).
@@ -200,6 +201,42 @@ BC_SIMD_CLONES double differenceFigures(const Image& a, const Image& b, ImageCom
     return sumSquares;
 }
 
+/// Root mean square over R, G and B of (a - b) filtered by the SSIM window's Gaussian, over
+/// the pixels where the window fits (the whole image is one window when it is smaller).
+double lowPassRmse(const Image& a, const Image& b) {
+    if (a.width == 0 || a.height == 0) return 0.0;
+    const std::uint32_t kx = std::min(a.width, kSsimWindow), ky = std::min(a.height, kSsimWindow);
+    const Kernel wx = gaussianKernel(kx), wy = gaussianKernel(ky);
+    const std::size_t width = a.width, stride = width + kSsimWindow;
+    const std::size_t outWidth = width - kx + 1, outHeight = a.height - ky + 1;
+    double sum = 0.0;
+    std::vector<double> raw(stride, 0.0), out(outWidth);
+    for (int c = 0; c < kColourChannels; ++c) {
+        // Filtered along x, row by row; then along y over kSsimWindow consecutive rows.
+        std::vector<double> along(std::size_t(a.height) * outWidth);
+        for (std::uint32_t y = 0; y < a.height; ++y) {
+            const float* pa = a.pixel(0, y) + c;
+            const float* pb = b.pixel(0, y) + c;
+            for (std::size_t x = 0; x < width; ++x)
+                raw[x] = double(pa[4 * x]) - double(pb[4 * x]);
+            KernelRows rows;
+            for (std::size_t k = 0; k < kSsimWindow; ++k)
+                rows[k] = raw.data() + k;
+            filterRows(rows, wx, along.data() + y * outWidth, outWidth);
+        }
+        std::vector<double> zeros(outWidth, 0.0);
+        for (std::size_t y = 0; y < outHeight; ++y) {
+            KernelRows rows;
+            for (std::size_t k = 0; k < kSsimWindow; ++k)
+                rows[k] = k < ky ? along.data() + (y + k) * outWidth : zeros.data();
+            filterRows(rows, wy, out.data(), outWidth);
+            for (double v : out)
+                sum += v * v;
+        }
+    }
+    return std::sqrt(sum / double(outWidth * outHeight * kColourChannels));
+}
+
 } // namespace
 
 ImageComparison compareImages(const Image& a, const Image& b) {
@@ -211,6 +248,9 @@ ImageComparison compareImages(const Image& a, const Image& b) {
     c.psnrDb =
         c.rmse == 0.0 ? std::numeric_limits<double>::infinity() : 20.0 * std::log10(1.0 / c.rmse);
     c.ssim = ssim(a, b);
+    c.lowPassRmse = lowPassRmse(a, b);
+    c.lowPassPsnrDb = c.lowPassRmse == 0.0 ? std::numeric_limits<double>::infinity()
+                                            : 20.0 * std::log10(1.0 / c.lowPassRmse);
     return c;
 }
 

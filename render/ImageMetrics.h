@@ -15,9 +15,16 @@ struct ImageComparison {
     double ssim = 1.0;         ///< mean SSIM (Wang et al. 2004) of R, G and B, averaged
     std::uint32_t maxAbsX = 0; ///< pixel where maxAbs occurs (the first, in row order)
     std::uint32_t maxAbsY = 0;
+    /// RMSE and PSNR of a-b over R, G and B after a Gaussian low pass (sigma 1.5 pixels, the
+    /// SSIM window, over the pixels where the window fits): the *structured* error a viewer
+    /// integrates, such as wood-grain rings or a bias, while pixel-scale noise (jittered
+    /// sampling's) averages out. Rings of a fixed sample lattice keep it low; the same error
+    /// spread as noise raises it.
+    double lowPassRmse = 0.0;
+    double lowPassPsnrDb = 0.0; ///< +infinity when lowPassRmse == 0
 };
 
-/// Max abs difference, RMSE, PSNR and SSIM of two equally sized images. SSIM uses an 11x11
+/// Max abs difference, RMSE, PSNR, SSIM and the low-pass error of two equally sized images. SSIM uses an 11x11
 /// Gaussian window (sigma 1.5, shrunk to fit smaller images), C1 = 0.01^2, C2 = 0.03^2.
 /// A NaN in either image makes maxAbs and rmse NaN, so a tolerance check fails.
 /// @throw std::invalid_argument when the sizes differ (the message gives both).

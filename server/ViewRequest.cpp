@@ -33,6 +33,7 @@ render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, bool int
     r.occlusionFrustums = bricks && (o.techniques & kTechOcclusionFrustums) != 0;
     r.shading = (o.techniques & kTechShading) != 0;
     r.rayGuided = (o.techniques & kTechRayGuided) != 0;
+    r.jitter = (o.techniques & kTechJitter) != 0;
     r.level = o.level == kLevelAutomatic ? 0 : o.level;
     r.interactive = o.level == kLevelAutomatic; // a coarser level when level 0 exceeds the pool
     return r;

@@ -674,8 +674,9 @@ TEST(DecoderRejects, EarlyTerminationThresholdOutsideZeroToOne) {
 }
 
 TEST(DecoderRejects, TechniqueBitsUndefinedOrMissingBrickSkipping) {
-    expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, 1u << 6), ErrorCode::OutOfRange,
-                   "SetRenderOptions.techniques: 0x40 has bits outside 0x3f");
+    expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, 1u << 7), ErrorCode::OutOfRange,
+                   "SetRenderOptions.techniques: 0x80 has bits outside 0x7f");
+    expectAccepted(patched<std::uint32_t>(SetRenderOptions{}, 8, kTechJitter));
     expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, kTechOctreeSkipping),
                    ErrorCode::OutOfRange, "SetRenderOptions.techniques: octree");
     expectRejected(patched<std::uint32_t>(SetRenderOptions{}, 8, kTechOcclusionFrustums),

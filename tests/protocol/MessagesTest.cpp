@@ -221,7 +221,7 @@ TEST(Messages, SetRenderOptionsGoldenBytesRoundTrip) {
         0x80, 0x02,             // width 640
         0xE0, 0x01,             // height 480
         0x00, 0x00, 0x00, 0x3F, // stepVoxels 0.5
-        0x3F, 0x00, 0x00, 0x00, // techniques: all six
+        0x7F, 0x00, 0x00, 0x00, // techniques: all seven
         0xA4, 0x70, 0x7D, 0x3F, // ertThreshold 0.99f
         0x01,                   // renderer: CPU raycaster
         0x01,                   // quality: always refined
@@ -242,7 +242,7 @@ TEST(Messages, SetRenderOptionsDefaultsToTheAutoRendererGoldenBytesRoundTrip) {
         0x00, 0x01,             // width 256
         0x00, 0x01,             // height 256
         0x00, 0x00, 0x80, 0x3F, // stepVoxels 1
-        0x3F, 0x00, 0x00, 0x00, // techniques: all six
+        0x7F, 0x00, 0x00, 0x00, // techniques: all seven
         0xA4, 0x70, 0x7D, 0x3F, // ertThreshold 0.99f
         0x05,                   // renderer: auto
         0x00,                   // quality: adaptive

@@ -166,6 +166,44 @@ TEST(ImageMetricsTest, SsimDropsForBlurAndNoiseAndIsSymmetric) {
     EXPECT_EQ(compareImages(blurred, a).rmse, compareImages(a, blurred).rmse);
 }
 
+TEST(ImageMetricsTest, LowPassErrorKeepsStructureAndAveragesNoiseOut) {
+    const Image a = scene(96, 80);
+    EXPECT_TRUE(std::isinf(compareImages(a, a).lowPassPsnrDb));
+    // A bias survives the low pass whole (R, G and B only, so against the RGBA RMSE: sqrt(4/3)).
+    Image bias = a, rings = a, noise = a;
+    for (std::size_t i = 0; i < bias.rgba.size(); ++i)
+        if (i % 4 != 3) bias.rgba[i] += 0.02f;
+    const ImageComparison cb = compareImages(a, bias);
+    EXPECT_NEAR(cb.lowPassRmse, 0.02, 1e-6);
+    EXPECT_NEAR(cb.lowPassPsnrDb, 20.0 * std::log10(1.0 / 0.02), 1e-3);
+    // Rings 8 pixels apart and pixel noise of the same RMSE: the rings stay, the noise goes.
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<int> sign(0, 1);
+    for (std::uint32_t y = 0; y < a.height; ++y)
+        for (std::uint32_t x = 0; x < a.width; ++x) {
+            const float r = std::hypot(float(x) - 48.0f, float(y) - 40.0f);
+            const float ring = 0.02f * std::sqrt(2.0f) * std::sin(r * 2.0f * 3.14159265f / 8.0f);
+            const float dot = sign(rng) ? 0.02f : -0.02f;
+            for (int c = 0; c < 3; ++c) {
+                rings.pixel(x, y)[c] += ring;
+                noise.pixel(x, y)[c] += dot;
+            }
+        }
+    const ImageComparison cr = compareImages(a, rings), cn = compareImages(a, noise);
+    EXPECT_NEAR(cr.rmse, cn.rmse, 0.1 * cn.rmse); // the same error by RMSE ...
+    // A sine of period P keeps exp(-2 pi^2 sigma^2 / P^2) = 0.50 of its amplitude; white noise
+    // keeps 1 / (2 sqrt(pi) sigma) = 0.19 of its RMSE. (rmse counts alpha too: x sqrt(4/3).)
+    EXPECT_GT(cr.lowPassRmse, 0.4 * cr.rmse);
+    EXPECT_LT(cn.lowPassRmse, 0.25 * cn.rmse);
+    EXPECT_LT(cr.lowPassPsnrDb, cr.psnrDb + 6.0);
+    EXPECT_GT(cn.lowPassPsnrDb, cn.psnrDb + 12.0);
+    // Symmetric, and defined for images smaller than the window.
+    EXPECT_EQ(compareImages(rings, a).lowPassRmse, cr.lowPassRmse);
+    Image tiny(3, 2), tinyB(3, 2);
+    std::fill(tinyB.rgba.begin(), tinyB.rgba.end(), 0.1f);
+    EXPECT_NEAR(compareImages(tiny, tinyB).lowPassRmse, 0.1, 1e-6);
+}
+
 TEST(ImageMetricsTest, NanPixelFailsAToleranceCheck) {
     Image a(8, 8), b(8, 8);
     b.pixel(3, 5)[2] = std::numeric_limits<float>::quiet_NaN();

@@ -210,8 +210,10 @@ inline bool allFinite(const render::Image& image) {
 }
 
 inline void printComparison(const std::string& what, const render::ImageComparison& c) {
-    std::printf("[metrics] %-48s max abs %.4f (%.1f/255)  RMSE %.5f  PSNR %.2f dB  SSIM %.5f\n",
-                what.c_str(), c.maxAbs, c.maxAbs * 255.0, c.rmse, c.psnrDb, c.ssim);
+    std::printf("[metrics] %-48s max abs %.4f (%.1f/255)  RMSE %.5f  PSNR %.2f dB  SSIM %.5f  "
+                "low-pass PSNR %.2f dB\n",
+                what.c_str(), c.maxAbs, c.maxAbs * 255.0, c.rmse, c.psnrDb, c.ssim,
+                c.lowPassPsnrDb);
 }
 
 } // namespace bc::test

@@ -34,6 +34,9 @@ nlohmann::json comparisonJson(const CompareCliOptions& o, const render::Image& a
         {"maxAbsX", c.maxAbsX}, {"maxAbsY", c.maxAbsY}, {"rmse", c.rmse},
         {"psnrDb", nullptr},    {"ssim", c.ssim}};
     if (std::isfinite(c.psnrDb)) j["psnrDb"] = c.psnrDb;
+    j["lowPassRmse"] = c.lowPassRmse;
+    j["lowPassPsnrDb"] = nullptr;
+    if (std::isfinite(c.lowPassPsnrDb)) j["lowPassPsnrDb"] = c.lowPassPsnrDb;
     if (!o.diffPath.empty()) j["diff"] = o.diffPath;
     return j;
 }
@@ -44,8 +47,15 @@ void printComparison(const render::ImageComparison& c) {
         std::snprintf(psnr, sizeof psnr, "%.1f", c.psnrDb);
     else
         std::snprintf(psnr, sizeof psnr, "inf");
-    std::printf("max abs %ld/255 (%.4f) at (%u,%u)  RMSE %.3g  PSNR %s dB  SSIM %.5f\n",
-                stepsOf255(c.maxAbs), c.maxAbs, c.maxAbsX, c.maxAbsY, c.rmse, psnr, c.ssim);
+    char lowPass[32];
+    if (std::isfinite(c.lowPassPsnrDb))
+        std::snprintf(lowPass, sizeof lowPass, "%.1f", c.lowPassPsnrDb);
+    else
+        std::snprintf(lowPass, sizeof lowPass, "inf");
+    std::printf("max abs %ld/255 (%.4f) at (%u,%u)  RMSE %.3g  PSNR %s dB  SSIM %.5f  "
+                "low-pass PSNR %s dB\n",
+                stepsOf255(c.maxAbs), c.maxAbs, c.maxAbsX, c.maxAbsY, c.rmse, psnr, c.ssim,
+                lowPass);
 }
 
 void runCompare(const CompareCliOptions& o) {

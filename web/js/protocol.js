@@ -47,7 +47,7 @@ export const Quality = Object.freeze({ Adaptive: 0, Refined: 1, Interactive: 2 }
 export const FrameMode = Object.freeze({ Once: 0, ContinuousOn: 1, ContinuousOff: 2 });
 export const Placement = Object.freeze({ Value: 0, Fraction: 1, Percentile: 2 });
 export const VOXEL_TYPE_NAMES = Object.freeze(['u8', 'u16', 'i16', 'f32']);
-export const TECHNIQUES_ALL = 0x3f;
+export const TECHNIQUES_ALL = 0x7f;
 export const LEVEL_AUTOMATIC = 255;
 /** RenderOptions flags (u16 at offset 22): bit 0 unscaled interactive frames (half size, rounded up). */
 export const RenderFlags = Object.freeze({ UnscaledInteractive: 1 });

@@ -115,12 +115,12 @@ test('SetTransferFunction: out-of-range points are refused', () => {
 
 test('SetRenderOptions: golden bytes of MessagesTest.cpp, refinedCodec at byte 21', () => {
   const o = {
-    width: 640, height: 480, stepVoxels: 0.5, techniques: 0x3f, ertThreshold: 0.99, renderer: 1,
+    width: 640, height: 480, stepVoxels: 0.5, techniques: 0x7f, ertThreshold: 0.99, renderer: 1,
     quality: 1, codec: 3, codecQuality: 90, level: 255, refinedCodec: 0,
   };
   const got = encodeSetRenderOptions(o, 6);
   assert.deepEqual(bytes(got), [
-    ...header(0x0a, 24, 6), 0x80, 0x02, 0xe0, 0x01, 0x00, 0x00, 0x00, 0x3f, 0x3f, 0x00, 0x00, 0x00,
+    ...header(0x0a, 24, 6), 0x80, 0x02, 0xe0, 0x01, 0x00, 0x00, 0x00, 0x3f, 0x7f, 0x00, 0x00, 0x00,
     0xa4, 0x70, 0x7d, 0x3f, 0x01, 0x01, 0x03, 0x5a, 0xff, 0x00, 0x00, 0x00,
   ]);
   const withPng = bytes(encodeSetRenderOptions({ ...o, quality: 0, refinedCodec: 5 }, 6));
@@ -134,12 +134,12 @@ test('SetRenderOptions: golden bytes of MessagesTest.cpp, refinedCodec at byte 2
 
 test('SetRenderOptions: renderer 5 is auto, golden bytes of MessagesTest.cpp (the default options)', () => {
   const o = {
-    width: 256, height: 256, stepVoxels: 1, techniques: 0x3f, ertThreshold: 0.99, renderer: Renderer.Auto,
+    width: 256, height: 256, stepVoxels: 1, techniques: 0x7f, ertThreshold: 0.99, renderer: Renderer.Auto,
     quality: 0, codec: 1, codecQuality: 0, level: 255, refinedCodec: 0, flags: 0,
   };
   const got = encodeSetRenderOptions(o, 8);
   assert.deepEqual(bytes(got), [
-    ...header(0x0a, 24, 8), 0x00, 0x01, 0x00, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x3f, 0x00, 0x00, 0x00,
+    ...header(0x0a, 24, 8), 0x00, 0x01, 0x00, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x7f, 0x00, 0x00, 0x00,
     0xa4, 0x70, 0x7d, 0x3f, 0x05, 0x00, 0x01, 0x00, 0xff, 0x00, 0x00, 0x00,
   ]);
   assert.equal(decode(got).body.renderer, Renderer.Auto);
@@ -148,7 +148,7 @@ test('SetRenderOptions: renderer 5 is auto, golden bytes of MessagesTest.cpp (th
 
 test('SetRenderOptions: flags (u16 at bytes 22..23), bit 0 unscaled interactive', () => {
   const o = {
-    width: 640, height: 480, stepVoxels: 0.5, techniques: 0x3f, ertThreshold: 0.99, renderer: 1,
+    width: 640, height: 480, stepVoxels: 0.5, techniques: 0x7f, ertThreshold: 0.99, renderer: 1,
     quality: 0, codec: 3, codecQuality: 80, level: 255, refinedCodec: 5, flags: RenderFlags.UnscaledInteractive,
   };
   const got = bytes(encodeSetRenderOptions(o, 7));
@@ -172,11 +172,11 @@ test('SetRenderOptions: flags (u16 at bytes 22..23), bit 0 unscaled interactive'
 });
 
 test('SetRenderOptions: ranges', () => {
-  const o = { width: 64, height: 64, stepVoxels: 1, techniques: 63, ertThreshold: 0.99, renderer: 0, quality: 0, codec: 3, codecQuality: 80, level: 255, refinedCodec: 5 };
+  const o = { width: 64, height: 64, stepVoxels: 1, techniques: 127, ertThreshold: 0.99, renderer: 0, quality: 0, codec: 3, codecQuality: 80, level: 255, refinedCodec: 5 };
   throwsCode(() => encodeSetRenderOptions({ ...o, width: 4097 }), 'OutOfRange', /width/);
   throwsCode(() => encodeSetRenderOptions({ ...o, height: 0 }), 'OutOfRange', /height/);
   throwsCode(() => encodeSetRenderOptions({ ...o, stepVoxels: 0 }), 'OutOfRange', /stepVoxels/);
-  throwsCode(() => encodeSetRenderOptions({ ...o, techniques: 64 }), 'OutOfRange', /techniques/);
+  throwsCode(() => encodeSetRenderOptions({ ...o, techniques: 128 }), 'OutOfRange', /techniques/);
   throwsCode(() => encodeSetRenderOptions({ ...o, level: 16 }), 'OutOfRange', /level/);
   throwsCode(() => encodeSetRenderOptions({ ...o, renderer: 6 }), 'OutOfRange', /renderer/);
 });
