@@ -24,9 +24,9 @@ struct ImageComparison {
     double lowPassPsnrDb = 0.0; ///< +infinity when lowPassRmse == 0
 };
 
-/// Max abs difference, RMSE, PSNR, SSIM and the low-pass error of two equally sized images. SSIM uses an 11x11
-/// Gaussian window (sigma 1.5, shrunk to fit smaller images), C1 = 0.01^2, C2 = 0.03^2.
-/// A NaN in either image makes maxAbs and rmse NaN, so a tolerance check fails.
+/// Max abs difference, RMSE, PSNR, SSIM and the low-pass error of two equally sized images. SSIM
+/// uses an 11x11 Gaussian window (sigma 1.5, shrunk to fit smaller images), C1 = 0.01^2, C2 =
+/// 0.03^2. A NaN in either image makes maxAbs and rmse NaN, so a tolerance check fails.
 /// @throw std::invalid_argument when the sizes differ (the message gives both).
 ImageComparison compareImages(const Image& a, const Image& b);
 
