@@ -250,7 +250,7 @@ ImageComparison compareImages(const Image& a, const Image& b) {
     c.ssim = ssim(a, b);
     c.lowPassRmse = lowPassRmse(a, b);
     c.lowPassPsnrDb = c.lowPassRmse == 0.0 ? std::numeric_limits<double>::infinity()
-                                            : 20.0 * std::log10(1.0 / c.lowPassRmse);
+                                           : 20.0 * std::log10(1.0 / c.lowPassRmse);
     return c;
 }
 
