@@ -48,7 +48,6 @@ enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
 /// its DDA state at that brick (so the next pass goes on with the same floats).
 struct RayState {
     Accum acc;
-    detail::Front front; ///< under pre-integration
     glm::ivec3 cell{0};
     glm::vec3 tMax{0.0f};
     int k = 0;
@@ -59,9 +58,11 @@ struct RayState {
 /// One ray through the brick grid (the shader's main()), for the bricks of batch f.batch:
 /// it stops, state saved, at the first planned brick of a later batch it would sample.
 /// `shift`: where the ray's samples start, in steps, relative to the unjittered lattice
-/// (rayJitter() - 1/2 with RenderOptions::jitter, else 0).
+/// (rayJitter() - 1/2 with RenderOptions::jitter, else 0). `front`: the ray's link between
+/// samples under pre-integration (f.pre), else null.
 template <class T>
-void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayCount& n) {
+void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, detail::Front* front,
+              RayCount& n) {
     if (s.phase == RayPhase::Done) return;
     if (s.phase == RayPhase::Waiting && f.bricks[s.brick].batch != f.batch) return; // not yet
     const RayPhase phase = s.phase;
@@ -120,7 +121,7 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayC
             const T* voxels = static_cast<const T*>(b.voxels);
             const bool more =
                 f.pre    ? detail::marchBrickPre(f, voxels, words, local, dv, d, t0, k, kEnd, acc,
-                                                 s.front, n)
+                                                 *front, n)
                 : f.simd ? detail::marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words, local, dv,
                                                   d, t0, k, kEnd, acc, n)
                          : detail::marchBrick(f, voxels, words, local, dv, d, t0, k, kEnd, acc, n);
@@ -132,9 +133,8 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayC
             n.samples += std::uint64_t(kEnd - k);
             const Rgba inside = segmentColour(f, detail::Front{e, k}, k + 1, e);
             for (; k < kEnd; ++k) {
-                const Rgba c =
-                    k > 0 && s.front.k == k - 1 ? segmentColour(f, s.front, k, e) : inside;
-                s.front = {e, k};
+                const Rgba c = k > 0 && front->k == k - 1 ? segmentColour(f, *front, k, e) : inside;
+                *front = {e, k};
                 if (c.a <= 0.0f) continue;
                 composite(acc, c);
                 if (acc.t <= f.ertT) return;
@@ -159,7 +159,7 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayC
 /// by row).
 template <class T>
 void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& rays,
-               RayCount& total) {
+               std::vector<detail::Front>& fronts, RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0};
     const auto x0 = region.x, y0 = region.y, w = region.width;
     tbb::parallel_for(tbb::blocked_range2d<std::uint32_t>(y0, y0 + region.height, 8, x0, x0 + w, 8),
@@ -170,8 +170,9 @@ void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& r
                                   const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
                                   const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
                                   const float shift = f.jitter ? rayJitter(x, y) - 0.5f : 0.0f;
-                                  marchRay<T>(f, sx, sy, shift,
-                                              rays[std::size_t(y - y0) * w + (x - x0)], n);
+                                  const std::size_t i = std::size_t(y - y0) * w + (x - x0);
+                                  marchRay<T>(f, sx, sy, shift, rays[i],
+                                              fronts.empty() ? nullptr : &fronts[i], n);
                               }
                           samples += n.samples;
                           leaps += n.leaps;
@@ -181,16 +182,17 @@ void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& r
 }
 
 void marchPassOfType(brickstore::VoxelType type, const Frame& f, const PixelRect& region,
-                     std::vector<RayState>& rays, RayCount& total) {
+                     std::vector<RayState>& rays, std::vector<detail::Front>& fronts,
+                     RayCount& total) {
     switch (type) {
     case brickstore::VoxelType::U8:
-        return marchPass<std::uint8_t>(f, region, rays, total);
+        return marchPass<std::uint8_t>(f, region, rays, fronts, total);
     case brickstore::VoxelType::U16:
-        return marchPass<std::uint16_t>(f, region, rays, total);
+        return marchPass<std::uint16_t>(f, region, rays, fronts, total);
     case brickstore::VoxelType::I16:
-        return marchPass<std::int16_t>(f, region, rays, total);
+        return marchPass<std::int16_t>(f, region, rays, fronts, total);
     case brickstore::VoxelType::F32:
-        return marchPass<float>(f, region, rays, total);
+        return marchPass<float>(f, region, rays, fronts, total);
     }
 }
 
@@ -326,6 +328,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     }
     const PixelRect region = options.drawn();
     std::vector<RayState> rays(region.pixels());
+    std::vector<detail::Front> fronts(f.pre ? region.pixels() : 0);
     RayCount count;
     for (std::size_t batch = 0, first = 0; batch < ends.size(); first = ends[batch++]) {
         const auto loadStart = Clock::now();
@@ -333,7 +336,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         stats.uploadMs += msSince(loadStart);
         const auto renderStart = Clock::now();
         f.batch = std::uint32_t(batch);
-        marchPassOfType(store.info().volume.type, f, region, rays, count);
+        marchPassOfType(store.info().volume.type, f, region, rays, fronts, count);
         stats.renderMs += msSince(renderStart);
     }
     stats.samples = count.samples;
