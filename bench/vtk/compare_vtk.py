@@ -2,7 +2,8 @@
 """brickcast against VTK: time and error against the converged float64 reference.
 
 What it does, for every scan x preset x view x size (--scans, --tfs, --views, --sizes)
-  1. Loads the raw scan (../shared/data; cthead, headsq, CT_AVM, frog, hydrogen) into
+  1. Loads the raw scan (../shared/data; cthead, headsq, CT_AVM, frog, hydrogen; the DICOM
+     pancreas series and the NIfTI Iguana as brickcast ingests and extracts them to raw) into
      vtkImageData, and ingests the same raw file into a brickcast store (cached in OUT/stores).
   2. Rebuilds brickcast's camera (Camera::orbit + ViewBasis), the scan's presets (configs/tf,
      placed exactly as render/TransferFunction.cpp places them from the store's own histogram,
@@ -425,7 +426,22 @@ SCANS = {
              "type": "u8", "spacing": (1, 1, 1.5), "tfs": ["mr"]},
     "hydrogen": {"file": "hydrogen_64x64x64_float32.raw", "dims": (64, 64, 64),
                  "type": "f32", "spacing": (1, 1, 1), "tfs": ["smoke"]},
+    # Containers VTK would read with readers of its own (vtkDICOMImageReader, vtkNIFTIImage-
+    # Reader) whose orientation, rescaling and slice order differ from brickcast's: brickcast
+    # ingests them and `brickcast extract` writes level 0 back as raw, which both then read,
+    # so both render exactly the same voxels in the same frame (dims, type and spacing from
+    # `brickcast info --json`).
+    "pancreas": {"source": "tcia_pancreas_ct_dicom", "tfs": ["ct-bone", "ct-skin"]},
+    "Iguana": {"source": "Iguana.nii.gz", "tfs": ["ct-bone"]},
 }
+
+
+def raw_path(args, scan):
+    """The raw file both renderers read: the shared one, or the one extracted from a store."""
+    spec = SCANS[scan]
+    if "file" in spec:
+        return os.path.join(args.data_dir, spec["file"])
+    return os.path.join(args.out, "stores", scan + ".raw")
 
 # What the float64 reference's image depends on besides its inputs: a change to any of these
 # files invalidates the cached references (a rebuilt brickcast with other raycasters does not).
@@ -469,7 +485,7 @@ class ReferenceCache:
         import hashlib
         spec = SCANS[scan]
         if scan not in self.scan_ids:
-            self.scan_ids[scan] = sha256_of(os.path.join(self.args.data_dir, spec["file"]))
+            self.scan_ids[scan] = sha256_of(raw_path(self.args, scan))
         tf_path = os.path.join(REPO, "configs", "tf", tf + ".json")
         key = {"scan": self.scan_ids[scan], "dims": spec["dims"], "type": spec["type"],
                "spacing": spec["spacing"], "tf": sha256_of(tf_path), "view": view["text"],
@@ -517,8 +533,21 @@ class ReferenceCache:
 def ingest_scan(args, scan):
     spec = SCANS[scan]
     store = os.path.join(args.out, "stores", scan + ".bcs")
+    os.makedirs(os.path.dirname(store), exist_ok=True)
+    if "source" in spec:
+        if not os.path.exists(store):
+            print(f"[compare_vtk] ingesting {spec['source']} -> {store}", flush=True)
+            run([args.brickcast, "ingest", os.path.join(args.data_dir, spec["source"]), "-o",
+                 store, "-q"])
+        raw = raw_path(args, scan)
+        if not os.path.exists(raw):
+            run([args.brickcast, "extract", store, "-o", raw])
+        info = json.loads(run([args.brickcast, "info", store, "--json"], nice=False))
+        spec["dims"] = tuple(int(d) for d in info["dims"])
+        spec["type"] = info["type"]
+        spec["spacing"] = tuple(float(v) for v in info["spacing_mm"])
+        return store
     if not os.path.exists(store):
-        os.makedirs(os.path.dirname(store), exist_ok=True)
         print(f"[compare_vtk] ingesting {spec['file']} -> {store}", flush=True)
         run([args.brickcast, "ingest", os.path.join(args.data_dir, spec["file"]),
              "--dims", ",".join(map(str, spec["dims"])), "--type", spec["type"],
@@ -557,7 +586,7 @@ def vtk_fixed_point(args, ctx, scan, tf, tfd, view, size, shade):
     vtk, np = ctx["vtk"], ctx["np"]
     spec = SCANS[scan]
     if ctx.get("volume_of") != scan:
-        ctx["image"] = load_volume(vtk, np, os.path.join(args.data_dir, spec["file"]),
+        ctx["image"] = load_volume(vtk, np, raw_path(args, scan),
                                    spec["dims"], spec["spacing"], True, spec["type"])
         ctx["volume_of"] = scan
     if size not in ctx["scenes"]:
