@@ -131,9 +131,8 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, deta
             // every later one is that value alone.
             const PreintegratedTable::End e = f.pre->end(double(b.constant));
             n.samples += std::uint64_t(kEnd - k);
-            const Rgba inside = segmentColour(f, detail::Front{e, k}, k + 1, e);
             for (; k < kEnd; ++k) {
-                const Rgba c = k > 0 && front->k == k - 1 ? segmentColour(f, *front, k, e) : inside;
+                const Rgba c = segmentColour(f, *front, k, e);
                 *front = {e, k};
                 if (c.a <= 0.0f) continue;
                 composite(acc, c);

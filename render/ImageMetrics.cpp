@@ -210,10 +210,10 @@ double lowPassRmse(const Image& a, const Image& b) {
     const std::size_t width = a.width, stride = width + kSsimWindow;
     const std::size_t outWidth = width - kx + 1, outHeight = a.height - ky + 1;
     double sum = 0.0;
-    std::vector<double> raw(stride, 0.0), out(outWidth);
+    std::vector<double> raw(stride, 0.0), out(outWidth), zeros(outWidth, 0.0);
+    std::vector<double> along(std::size_t(a.height) * outWidth);
     for (int c = 0; c < kColourChannels; ++c) {
         // Filtered along x, row by row; then along y over kSsimWindow consecutive rows.
-        std::vector<double> along(std::size_t(a.height) * outWidth);
         for (std::uint32_t y = 0; y < a.height; ++y) {
             const float* pa = a.pixel(0, y) + c;
             const float* pb = b.pixel(0, y) + c;
@@ -224,7 +224,6 @@ double lowPassRmse(const Image& a, const Image& b) {
                 rows[k] = raw.data() + k;
             filterRows(rows, wx, along.data() + y * outWidth, outWidth);
         }
-        std::vector<double> zeros(outWidth, 0.0);
         for (std::size_t y = 0; y < outHeight; ++y) {
             KernelRows rows;
             for (std::size_t k = 0; k < kSsimWindow; ++k)

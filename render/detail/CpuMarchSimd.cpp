@@ -242,15 +242,6 @@ HWY_INLINE void shadeV(const Frame& f, glm::vec3 dir, VF gx, VF gy, VF gz, VF& r
     b = apply(b);
 }
 
-/// The scalar code's sample at index kk, for a lane outside the fused range.
-template <class T>
-Rgba scalarSample(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::vec3 dir, float t) {
-    const glm::vec3 q = rel + dv * t;
-    Rgba c = classify(f, fetch(v, f.edge, q));
-    if (c.a > 0.0f && f.shading) c = shade(f, c, sixFetchGradient(v, f.edge, q), dir);
-    return c;
-}
-
 /// Samples [k, k + count) of one brick, count <= Lanes(DF()); false once the ray is opaque.
 ///
 /// Voxel reads, with the lane's position q clamped into the fused range [1, edge - 2) (lanes
@@ -334,7 +325,7 @@ bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::ve
     for (int j = 0; j < count; ++j) {
         Rgba s{rs[j], gs[j], bs[j], as[j]};
         if (!allFused && ((fusedBits[j >> 3] >> (j & 7)) & 1) == 0) {
-            s = scalarSample(f, v, rel, dv, dir, ts[j]);
+            s = colourOf(f, Sample<T>(v, f.edge, rel + dv * ts[j]), dir); // the scalar code
             if (s.a <= 0.0f) continue;
         }
         composite(sum, s); // the chain from lane to lane is its one multiply of t

@@ -157,6 +157,23 @@ template <class T> struct Sample {
     }
 };
 
+/// A sample's straight colour: classified, and shaded where it is visible.
+template <class T> Rgba colourOf(const Frame& f, const Sample<T>& s, glm::vec3 dir) {
+    Rgba c = classify(f, s.value);
+    if (c.a > 0.0f && f.shading) c = shade(f, c, s.diffs(), dir);
+    return c;
+}
+
+/// The first sample past the empty octree node of level l (emptyLevel()) that holds `leaf`.
+inline int sampleAfterNode(const Frame& f, glm::vec3 local, glm::vec3 dv, float t0, glm::ivec3 leaf,
+                           int l) {
+    const int shift = f.octDepth - l;
+    const float size = f.leaf * float(1 << shift);
+    const glm::vec3 lo = glm::vec3(leaf >> shift) * size;
+    const float tExit = exitParameter(local, dv, lo, size);
+    return int(std::ceil((tExit - t0) / f.stepMm - 0.5f));
+}
+
 /// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque.
 template <class T>
 bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
@@ -171,22 +188,16 @@ bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec
             if (leaf != checked) {
                 const int l = emptyLevel(f, words, leaf);
                 if (l > 0) {
-                    const float size = f.leaf * float(1 << (f.octDepth - l));
-                    const glm::vec3 lo = glm::vec3(leaf >> (f.octDepth - l)) * size;
-                    const float tExit = exitParameter(local, dv, lo, size);
-                    const int kNext = int(std::ceil((tExit - t0) / f.stepMm - 0.5f));
                     ++n.leaps;
-                    k = std::max(k, std::min(kNext, kEnd) - 1);
+                    k = std::max(k, std::min(sampleAfterNode(f, local, dv, t0, leaf, l), kEnd) - 1);
                     continue;
                 }
                 checked = leaf;
             }
         }
-        const Sample<T> sample(v, f.edge, rel + dv * t);
-        Rgba c = classify(f, sample.value);
+        const Rgba c = colourOf(f, Sample<T>(v, f.edge, rel + dv * t), dir);
         ++n.samples;
         if (c.a <= 0.0f) continue;
-        if (f.shading) c = shade(f, c, sample.diffs(), dir);
         composite(acc, c);
         if (acc.t <= f.ertT) return false;
     }
@@ -220,6 +231,11 @@ bool marchBrickPre(const Frame& f, const T* v, const std::uint32_t* words, glm::
     const glm::vec3 rel = local + (float(f.apron) - 0.5f);
     auto at = [&](int j) { return t0 + (float(j) + 0.5f) * f.stepMm; };
     auto leafOf = [&](int j) { return glm::ivec3(glm::floor((local + dv * at(j)) / f.leaf)); };
+    // Makes sample j the front, reading its value (a sample a leap skipped).
+    auto readFront = [&](int j) {
+        front.end = f.pre->end(double(detail::fetch(v, f.edge, rel + dv * at(j))));
+        front.k = j;
+    };
     glm::ivec3 checked(-1);
     for (; k < kEnd; ++k) {
         const float t = at(k);
@@ -235,21 +251,14 @@ bool marchBrickPre(const Frame& f, const T* v, const std::uint32_t* words, glm::
                                glm::all(glm::lessThan(prev, glm::ivec3(f.leafAxis))) &&
                                (prev >> shift) == (leaf >> shift));
                 if (l > 0 && prevInside) {
-                    const float size = f.leaf * float(1 << shift);
-                    const glm::vec3 lo = glm::vec3(leaf >> shift) * size;
-                    const float tExit = exitParameter(local, dv, lo, size);
-                    const int kNext = int(std::ceil((tExit - t0) / f.stepMm - 0.5f));
                     ++n.leaps;
-                    k = std::max(k, std::min(kNext, kEnd) - 1);
+                    k = std::max(k, std::min(sampleAfterNode(f, local, dv, t0, leaf, l), kEnd) - 1);
                     continue;
                 }
                 if (l == 0) checked = leaf;
             }
         }
-        if (front.k != k - 1 && k > 0) {
-            front.end = f.pre->end(double(detail::fetch(v, f.edge, rel + dv * at(k - 1))));
-            front.k = k - 1;
-        }
+        if (front.k != k - 1 && k > 0) readFront(k - 1);
         const Sample<T> sample(v, f.edge, rel + dv * t);
         const PreintegratedTable::End back = f.pre->end(double(sample.value));
         Rgba c = segmentColour(f, front, k, back);
@@ -261,10 +270,7 @@ bool marchBrickPre(const Frame& f, const T* v, const std::uint32_t* words, glm::
         composite(acc, c);
         if (acc.t <= f.ertT) return false;
     }
-    if (front.k != kEnd - 1 && kEnd > 0) {
-        front.end = f.pre->end(double(detail::fetch(v, f.edge, rel + dv * at(kEnd - 1))));
-        front.k = kEnd - 1;
-    }
+    if (front.k != kEnd - 1 && kEnd > 0) readFront(kEnd - 1);
     return true;
 }
 
