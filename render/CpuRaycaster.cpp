@@ -84,6 +84,8 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, deta
     t0 += shift * f.stepMm; // sample k at t0 + (k + 1/2) step: at the entry + (k + jitter) step
     const int total = int(std::ceil((t1 - t0) / f.stepMm - 0.5f));
     if (total <= 0) return;
+    const glm::vec3 invDv = 1.0f / dv; // inf where dv is 0: clipToSampled does not read it
+    const float invStep = 1.0f / f.stepMm;
     glm::ivec3 cell = s.cell, stepDir;
     glm::vec3 tDelta, tMax = s.tMax;
     if (phase == RayPhase::Fresh) {
@@ -119,12 +121,19 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, deta
             const std::uint32_t* words = f.occ ? f.occ + std::size_t(index) * f.occWords : nullptr;
             const glm::vec3 local = ov - glm::vec3(cell * f.brick);
             const T* voxels = static_cast<const T*>(b.voxels);
-            const bool more =
-                f.pre    ? detail::marchBrickPre(f, voxels, words, local, dv, d, t0, k, kEnd, acc,
-                                                 *front, n)
-                : f.simd ? detail::marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words, local, dv,
-                                                  d, t0, k, kEnd, acc, n)
-                         : detail::marchBrick(f, voxels, words, local, dv, d, t0, k, kEnd, acc, n);
+            // Pre-integration walks the whole range itself: a segment may begin at a sample
+            // that a leap skipped. The others narrow it to the box of sampled leaves first.
+            int kFirst = k, kLast = kEnd;
+            bool more = true;
+            if (f.pre)
+                more = detail::marchBrickPre(f, voxels, words, local, dv, d, t0, k, kEnd, acc,
+                                             *front, n);
+            else if (!words || detail::clipToSampled(f, f.boxes[index], local, dv, invDv, invStep,
+                                                     t0, kFirst, kLast))
+                more = f.simd ? detail::marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words, local,
+                                                       dv, d, t0, kFirst, kLast, acc, n)
+                              : detail::marchBrick(f, voxels, words, local, dv, d, t0, kFirst,
+                                                   kLast, acc, n);
             if (!more) return;
         } else if (b.slot == Slot::Constant && kEnd > k && f.pre) {
             // One value throughout: the first segment runs from the last sample's value to it,
@@ -324,6 +333,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         f.occWords = int(occupancy->wordsPerBrick());
         f.leafAxis = int(occupancy->leavesPerAxis());
         f.leaf = float(occupancy->leafVoxels());
+        f.boxes = occupancy->sampledBoxes().data();
     }
     const PixelRect region = options.drawn();
     std::vector<RayState> rays(region.pixels());

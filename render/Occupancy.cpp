@@ -78,13 +78,14 @@ OccupancyTrees::OccupancyTrees(const brickstore::BrickStore& store, std::uint32_
     mNonEmpty.assign(mBricks * leafCount, 1);
     mRoot.assign(mBricks, 1);
     mWords.assign(mBricks * mWordsPerBrick, ~0u);
+    mBoxes.assign(mBricks, SampledBox{{0, 0, 0}, {mLeaves - 1, mLeaves - 1, mLeaves - 1}});
 }
 
 std::uint64_t OccupancyTrees::bytes() const {
     auto of = [](const auto& v) { return std::uint64_t(v.capacity() * sizeof(v[0])); };
     std::uint64_t n = of(mStored) + of(mBrickRange) + of(mLeafRange) + of(mLeafEntries) +
-                      of(mLeafFull) + of(mNonEmpty) + of(mRoot) + of(mWords) + of(mChanged) +
-                      of(mVisible);
+                      of(mLeafFull) + of(mNonEmpty) + of(mRoot) + of(mWords) + of(mBoxes) +
+                      of(mChanged) + of(mVisible);
     for (const auto& f : mFaults)
         n += f.capacity();
     return n + sizeof(*this);
@@ -210,6 +211,17 @@ void OccupancyTrees::rebuildBrick(std::uint64_t brick, const std::vector<std::ui
                 }
         whole = std::move(next);
     }
+    SampledBox box{{n, n, n}, {0, 0, 0}};
+    if (mDepth == 0 && mRoot[brick]) box = {{0, 0, 0}, {n - 1, n - 1, n - 1}};
+    for (std::uint32_t z = 0; mDepth > 0 && z < n; ++z)
+        for (std::uint32_t y = 0; y < n; ++y)
+            for (std::uint32_t x = 0; x < n; ++x) {
+                const std::uint64_t bit = bitOffset(mDepth) + nodeIndex({x, y, z}, side);
+                if (((words[bit / 32] >> (bit % 32)) & 1u) == 0u) continue;
+                box.lo = {std::min(box.lo[0], x), std::min(box.lo[1], y), std::min(box.lo[2], z)};
+                box.hi = {std::max(box.hi[0], x), std::max(box.hi[1], y), std::max(box.hi[2], z)};
+            }
+    mBoxes[brick] = box;
 }
 
 bool OccupancyTrees::leafNonEmpty(std::uint64_t brick, std::uint32_t leaf) const {

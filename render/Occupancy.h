@@ -45,6 +45,14 @@ struct OccupancyRebuild {
     bool full = false;               ///< every octree rebuilt (first build, new domain or config)
 };
 
+/// The leaves of one brick whose occupancy bit is set, as a box of leaf coordinates (inclusive
+/// on both ends); lo > hi on every axis when no leaf is.
+struct SampledBox {
+    std::array<std::uint32_t, 3> lo{}, hi{};
+    bool none() const { return lo[0] > hi[0]; }
+    bool operator==(const SampledBox&) const = default;
+};
+
 /// The octrees of one pyramid level of one store. Not thread-safe; render thread only.
 class OccupancyTrees {
   public:
@@ -69,6 +77,9 @@ class OccupancyTrees {
     /// level l holds (2^l)^3 bits (x fastest), starting at bit sum_{m=1}^{l-1} 8^m. A set bit
     /// means "sample here"; a clear one, "leap over this node". Constant bricks are all set.
     const std::vector<std::uint32_t>& words() const { return mWords; }
+    /// Per brick of the level, the box of its leaves whose bit is set (every leaf for a
+    /// constant brick): a ray leaves out the samples outside it before it walks the octree.
+    const std::vector<SampledBox>& sampledBoxes() const { return mBoxes; }
     /// Bricks whose words changed in the last update (indices within the level).
     const std::vector<std::uint64_t>& changedBricks() const { return mChanged; }
 
@@ -98,6 +109,7 @@ class OccupancyTrees {
     std::vector<std::uint8_t> mNonEmpty;                    ///< per leaf, of the last update
     std::vector<std::uint8_t> mRoot;                        ///< per brick: any leaf non-empty
     std::vector<std::uint32_t> mWords;
+    std::vector<SampledBox> mBoxes;
     std::vector<std::uint64_t> mChanged;
     std::vector<std::string> mFaults;
 

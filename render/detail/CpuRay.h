@@ -3,6 +3,7 @@
 // classification, shading and compositing of one sample, the octree walk and the scalar
 // march through one brick. The vectorised march (render/detail/CpuMarchSimd.cpp) takes the
 // same samples with the same formulas, many at once, and falls back to these per sample.
+#include "render/Occupancy.h"
 #include "render/RenderTypes.h"
 #include "render/TransferFunction.h"
 #include "render/detail/CpuSampling.h"
@@ -10,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -48,6 +50,7 @@ struct Frame {
     double segment = 1.0;
     glm::vec3 gradScale{1};
     const std::uint32_t* occ = nullptr;
+    const SampledBox* boxes = nullptr; ///< per brick, with occ (OccupancyTrees::sampledBoxes)
     int octDepth = 0, occWords = 0, leafAxis = 1;
     float leaf = 1;
     const BrickRef* bricks = nullptr;
@@ -130,6 +133,36 @@ inline float exitParameter(glm::vec3 p0, glm::vec3 dv, glm::vec3 lo, float size)
 struct RayCount {
     std::uint64_t samples = 0, leaps = 0;
 };
+
+/// Narrows samples [k, kEnd) of a brick to those inside the box of its sampled leaves; false
+/// when none is left. The samples left out lie in leaves whose bit is clear, which the octree
+/// walk would skip one by one (to within an ulp of the box's faces, where a sample is
+/// transparent if either leaf is: render/OCCUPANCY.md). A face on the brick's own boundary is
+/// not a limit: a sample there may lie a rounding error outside and count as the edge leaf.
+/// `invDv`: 1 / dv per axis (any value where dv is 0); `invStep`: 1 / f.stepMm.
+inline bool clipToSampled(const Frame& f, const SampledBox& box, glm::vec3 local, glm::vec3 dv,
+                          glm::vec3 invDv, float invStep, float t0, int& k, int& kEnd) {
+    if (box.none()) return false;
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    float ta = -kInf, tb = kInf;
+    for (int a = 0; a < 3; ++a) {
+        const float lo = box.lo[a] == 0 ? -kInf : float(box.lo[a]) * f.leaf;
+        const float hi = int(box.hi[a]) >= f.leafAxis - 1 ? kInf : float(box.hi[a] + 1) * f.leaf;
+        if (dv[a] == 0.0f) {
+            if (local[a] < lo || local[a] >= hi) return false;
+            continue;
+        }
+        const float u0 = (lo - local[a]) * invDv[a], u1 = (hi - local[a]) * invDv[a];
+        ta = std::max(ta, std::min(u0, u1));
+        tb = std::min(tb, std::max(u0, u1));
+    }
+    // Sample indices as floats first: the parameters may be infinite.
+    const float ka = (ta - t0) * invStep - 0.5f, kb = (tb - t0) * invStep - 0.5f;
+    if (!(ta < tb) || !(ka < float(kEnd)) || !(kb > float(k))) return false;
+    if (ka > float(k)) k = int(std::ceil(ka));
+    if (kb < float(kEnd)) kEnd = int(std::ceil(kb));
+    return k < kEnd;
+}
 
 /// A sample's value at q and, where no fetch of the six-fetch gradient would be clamped
 /// (every sample of the payload once the apron is 2 or more), the cell whose weights give the

@@ -2,6 +2,9 @@
 // double-precision reference, agree with the GPU frame, and keep the skipping invariants.
 #include "render/CpuRaycaster.h"
 #include "RenderTestSupport.h"
+#include "render/detail/CpuRay.h"
+
+#include <random>
 
 namespace bc::render {
 namespace {
@@ -97,6 +100,80 @@ TEST(CpuRaycaster, SkippingIsExactAndEarlyTerminationKeepsItsBound) {
     ert.ertThreshold = 0.9;
     const Image e = cpuFrame(*t, all, tf, camera, ert);
     EXPECT_LE(compareImages(a, e).maxAbs, (1.0 - 0.9) + 1.0 / 255.0);
+}
+
+// The box of sampled leaves (OccupancyTrees::sampledBoxes) narrows a ray's samples in a brick
+// before the octree walk: every sample it leaves out lies in a leaf outside the box (or within
+// rounding of one of its faces), and the first and last it keeps lie inside. Random boxes and
+// rays, with axis-parallel, grazing and far-away ones, at several steps.
+TEST(CpuRaycaster, SampledBoxClipLeavesOutOnlySamplesOutsideTheBox) {
+    detail::Frame f;
+    f.leaf = 8.0f;
+    f.leafAxis = 8;
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    std::uniform_int_distribution<std::uint32_t> leafOf(0, 7);
+    std::uint64_t leftOut = 0, kept = 0;
+    for (int trial = 0; trial < 4000; ++trial) {
+        f.stepMm = std::array{0.05f, 0.3f, 1.0f, 2.7f}[trial % 4];
+        SampledBox box;
+        for (int a = 0; a < 3; ++a) {
+            const std::uint32_t i = leafOf(rng), j = leafOf(rng);
+            box.lo[a] = std::min(i, j);
+            box.hi[a] = std::max(i, j);
+        }
+        glm::vec3 dir(unit(rng), unit(rng), unit(rng));
+        if (trial % 5 == 1) dir[trial % 3] = 0.0f;              // in an axis plane
+        if (trial % 7 == 2) dir = glm::vec3(1.0f, 1e-6f, 0.0f); // grazing
+        if (glm::length(dir) == 0.0f) dir = glm::vec3(0.0f, 0.0f, 1.0f);
+        dir = glm::normalize(dir);
+        const float far = trial % 11 == 3 ? 1.0e5f : 100.0f;
+        const glm::vec3 target(32.0f + 40.0f * unit(rng), 32.0f + 40.0f * unit(rng),
+                               32.0f + 40.0f * unit(rng));
+        const glm::vec3 local = target - dir * far;
+        const float t0 = far - 80.0f;
+        const int kEnd0 = int(160.0f / f.stepMm);
+        int k = 0, kEnd = kEnd0;
+        const bool some =
+            detail::clipToSampled(f, box, local, dir, 1.0f / dir, 1.0f / f.stepMm, t0, k, kEnd);
+        // Sample j: in a leaf inside the box, outside it, or within rounding of a face (a
+        // face on the brick's boundary is none: the box reaches past it).
+        enum class Where { Inside, Outside, Face };
+        auto where = [&](int j) {
+            const float t = t0 + (float(j) + 0.5f) * f.stepMm;
+            const glm::vec3 p = local + dir * t;
+            const float eps = 1e-5f * (std::abs(t) + glm::length(local)) + 1e-4f;
+            bool inside = true, face = false;
+            for (int a = 0; a < 3; ++a) {
+                const int leaf = std::clamp(int(std::floor(p[a] / f.leaf)), 0, f.leafAxis - 1);
+                inside = inside && leaf >= int(box.lo[a]) && leaf <= int(box.hi[a]);
+                const float lo = float(box.lo[a]) * f.leaf, hi = float(box.hi[a] + 1) * f.leaf;
+                face = face || (box.lo[a] > 0 && std::abs(p[a] - lo) <= eps) ||
+                       (int(box.hi[a]) < f.leafAxis - 1 && std::abs(p[a] - hi) <= eps);
+            }
+            return face ? Where::Face : inside ? Where::Inside : Where::Outside;
+        };
+        for (int j = 0; j < kEnd0; ++j) {
+            if (some && j >= k && j < kEnd) {
+                ++kept;
+                continue;
+            }
+            ++leftOut;
+            ASSERT_NE(where(j), Where::Inside)
+                << "trial " << trial << ": sample " << j << " left out inside the box";
+        }
+        if (some) {
+            EXPECT_NE(where(k), Where::Outside) << "trial " << trial << ": first kept sample";
+            EXPECT_NE(where(kEnd - 1), Where::Outside) << "trial " << trial << ": last kept";
+        }
+    }
+    EXPECT_GT(leftOut, 0u);
+    EXPECT_GT(kept, 0u);
+    // No leaf sampled: nothing is kept.
+    int k = 0, kEnd = 10;
+    const SampledBox none{{8, 8, 8}, {0, 0, 0}};
+    EXPECT_FALSE(detail::clipToSampled(f, none, glm::vec3(0.0f), glm::vec3(1.0f, 0.0f, 0.0f),
+                                       glm::vec3(1.0f), 1.0f, 0.0f, k, kEnd));
 }
 
 // Rays that start inside the volume, orthographic rays, and float data.

@@ -132,6 +132,35 @@ TEST(OccupancyTest, RatioThresholdAndLevelLimitDrawNodesWhole) {
     EXPECT_THROW(exact.update(table, {1.5, 32}), std::invalid_argument);
 }
 
+TEST(OccupancyTest, SampledBoxIsTheBoundsOfTheLeavesWhoseBitIsSet) {
+    auto t = angiography();
+    if (!t) return test::missingData("scan CT_AVM");
+    const auto table = TransferFunction::preset("vessels", t->stats).table(1.0, 4096);
+    for (const OccupancyConfig config : {OccupancyConfig{}, OccupancyConfig{1.0, 1}}) {
+        OccupancyTrees trees(*t->store, 0);
+        trees.update(table, config);
+        const std::uint32_t d = trees.depth(), n = trees.leavesPerAxis();
+        std::uint64_t narrowed = 0, none = 0;
+        for (std::uint64_t b = 0; b < LevelGeometry::of(*t->store, 0).brickCount(); ++b) {
+            SampledBox want{{n, n, n}, {0, 0, 0}};
+            for (std::uint32_t i = 0; i < n * n * n; ++i) {
+                const auto leaf = coords(i, n);
+                if (!trees.occupied(b, d, leaf)) continue;
+                for (int a = 0; a < 3; ++a) {
+                    want.lo[a] = std::min(want.lo[a], leaf[a]);
+                    want.hi[a] = std::max(want.hi[a], leaf[a]);
+                }
+            }
+            const SampledBox& got = trees.sampledBoxes()[b];
+            EXPECT_EQ(got, want) << "brick " << b;
+            none += got.none();
+            narrowed += !got.none() && got != SampledBox{{0, 0, 0}, {n - 1, n - 1, n - 1}};
+        }
+        EXPECT_GT(narrowed, 0u) << "no box is smaller than its brick: the test proves nothing";
+        EXPECT_GT(none, 0u) << "no stored brick is all empty: the test proves nothing";
+    }
+}
+
 TEST(OccupancyTest, IncrementalRebuildTouchesOnlyBricksMeetingTheChangeAndEqualsAFullOne) {
     auto t = angiography();
     if (!t) return test::missingData("scan CT_AVM");
@@ -151,6 +180,7 @@ TEST(OccupancyTest, IncrementalRebuildTouchesOnlyBricksMeetingTheChangeAndEquals
     EXPECT_FALSE(peakOnly.full);
     fresh.update(moved.table(1.0, 4096), {});
     EXPECT_EQ(incremental.words(), fresh.words());
+    EXPECT_EQ(incremental.sampledBoxes(), fresh.sampledBoxes());
     EXPECT_GT(peakOnly.ms, 0.0);
     // A change confined to values above every brick but the brightest touches few bricks.
     const auto nearTop = peakTf(top - 1.0, 0.5, t->stats);
