@@ -122,19 +122,10 @@ TEST(CpuSimdFallback, NarrowApronsMixScalarAndVectorLanesExactly) {
 // Positions near x = 16384 voxels, rays through a camera inside the volume, axis-parallel
 // orthographic rays on brick faces, and steps of 0.05 and 4 voxels: exact on the SIMD path too.
 TEST(CpuSimdFallback, StressViewsAreExactAndFinite) {
-    auto wide = brickstore::makeSynthetic(brickstore::SynthKind::Checker, {16384, 40, 40}, 5);
-    auto t = test::ingestStore(*wide, {64, 2, 8});
-    const std::string json = R"({"name":"checker","points":[{"value":100,"rgba":[0.9,0.7,0.4,0]},)"
-                             R"({"value":255,"rgba":[0.9,0.7,0.4,0.6]}]})";
-    const auto checker = TransferFunction::parse(json, "<checker>", t->stats);
-    Camera far;
-    far.eye = {16300, -60, 80};
-    far.target = {16340, 20, 20};
-    far.up = {0, 0, 1};
-    far.fovYDeg = 40;
+    const test::FarChecker checker = test::farChecker();
     RenderOptions o;
     o.width = o.height = 64;
-    expectSame(*t, checker, far, o, "checker 16384 wide, far end");
+    expectSame(*checker.store, checker.tf, checker.camera, o, "checker 16384 wide, far end");
 
     auto phantom = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {96, 96, 64}, 3);
     auto p = test::ingestStore(*phantom, {32, 2, 8});

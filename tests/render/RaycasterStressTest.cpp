@@ -224,20 +224,11 @@ TEST_P(RaycasterStress, StepsFromFiveHundredthsToFourVoxelsMatchReference) {
     }
 }
 
-// Positions near x = 16384 voxels leave float about 1/1000 voxel of precision. A dense 3D
-// checkerboard fills every brick, so any hole or seam at the far end shows.
+// Positions near x = 16384 voxels leave float about 1/1000 voxel of precision
+// (test::farChecker): no NaN, hole or seam at the far end.
 TEST_P(RaycasterStress, SixteenThousandVoxelWideVolumeHasNoNaNHolesOrSeams) {
-    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Checker, {16384, 40, 40}, 5);
-    auto t = test::ingestStore(*source, {64, 2, 8});
-    const std::string json = R"({"name":"checker","points":[{"value":100,"rgba":[0.9,0.7,0.4,0]},)"
-                             R"({"value":255,"rgba":[0.9,0.7,0.4,0.6]}]})";
-    const auto tf = TransferFunction::parse(json, "<checker>", t->stats);
-    Camera c;
-    c.eye = {16300, -60, 80};
-    c.target = {16340, 20, 20};
-    c.up = {0, 0, 1};
-    c.fovYDeg = 40;
-    expectCloseToReference(*t, tf, c, small(), "checker 16384 wide, far end", 40.0);
+    const test::FarChecker c = test::farChecker();
+    expectCloseToReference(*c.store, c.tf, c.camera, small(), "checker 16384 wide, far end", 40.0);
 }
 
 INSTANTIATE_TEST_SUITE_P(Raycasters, RaycasterStress, ::testing::Values("gpu", "cpu", "cpu_scalar"),

@@ -209,6 +209,28 @@ inline bool allFinite(const render::Image& image) {
     return true;
 }
 
+/// A 16384 x 40 x 40 checkerboard (voxels 0 and 255, 64-voxel bricks) that fills every brick,
+/// a TF that shows its 255 voxels, and a camera at the far end, where float keeps about 1/1000
+/// voxel of a position: any hole, seam or NaN from lost precision shows.
+struct FarChecker {
+    std::unique_ptr<TestStore> store;
+    render::TransferFunction tf;
+    render::Camera camera;
+};
+inline FarChecker farChecker() {
+    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Checker, {16384, 40, 40}, 5);
+    auto store = ingestStore(*source, {64, 2, 8});
+    const std::string json = R"({"name":"checker","points":[{"value":100,"rgba":[0.9,0.7,0.4,0]},)"
+                             R"({"value":255,"rgba":[0.9,0.7,0.4,0.6]}]})";
+    auto tf = render::TransferFunction::parse(json, "<checker>", store->stats);
+    render::Camera camera;
+    camera.eye = {16300, -60, 80};
+    camera.target = {16340, 20, 20};
+    camera.up = {0, 0, 1};
+    camera.fovYDeg = 40;
+    return {std::move(store), std::move(tf), camera};
+}
+
 inline void printComparison(const std::string& what, const render::ImageComparison& c) {
     std::printf("[metrics] %-48s max abs %.4f (%.1f/255)  RMSE %.5f  PSNR %.2f dB  SSIM %.5f  "
                 "low-pass PSNR %.2f dB\n",
