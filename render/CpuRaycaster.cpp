@@ -32,6 +32,7 @@ using detail::Accum;
 using detail::BrickRef;
 using detail::Frame;
 using detail::RayCount;
+using detail::RayState;
 using detail::Rgba;
 using detail::Slot;
 
@@ -42,100 +43,39 @@ template <class T> constexpr brickstore::VoxelType voxelTypeOf() {
     return brickstore::VoxelType::F32;
 }
 
-enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
-
-/// A ray between batches: its colour so far and, while it waits for a brick of a later batch,
-/// its DDA state at that brick (so the next pass goes on with the same floats).
-struct RayState {
-    Accum acc;
-    glm::ivec3 cell{0};
-    glm::vec3 tMax{0.0f};
-    int k = 0;
-    int brick = 0; ///< the brick it waits for
-    RayPhase phase = RayPhase::Fresh;
-};
-
-/// One ray through the brick grid (the shader's main()), for the bricks of batch f.batch:
-/// it stops, state saved, at the first planned brick of a later batch it would sample.
-/// `shift`: where the ray's samples start, in steps, relative to the unjittered lattice
-/// (rayJitter() - 1/2 with RenderOptions::jitter, else 0). `front`: the ray's link between
-/// samples under pre-integration (f.pre), else null.
+/// One ray (the shader's main()) for the bricks of batch f.batch, one brick after the other
+/// (RayWalk). `front`: the ray's link between samples under pre-integration (f.pre), else
+/// null.
 template <class T>
 void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, detail::Front* front,
               RayCount& n) {
-    if (s.phase == RayPhase::Done) return;
-    if (s.phase == RayPhase::Waiting && f.bricks[s.brick].batch != f.batch) return; // not yet
-    const RayPhase phase = s.phase;
-    s.phase = RayPhase::Done; // unless it stops to wait below
-    const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
-    const glm::vec3 d = f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
-    const glm::vec3 ov = o * f.invSpacing, dv = d * f.invSpacing;
+    detail::RayWalk w;
+    if (!w.begin(f, sx, sy, shift, s)) return;
     Accum& acc = s.acc;
-    float t0 = 0.0f, t1 = 3.0e38f;
-    for (int a = 0; a < 3; ++a) {
-        if (dv[a] == 0.0f) {
-            if (ov[a] < 0.0f || ov[a] > f.dims[a]) return;
-            continue;
-        }
-        const float ta = -ov[a] / dv[a], tb = (f.dims[a] - ov[a]) / dv[a];
-        t0 = std::max(t0, std::min(ta, tb));
-        t1 = std::min(t1, std::max(ta, tb));
-    }
-    t0 += shift * f.stepMm; // sample k at t0 + (k + 1/2) step: at the entry + (k + jitter) step
-    const int total = int(std::ceil((t1 - t0) / f.stepMm - 0.5f));
-    if (total <= 0) return;
-    const glm::vec3 invDv = 1.0f / dv; // inf where dv is 0: clipToSampled does not read it
-    const float invStep = 1.0f / f.stepMm;
-    glm::ivec3 cell = s.cell, stepDir;
-    glm::vec3 tDelta, tMax = s.tMax;
-    if (phase == RayPhase::Fresh) {
-        const glm::vec3 pin = ov + dv * t0;
-        cell = glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
-    }
-    for (int a = 0; a < 3; ++a) {
-        stepDir[a] = dv[a] > 0.0f ? 1 : dv[a] < 0.0f ? -1 : 0;
-        if (stepDir[a] == 0) {
-            tDelta[a] = 3.0e38f;
-            if (phase == RayPhase::Fresh) tMax[a] = 3.0e38f;
-            continue;
-        }
-        tDelta[a] = float(f.brick) / std::abs(dv[a]);
-        if (phase != RayPhase::Fresh) continue;
-        const float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * f.brick);
-        tMax[a] = (plane - ov[a]) / dv[a];
-    }
-    for (int k = phase == RayPhase::Fresh ? 0 : s.k; k < total;) {
-        const float tOut = std::min({tMax.x, tMax.y, tMax.z});
-        const int kEnd = std::min(total, int(std::ceil((tOut - t0) / f.stepMm - 0.5f)));
-        const int index = (cell.z * f.grid.y + cell.y) * f.grid.x + cell.x;
-        const BrickRef& b = f.bricks[index];
-        if (b.slot != Slot::Absent && kEnd > k && b.batch != f.batch) {
-            s.cell = cell;
-            s.tMax = tMax;
-            s.k = k;
-            s.brick = index;
-            s.phase = RayPhase::Waiting;
-            return;
-        }
-        if (b.slot == Slot::Sampled && kEnd > k) {
-            const std::uint32_t* words = f.occ ? f.occ + std::size_t(index) * f.occWords : nullptr;
-            const glm::vec3 local = ov - glm::vec3(cell * f.brick);
+    while (w.next(f, s)) {
+        const BrickRef& b = f.bricks[w.index];
+        int& k = w.k;
+        const int kEnd = w.kEnd;
+        if (b.slot == Slot::Sampled) {
+            const std::uint32_t* words =
+                f.occ ? f.occ + std::size_t(w.index) * f.occWords : nullptr;
+            const glm::vec3 local = w.local(f);
             const T* voxels = static_cast<const T*>(b.voxels);
             // Pre-integration walks the whole range itself: a segment may begin at a sample
             // that a leap skipped. The others narrow it to the box of sampled leaves first.
             int kFirst = k, kLast = kEnd;
             bool more = true;
             if (f.pre)
-                more = detail::marchBrickPre(f, voxels, words, local, dv, d, t0, k, kEnd, acc,
+                more = detail::marchBrickPre(f, voxels, words, local, w.dv, w.d, w.t0, k, kEnd, acc,
                                              *front, n);
-            else if (!words || detail::clipToSampled(f, f.boxes[index], local, dv, invDv, invStep,
-                                                     t0, kFirst, kLast))
+            else if (!words || detail::clipToSampled(f, f.boxes[w.index], local, w.dv, w.invDv,
+                                                     w.invStep, w.t0, kFirst, kLast))
                 more = f.simd ? detail::marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words, local,
-                                                       dv, d, t0, kFirst, kLast, acc, n)
-                              : detail::marchBrick(f, voxels, words, local, dv, d, t0, kFirst,
+                                                       w.dv, w.d, w.t0, kFirst, kLast, acc, n)
+                              : detail::marchBrick(f, voxels, words, local, w.dv, w.d, w.t0, kFirst,
                                                    kLast, acc, n);
             if (!more) return;
-        } else if (b.slot == Slot::Constant && kEnd > k && f.pre) {
+        } else if (f.pre) {
             // One value throughout: the first segment runs from the last sample's value to it,
             // every later one is that value alone.
             const PreintegratedTable::End e = f.pre->end(double(b.constant));
@@ -147,19 +87,9 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, deta
                 composite(acc, c);
                 if (acc.t <= f.ertT) return;
             }
-        } else if (b.slot == Slot::Constant && kEnd > k) {
-            const Rgba c = classify(f, b.constant);
-            n.samples += std::uint64_t(kEnd - k);
-            for (; c.a > 0.0f && k < kEnd; ++k) {
-                composite(acc, c);
-                if (acc.t <= f.ertT) return;
-            }
+        } else if (!detail::marchConstant(f, b.constant, k, kEnd, acc, n)) {
+            return;
         }
-        k = std::max(k, kEnd);
-        const int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
-        cell[a] += stepDir[a];
-        tMax[a] += tDelta[a];
-        if (cell[a] < 0 || cell[a] >= f.grid[a]) break;
     }
 }
 
@@ -170,21 +100,46 @@ void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& r
                std::vector<detail::Front>& fronts, RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0};
     const auto x0 = region.x, y0 = region.y, w = region.width;
-    tbb::parallel_for(tbb::blocked_range2d<std::uint32_t>(y0, y0 + region.height, 8, x0, x0 + w, 8),
-                      [&](const tbb::blocked_range2d<std::uint32_t>& r) {
-                          RayCount n;
-                          for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
-                              for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
-                                  const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
-                                  const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
-                                  const float shift = f.jitter ? rayJitter(x, y) - 0.5f : 0.0f;
-                                  const std::size_t i = std::size_t(y - y0) * w + (x - x0);
-                                  marchRay<T>(f, sx, sy, shift, rays[i],
-                                              fronts.empty() ? nullptr : &fronts[i], n);
-                              }
-                          samples += n.samples;
-                          leaps += n.leaps;
-                      });
+    auto ray = [&](std::uint32_t x, std::uint32_t y) {
+        detail::PacketRay p;
+        p.sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
+        p.sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
+        p.shift = f.jitter ? rayJitter(x, y) - 0.5f : 0.0f;
+        p.state = &rays[std::size_t(y - y0) * w + (x - x0)];
+        return p;
+    };
+    tbb::parallel_for(
+        tbb::blocked_range2d<std::uint32_t>(y0, y0 + region.height, 8, x0, x0 + w, 8),
+        [&](const tbb::blocked_range2d<std::uint32_t>& r) {
+            RayCount n;
+            if (f.packets) { // the rays in 4x4 blocks (partial at an edge)
+                const auto ye = r.rows().end(), xe = r.cols().end();
+                std::vector<detail::PacketRay> list;
+                list.reserve(r.rows().size() * r.cols().size());
+                for (std::uint32_t by = r.rows().begin(); by < ye; by += 4)
+                    for (std::uint32_t bx = r.cols().begin(); bx < xe; bx += 4)
+                        for (std::uint32_t y = by; y < std::min(by + 4, ye); ++y)
+                            for (std::uint32_t x = bx; x < std::min(bx + 4, xe); ++x) {
+                                list.push_back(ray(x, y));
+                                // The states were written by the thread that
+                                // made them: fetch them here, well before use.
+                                __builtin_prefetch(list.back().state, 1);
+                            }
+                detail::marchPacketSimd(voxelTypeOf<T>(), f, list.data(), list.size(), n);
+                samples += n.samples;
+                leaps += n.leaps;
+                return;
+            }
+            for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
+                for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
+                    const detail::PacketRay p = ray(x, y);
+                    const std::size_t i = std::size_t(y - y0) * w + (x - x0);
+                    marchRay<T>(f, p.sx, p.sy, p.shift, *p.state,
+                                fronts.empty() ? nullptr : &fronts[i], n);
+                }
+            samples += n.samples;
+            leaps += n.leaps;
+        });
     total.samples += samples;
     total.leaps += leaps;
 }
@@ -229,6 +184,7 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.ertT = o.earlyTermination ? float(1.0 - o.ertThreshold) : -1.0f;
     f.shading = o.shading;
     f.simd = o.simd;
+    f.packets = o.simd && o.packets && !o.preintegrate;
     f.jitter = o.jitter;
     f.segment = o.stepVoxels;
     f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);

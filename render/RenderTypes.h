@@ -62,6 +62,10 @@ struct RenderOptions {
     /// widest instruction set; render/detail/CpuMarchSimd.cpp). The same image as the scalar
     /// loop, bit for bit; false draws with the scalar loop.
     bool simd = true;
+    /// With simd: march a vector of rays at a time, one sample per lane (packets of 4x4
+    /// pixels, render/detail/CpuMarchSimd.h) instead of a vector of one ray's consecutive
+    /// samples. The same image, bit for bit. Pre-integration marches with the scalar loop.
+    bool packets = true;
     /// Start each ray's samples at a per-pixel offset of [0, 1) step from the box entry
     /// instead of half a step (rayJitter()): the fixed lattice's wood-grain rings become fine
     /// noise (render/OPTICS.md). Deterministic per pixel, so skipping, slices and repeated

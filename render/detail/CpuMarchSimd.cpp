@@ -1,17 +1,28 @@
-// The CPU raycaster's brick march vectorised across consecutive samples of one ray
-// (render/detail/CpuMarchSimd.h), compiled once per instruction set by Highway's
-// foreach_target and dispatched at run time to the best one the host has.
+// The CPU raycaster's march vectorised (render/detail/CpuMarchSimd.h), compiled once per
+// instruction set by Highway's foreach_target and dispatched at run time to the best one the
+// host has. Two layouts:
 //
-// Why across samples and not across rays: the brick DDA, the octree leaps and early
-// termination stay the scalar code's, per ray, unchanged; only the per-sample work (8 to 32
-// voxel loads, trilinear weights, the TF lookup, the gradient and the shading) runs a vector
-// of samples at a time, and the samples of one ray in one brick share the brick's voxels.
+// - Across rays (marchPacketSimd, the default): each lane is one ray of a list of neighbouring
+//   pixels, and a step takes one sample of every lane. A ray is a chain of dependent steps
+//   (DDA, leaf test, leap, sample, composite); sixteen independent chains side by side keep
+//   the core busy where one ray's chain leaves it waiting. Lanes walk the brick grid each on
+//   its own and sample their own bricks (32-bit gather offsets from one base); a lane out of
+//   samples takes its next brick, or the next ray of the list, once a quarter of the lanes
+//   are. Visible samples wait in a queue for their colour (TF colour, gradient, shading),
+//   taken a full vector at a time: a step only classifies, so the gradient's 24 voxel loads
+//   are paid per visible sample, not per lane of every step with one visible sample.
+// - Across one ray's consecutive samples in one brick (marchBrickSimd): the brick DDA, the
+//   octree leaps and early termination stay the scalar code's, per ray; the per-sample work
+//   runs a vector of samples at a time. Pre-integration's scalar march aside, this is what
+//   RenderOptions::packets = false selects.
 //
 // Same image as the scalar march, bit for bit: every lane does the scalar code's float
 // operations in the scalar code's order, and this file is compiled without contraction into
 // fused multiply-adds (render/CMakeLists.txt), so a sample's colour does not depend on the
-// lane it ran in, on the vector width, or on whether it ran here at all. Compositing stays
-// sequential, lane by lane, so early termination stops at the same sample.
+// lane it ran in, on the vector width, or on whether it ran here at all. Compositing keeps
+// each ray's order: across samples it goes lane by lane; across rays a lane's transmittance
+// is updated at its step (so early termination stops at the same sample) and the queued
+// colours are added to its sums in the order its samples were taken.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "render/detail/CpuMarchSimd.cpp"
 #include <hwy/foreach_target.h> // IWYU pragma: keep
@@ -215,8 +226,10 @@ HWY_INLINE VF pow24(VF x) {
     return hn::Mul(x12, x12);
 }
 
-/// shade() of CpuRay.h per lane (r, g, b in place; lanes with a zero gradient keep theirs).
-HWY_INLINE void shadeV(const Frame& f, glm::vec3 dir, VF gx, VF gy, VF gz, VF& r, VF& g, VF& b) {
+/// shade() of CpuRay.h per lane, for ray directions (dx, dy, dz) (r, g, b in place; lanes with a
+/// zero gradient keep theirs).
+HWY_INLINE void shadeV(const Frame& f, VF dx, VF dy, VF dz, VF gx, VF gy, VF gz, VF& r, VF& g,
+                       VF& b) {
     const DF df;
     gx = hn::Mul(gx, hn::Set(df, f.gradScale.x));
     gy = hn::Mul(gy, hn::Set(df, f.gradScale.y));
@@ -224,9 +237,7 @@ HWY_INLINE void shadeV(const Frame& f, glm::vec3 dir, VF gx, VF gy, VF gz, VF& r
     const VF len = hn::Sqrt(hn::Add(hn::Add(hn::Mul(gx, gx), hn::Mul(gy, gy)), hn::Mul(gz, gz)));
     const auto lit = hn::Gt(len, hn::Zero(df));
     const VF nx = hn::Div(gx, len), ny = hn::Div(gy, len), nz = hn::Div(gz, len);
-    const VF diff =
-        hn::Abs(hn::Add(hn::Add(hn::Mul(nx, hn::Set(df, dir.x)), hn::Mul(ny, hn::Set(df, dir.y))),
-                        hn::Mul(nz, hn::Set(df, dir.z))));
+    const VF diff = hn::Abs(hn::Add(hn::Add(hn::Mul(nx, dx), hn::Mul(ny, dy)), hn::Mul(nz, dz)));
     const VF spec = hn::Mul(hn::Set(df, float(ShadingModel::kSpecular)), pow24(diff));
     const VF k = hn::Add(hn::Set(df, float(ShadingModel::kAmbient)),
                          hn::Mul(hn::Set(df, float(ShadingModel::kDiffuse)), diff));
@@ -242,14 +253,84 @@ HWY_INLINE void shadeV(const Frame& f, glm::vec3 dir, VF gx, VF gy, VF gz, VF& r
     b = apply(b);
 }
 
-/// Samples [k, k + count) of one brick, count <= Lanes(DF()); false once the ray is opaque.
+/// A vector of samples of one brick at positions q (voxels, relative to the stored brick's
+/// first voxel, as Sample<T> takes them): their opacity at once, their colour on demand.
 ///
 /// Voxel reads, with the lane's position q clamped into the fused range [1, edge - 2) (lanes
-/// outside it are redone by the scalar code): the cell is x0..x0+1, y0..y0+1, z0..z0+1 with
-/// 1 <= x0, y0, z0 <= edge - 3, the gradient reads one voxel beyond on each axis (0 .. edge -
-/// 1), so no read leaves the brick; the 4-byte gathers of 8-bit voxels read up to 2 bytes past
-/// the voxel they need, which stays inside since the last row of the last slice (z = y =
-/// edge - 1) is never a row read here (z = edge - 1 is read only for rows y0 and y0 + 1).
+/// outside it are for the scalar code, Sample<T>): the cell is x0..x0+1, y0..y0+1, z0..z0+1
+/// with 1 <= x0, y0, z0 <= edge - 3, the gradient reads one voxel beyond on each axis (0 ..
+/// edge - 1), so no read leaves the brick; the 4-byte gathers of 8-bit voxels read up to 2
+/// bytes past the voxel they need, which stays inside since the last row of the last slice (z
+/// = y = edge - 1) is never a row read here (z = edge - 1 is read only for rows y0 and y0 + 1).
+template <class T> struct SamplesV {
+    const Frame& f;
+    const T* v;
+    hn::Mask<DF> fused; ///< lanes in the fused range: the others' results are not theirs
+    bool allFused;
+    VI o, sy, sz, e;
+    VF fx, fy, fz, w;
+    CellRows c;
+    VF a; ///< classify()'s alpha per lane
+
+    /// `base`: per lane, where its brick's voxels start, in voxels from `voxels` (0 when
+    /// every lane samples the brick at `voxels`).
+    /// `quads`: read the cell rows' x neighbours too (what the gradient needs) where one
+    /// gather reads them with the rows.
+    SamplesV(const Frame& frame, const T* voxels, VF qx, VF qy, VF qz, VI base, bool quads)
+        : f(frame), v(voxels) {
+        const DF df;
+        const DI di;
+        const VF one = hn::Set(df, 1.0f), hi = hn::Set(df, float(f.edge - 2));
+        fused = hn::And(hn::And(hn::And(hn::Ge(qx, one), hn::Lt(qx, hi)),
+                                hn::And(hn::Ge(qy, one), hn::Lt(qy, hi))),
+                        hn::And(hn::Ge(qz, one), hn::Lt(qz, hi)));
+        allFused = hn::AllTrue(df, fused);
+        // Addresses from positions clamped into the fused range, which leaves a fused lane's
+        // own (Max first: it returns 1 for a NaN position).
+        const VF top = hn::Set(df, std::nextafter(float(f.edge - 2), 0.0f));
+        auto inside = [&](VF q) { return hn::Min(hn::Max(q, one), top); };
+        const VF cx = allFused ? qx : inside(qx), cy = allFused ? qy : inside(qy),
+                 cz = allFused ? qz : inside(qz);
+        const VI x0 = hn::ConvertTo(di, cx), y0 = hn::ConvertTo(di, cy), z0 = hn::ConvertTo(di, cz);
+        fx = hn::Sub(cx, hn::ConvertTo(df, x0));
+        fy = hn::Sub(cy, hn::ConvertTo(df, y0));
+        fz = hn::Sub(cz, hn::ConvertTo(df, z0));
+        sy = hn::Set(di, f.edge);
+        sz = hn::Set(di, f.edge * f.edge);
+        o = hn::Add(hn::Add(hn::Add(hn::Mul(z0, sz), hn::Mul(y0, sy)), x0), base);
+        cellRows(v, o, sy, sz, quads, c);
+        const VF value =
+            lerpV(lerpV(lerpV(c.r00.lo, c.r00.hi, fx), lerpV(c.r10.lo, c.r10.hi, fx), fy),
+                  lerpV(lerpV(c.r01.lo, c.r01.hi, fx), lerpV(c.r11.lo, c.r11.hi, fx), fy), fz);
+        // classify() per lane.
+        const VF u = hn::Min(
+            hn::Max(hn::Add(hn::Mul(value, hn::Set(df, f.tfScale)), hn::Set(df, f.tfOffset)),
+                    hn::Zero(df)),
+            hn::Set(df, float(f.entries - 1)));
+        const VI entry = hn::Min(hn::ConvertTo(di, u), hn::Set(di, f.entries - 2));
+        w = hn::Sub(u, hn::ConvertTo(df, entry));
+        e = hn::ShiftLeft<2>(entry);
+        a = channel(3);
+    }
+    VF channel(int ch) const {
+        const DF df;
+        const DI di;
+        return lerpV(hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch))),
+                     hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch + 4))), w);
+    }
+    /// classify()'s colour, shaded for ray directions (dx, dy, dz) where f.shading.
+    void colour(VF dx, VF dy, VF dz, VF& r, VF& g, VF& b) const {
+        r = channel(0);
+        g = channel(1);
+        b = channel(2);
+        if (!f.shading) return;
+        VF gx, gy, gz;
+        gradientOf(v, o, sy, sz, c, fx, fy, fz, gx, gy, gz);
+        shadeV(f, dx, dy, dz, gx, gy, gz, r, g, b);
+    }
+};
+
+/// Samples [k, k + count) of one brick, count <= Lanes(DF()); false once the ray is opaque.
 template <class T>
 bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::vec3 dir, float t0,
                 int k, int count, Accum& acc, RayCount& n) {
@@ -260,53 +341,18 @@ bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::ve
     const VF t =
         hn::Add(hn::Set(df, t0), hn::Mul(hn::Add(hn::ConvertTo(df, index), hn::Set(df, 0.5f)),
                                          hn::Set(df, f.stepMm)));
-    const VF qx = hn::Add(hn::Set(df, rel.x), hn::Mul(hn::Set(df, dv.x), t));
-    const VF qy = hn::Add(hn::Set(df, rel.y), hn::Mul(hn::Set(df, dv.y), t));
-    const VF qz = hn::Add(hn::Set(df, rel.z), hn::Mul(hn::Set(df, dv.z), t));
-    const VF one = hn::Set(df, 1.0f), hi = hn::Set(df, float(f.edge - 2));
-    const auto fused = hn::And(
-        hn::And(hn::And(hn::Ge(qx, one), hn::Lt(qx, hi)), hn::And(hn::Ge(qy, one), hn::Lt(qy, hi))),
-        hn::And(hn::Ge(qz, one), hn::Lt(qz, hi)));
-    const bool allFused = hn::AllTrue(df, fused);
-    // Addresses from positions clamped into the fused range, which leaves a fused lane's own
-    // (Max first: it returns 1 for a NaN position).
-    const VF top = hn::Set(df, std::nextafter(float(f.edge - 2), 0.0f));
-    auto inside = [&](VF q) { return hn::Min(hn::Max(q, one), top); };
-    const VF cx = allFused ? qx : inside(qx), cy = allFused ? qy : inside(qy),
-             cz = allFused ? qz : inside(qz);
-    const VI x0 = hn::ConvertTo(di, cx), y0 = hn::ConvertTo(di, cy), z0 = hn::ConvertTo(di, cz);
-    const VF fx = hn::Sub(cx, hn::ConvertTo(df, x0)), fy = hn::Sub(cy, hn::ConvertTo(df, y0)),
-             fz = hn::Sub(cz, hn::ConvertTo(df, z0));
-    const VI sy = hn::Set(di, f.edge), sz = hn::Set(di, f.edge * f.edge);
-    const VI o = hn::Add(hn::Add(hn::Mul(z0, sz), hn::Mul(y0, sy)), x0);
-    CellRows c;
-    cellRows(v, o, sy, sz, f.shading, c);
-    const VF value =
-        lerpV(lerpV(lerpV(c.r00.lo, c.r00.hi, fx), lerpV(c.r10.lo, c.r10.hi, fx), fy),
-              lerpV(lerpV(c.r01.lo, c.r01.hi, fx), lerpV(c.r11.lo, c.r11.hi, fx), fy), fz);
-    // classify() per lane.
-    const VF u =
-        hn::Min(hn::Max(hn::Add(hn::Mul(value, hn::Set(df, f.tfScale)), hn::Set(df, f.tfOffset)),
-                        hn::Zero(df)),
-                hn::Set(df, float(f.entries - 1)));
-    const VI entry = hn::Min(hn::ConvertTo(di, u), hn::Set(di, f.entries - 2));
-    const VF w = hn::Sub(u, hn::ConvertTo(df, entry));
-    const VI e = hn::ShiftLeft<2>(entry);
-    auto channel = [&](int ch) {
-        return lerpV(hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch))),
-                     hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch + 4))), w);
-    };
-    const VF a = channel(3);
+    const SamplesV<T> samples(f, v, hn::Add(hn::Set(df, rel.x), hn::Mul(hn::Set(df, dv.x), t)),
+                              hn::Add(hn::Set(df, rel.y), hn::Mul(hn::Set(df, dv.y), t)),
+                              hn::Add(hn::Set(df, rel.z), hn::Mul(hn::Set(df, dv.z), t)),
+                              hn::Zero(di), f.shading);
+    const bool allFused = samples.allFused;
+    const VF a = samples.a;
     if (allFused && hn::AllFalse(df, hn::Gt(a, hn::Zero(df)))) {
         n.samples += std::uint64_t(count);
         return true;
     }
-    VF r = channel(0), g = channel(1), b = channel(2);
-    if (f.shading) {
-        VF gx, gy, gz;
-        gradientOf(v, o, sy, sz, c, fx, fy, fz, gx, gy, gz);
-        shadeV(f, dir, gx, gy, gz, r, g, b);
-    }
+    VF r, g, b;
+    samples.colour(hn::Set(df, dir.x), hn::Set(df, dir.y), hn::Set(df, dir.z), r, g, b);
     HWY_ALIGN float rs[kMax], gs[kMax], bs[kMax], as[kMax], ts[kMax];
     hn::Store(r, df, rs);
     hn::Store(g, df, gs);
@@ -314,7 +360,7 @@ bool marchChunk(const Frame& f, const T* v, glm::vec3 rel, glm::vec3 dv, glm::ve
     hn::Store(a, df, as);
     std::uint8_t fusedBits[(kMax + 7) / 8 + 8] = {};
     if (!allFused) {
-        hn::StoreMaskBits(df, fused, fusedBits);
+        hn::StoreMaskBits(df, samples.fused, fusedBits);
         hn::Store(t, df, ts);
     }
     // Lane by lane, without a branch on visibility: a transparent lane (alpha 0; the TF has
@@ -476,6 +522,560 @@ bool MarchBrick(brickstore::VoxelType type, const Frame& f, const void* voxels,
     return true;
 }
 
+/// Leaves (lx, ly, lz) of the rays' positions p = local + dv t per lane, clamped into the
+/// brick: the scalar walk's floor(p / leaf) (a power-of-two leaf, the default 8, multiplies by
+/// its exact reciprocal instead: the same float).
+HWY_INLINE VI leafOf(const Frame& f, VF local, VF dv, VF t) {
+    const DF df;
+    const DI di;
+    const bool pow2 = f.leaf >= 1.0f && std::has_single_bit(unsigned(f.leaf)) &&
+                      float(unsigned(f.leaf)) == f.leaf;
+    const VF p = hn::Add(local, hn::Mul(dv, t));
+    const VF q = pow2 ? hn::Mul(p, hn::Set(df, 1.0f / f.leaf)) : hn::Div(p, hn::Set(df, f.leaf));
+    return hn::Min(hn::Max(hn::ConvertTo(di, hn::Floor(q)), hn::Zero(di)),
+                   hn::Set(di, f.leafAxis - 1));
+}
+
+/// Per lane: is the octree node of level l (1: the root's children ... f.octDepth: the leaves)
+/// that holds leaf (lx, ly, lz) sampled? `wordBase`: where the lane's brick's words start.
+HWY_INLINE hn::Mask<DI> nodeSampled(const Frame& f, const std::uint32_t* words, VI wordBase, VI lx,
+                                    VI ly, VI lz, int l) {
+    const DI di;
+    const int shift = f.octDepth - l;
+    const VI s = hn::Set(di, 1 << l);
+    const VI nx = hn::ShiftRightSame(lx, shift), ny = hn::ShiftRightSame(ly, shift),
+             nz = hn::ShiftRightSame(lz, shift);
+    const VI bit = hn::Add(hn::Set(di, ((1 << (3 * l)) - 8) / 7),
+                           hn::Add(hn::Mul(hn::Add(hn::Mul(nz, s), ny), s), nx));
+    const VI word = hn::GatherIndex(di, reinterpret_cast<const std::int32_t*>(words),
+                                    hn::Add(hn::ShiftRight<5>(bit), wordBase));
+    return hn::Ne(hn::And(hn::Shr(word, hn::And(bit, hn::Set(di, 31))), hn::Set(di, 1)),
+                  hn::Zero(di));
+}
+
+/// RayWalk::begin() for rays [0, count) of `rays` at once, all Fresh: ok[i] says whether ray
+/// i has anything to draw, walks[i] is its walk. The scalar code's float operations in its
+/// order (glm::normalize is v * (1 / sqrt(dot(v, v))); std::min and std::max by their own
+/// comparisons), so each walk is bit for bit the one begin() sets up. Marks the rays Done,
+/// as begin() does (a ray that stops to wait says so in RayWalk::next()).
+void beginFresh(const Frame& f, const PacketRay* rays, std::size_t count, RayWalk* walks,
+                bool* ok) {
+    const DF df;
+    const DI di;
+    constexpr std::size_t kMax = hn::MaxLanes(DF());
+    HWY_ALIGN float sx[kMax] = {}, sy[kMax] = {}, shift[kMax] = {};
+    for (std::size_t i = 0; i < count; ++i) {
+        sx[i] = rays[i].sx;
+        sy[i] = rays[i].sy;
+        shift[i] = rays[i].shift;
+    }
+    const VF SX = hn::Load(df, sx), SY = hn::Load(df, sy), zero = hn::Zero(df);
+    auto minOf = [](VF a, VF b) { return hn::IfThenElse(hn::Lt(b, a), b, a); }; // std::min
+    auto maxOf = [](VF a, VF b) { return hn::IfThenElse(hn::Lt(a, b), b, a); }; // std::max
+    auto along = [&](float base, float right, float up) { // base + sx right + sy up
+        return hn::Add(hn::Add(hn::Set(df, base), hn::Mul(SX, hn::Set(df, right))),
+                       hn::Mul(SY, hn::Set(df, up)));
+    };
+    VF o[3], d[3];
+    for (int a = 0; a < 3; ++a) {
+        o[a] = f.ortho ? along(f.eye[a], f.right[a], f.up[a]) : hn::Set(df, f.eye[a]);
+        d[a] = f.ortho ? hn::Set(df, f.forward[a]) : along(f.forward[a], f.right[a], f.up[a]);
+    }
+    if (!f.ortho) {
+        const VF inv = hn::Div(hn::Set(df, 1.0f),
+                               hn::Sqrt(hn::Add(hn::Add(hn::Mul(d[0], d[0]), hn::Mul(d[1], d[1])),
+                                                hn::Mul(d[2], d[2]))));
+        for (VF& x : d)
+            x = hn::Mul(x, inv);
+    }
+    VF ov[3], dv[3], inv[3];
+    VF t0 = zero, t1 = hn::Set(df, 3.0e38f);
+    auto miss = hn::Not(hn::FirstN(df, count));
+    for (int a = 0; a < 3; ++a) {
+        ov[a] = hn::Mul(o[a], hn::Set(df, f.invSpacing[a]));
+        dv[a] = hn::Mul(d[a], hn::Set(df, f.invSpacing[a]));
+        inv[a] = hn::Div(hn::Set(df, 1.0f), dv[a]);
+        const auto still = hn::Eq(dv[a], zero);
+        miss = hn::Or(miss, hn::And(still, hn::Or(hn::Lt(ov[a], zero),
+                                                  hn::Gt(ov[a], hn::Set(df, f.dims[a])))));
+        const VF ta = hn::Mul(hn::Neg(ov[a]), inv[a]),
+                 tb = hn::Mul(hn::Sub(hn::Set(df, f.dims[a]), ov[a]), inv[a]);
+        t0 = hn::IfThenElse(still, t0, maxOf(t0, minOf(ta, tb)));
+        t1 = hn::IfThenElse(still, t1, minOf(t1, maxOf(ta, tb)));
+    }
+    const float invStep = 1.0f / f.stepMm;
+    t0 = hn::Add(t0, hn::Mul(hn::Load(df, shift), hn::Set(df, f.stepMm)));
+    const VF totalF =
+        hn::Ceil(hn::Sub(hn::Mul(hn::Sub(t1, t0), hn::Set(df, invStep)), hn::Set(df, 0.5f)));
+    // Where the count does not fit an int the ray is refused (begin() would misbehave).
+    miss = hn::Or(miss, hn::Not(hn::Lt(totalF, hn::Set(df, 2.0e9f))));
+    miss = hn::Or(miss, hn::Not(hn::Gt(totalF, zero)));
+    const float brick = float(f.brick);
+    HWY_ALIGN float out[16][kMax];
+    HWY_ALIGN std::int32_t cells[3][kMax];
+    for (int a = 0; a < 3; ++a) {
+        const VF pin = hn::Add(ov[a], hn::Mul(dv[a], t0));
+        const VI cell = hn::Min(
+            hn::Max(hn::ConvertTo(di, hn::Floor(hn::Div(pin, hn::Set(df, brick)))), hn::Zero(di)),
+            hn::Set(di, f.grid[a] - 1));
+        const auto still = hn::Eq(dv[a], zero), up = hn::Gt(dv[a], zero);
+        const VF plane = hn::ConvertTo(
+            df, hn::Mul(hn::Add(cell, hn::IfThenElseZero(hn::RebindMask(di, up), hn::Set(di, 1))),
+                        hn::Set(di, f.brick)));
+        const VF far = hn::Set(df, 3.0e38f);
+        hn::Store(cell, di, cells[a]);
+        hn::Store(d[a], df, out[a]);
+        hn::Store(ov[a], df, out[3 + a]);
+        hn::Store(dv[a], df, out[6 + a]);
+        hn::Store(inv[a], df, out[9 + a]);
+        hn::Store(hn::IfThenElse(still, far, hn::Mul(hn::Set(df, brick), hn::Abs(inv[a]))), df,
+                  out[12 + a]);
+        // tMax, kept where the cell is known: out[15] holds one axis at a time.
+        hn::Store(hn::IfThenElse(still, far, hn::Mul(hn::Sub(plane, ov[a]), inv[a])), df, out[15]);
+        for (std::size_t i = 0; i < count; ++i)
+            walks[i].tMax[a] = out[15][i];
+    }
+    HWY_ALIGN float t0s[kMax];
+    HWY_ALIGN std::int32_t totals[kMax];
+    hn::Store(t0, df, t0s);
+    hn::Store(hn::ConvertTo(di, hn::IfThenElseZero(hn::Not(miss), totalF)), di, totals);
+    std::uint8_t missBits[(kMax + 7) / 8 + 8] = {};
+    hn::StoreMaskBits(df, miss, missBits);
+    for (std::size_t i = 0; i < count; ++i) {
+        RayWalk& w = walks[i];
+        ok[i] = ((missBits[i >> 3] >> (i & 7)) & 1) == 0;
+        if (rays[i].state) rays[i].state->phase = RayPhase::Done;
+        if (!ok[i]) continue;
+        for (int a = 0; a < 3; ++a) {
+            w.d[a] = out[a][i];
+            w.ov[a] = out[3 + a][i];
+            w.dv[a] = out[6 + a][i];
+            w.invDv[a] = out[9 + a][i];
+            w.tDelta[a] = out[12 + a][i];
+            w.cell[a] = cells[a][i];
+            w.stepDir[a] = w.dv[a] > 0.0f ? 1 : w.dv[a] < 0.0f ? -1 : 0;
+        }
+        w.t0 = t0s[i];
+        w.invStep = invStep;
+        w.total = totals[i];
+        w.k = w.kEnd = w.index = 0;
+        w.entered = false;
+    }
+}
+
+/// The rays in a packet's lanes, one per lane (structure of arrays): where each is in its
+/// brick, and its colour so far. A lane without samples to take has k = end.
+struct Lanes {
+    static constexpr std::size_t kMax = hn::MaxLanes(DF());
+    HWY_ALIGN std::int32_t k[kMax], end[kMax];
+    HWY_ALIGN std::int32_t base[kMax];  ///< the brick's first voxel, in voxels from the packet's
+    HWY_ALIGN std::int32_t words[kMax]; ///< the brick's first octree word in f.occ
+    HWY_ALIGN float t0[kMax], lx[kMax], ly[kMax], lz[kMax], dx[kMax], dy[kMax], dz[kMax];
+    HWY_ALIGN float ix[kMax], iy[kMax], iz[kMax]; ///< 1 / (dx, dy, dz)
+    HWY_ALIGN float wx[kMax], wy[kMax], wz[kMax]; ///< the rays' world directions (shading)
+    HWY_ALIGN float r[kMax], g[kMax], b[kMax], t[kMax];
+};
+
+/// The march of marchPacketSimd() for voxels of type T: its lanes, each a ray of the queue
+/// `rays` in turn, and the step that takes one sample of every lane.
+template <class T> class Packet {
+  public:
+    static constexpr std::size_t kMax = Lanes::kMax;
+
+    Packet(const Frame& f, const PacketRay* rays, std::size_t count, int lanes, RayCount& n)
+        : f(f), mRays(rays), mCount(count), mLanes(lanes), mN(n) {}
+
+    void run() {
+        for (int j = 0; j < int(kMax); ++j)
+            idle(j);
+        for (int j = 0; j < mLanes; ++j)
+            refill(j);
+        march();
+    }
+
+  private:
+    using MI = hn::Mask<DI>;
+
+    /// Lane j without a ray: no samples, nothing to composite.
+    void idle(int j) {
+        mRay[j] = nullptr;
+        L.k[j] = L.end[j] = 0;
+        L.base[j] = L.words[j] = 0;
+        L.t0[j] = L.lx[j] = L.ly[j] = L.lz[j] = L.dx[j] = L.dy[j] = L.dz[j] = 0.0f;
+        L.ix[j] = L.iy[j] = L.iz[j] = L.wx[j] = L.wy[j] = L.wz[j] = 0.0f;
+        L.r[j] = L.g[j] = L.b[j] = 0.0f;
+        L.t[j] = 1.0f;
+    }
+
+    /// Lane j's ray on to its next sampled brick with samples to take (compositing the
+    /// bricks of one value on the way, narrowing to the box of sampled leaves); false when the
+    /// ray has no more in this pass.
+    bool seek(int j) {
+        RayWalk& w = mWalk[j];
+        RayState& s = *mRay[j]->state;
+        Accum acc{L.r[j], L.g[j], L.b[j], L.t[j]};
+        bool found = false;
+        while (!found && w.next(f, s)) {
+            const BrickRef& b = f.bricks[w.index];
+            if (b.slot == Slot::Constant) {
+                if (!marchConstant(f, b.constant, w.k, w.kEnd, acc, mN)) break;
+                continue;
+            }
+            int first = w.k, last = w.kEnd;
+            if (f.occ && !clipToSampled(f, f.boxes[w.index], w.local(f), w.dv, w.invDv, w.invStep,
+                                        w.t0, first, last))
+                continue;
+            const T* voxels = static_cast<const T*>(b.voxels);
+            if (!mVoxels) mVoxels = voxels;
+            // Gathers address a lane's voxels by 32-bit byte offsets from the packet's first
+            // brick: a brick further away than that (never seen yet) is the scalar loop's
+            // (pointers compared as integers: the bricks are separate allocations).
+            const std::int64_t offset = (std::int64_t(reinterpret_cast<std::uintptr_t>(voxels)) -
+                                         std::int64_t(reinterpret_cast<std::uintptr_t>(mVoxels))) /
+                                        std::int64_t(sizeof(T));
+            const std::int64_t span = std::int64_t(f.edge) * f.edge * f.edge;
+            if ((std::abs(offset) + span) * std::int64_t(sizeof(T)) + 8 > INT32_MAX) {
+                if (!marchAlone(voxels, w, first, last, acc)) break;
+                continue;
+            }
+            const glm::vec3 local = w.local(f);
+            mLaneVoxels[j] = voxels;
+            L.k[j] = first;
+            L.end[j] = last;
+            L.base[j] = std::int32_t(offset);
+            L.words[j] = w.index * f.occWords;
+            L.t0[j] = w.t0;
+            L.lx[j] = local.x;
+            L.ly[j] = local.y;
+            L.lz[j] = local.z;
+            L.dx[j] = w.dv.x;
+            L.dy[j] = w.dv.y;
+            L.dz[j] = w.dv.z;
+            L.ix[j] = w.invDv.x;
+            L.iy[j] = w.invDv.y;
+            L.iz[j] = w.invDv.z;
+            L.wx[j] = w.d.x;
+            L.wy[j] = w.d.y;
+            L.wz[j] = w.d.z;
+            found = true;
+        }
+        L.r[j] = acc.r;
+        L.g[j] = acc.g;
+        L.b[j] = acc.b;
+        L.t[j] = acc.t;
+        return found;
+    }
+
+    /// A brick too far from the packet's for its gathers: the scalar loop, samples [k, kEnd).
+    bool marchAlone(const T* voxels, const RayWalk& w, int k, int kEnd, Accum& acc) {
+        const std::uint32_t* words = f.occ ? f.occ + std::size_t(w.index) * f.occWords : nullptr;
+        return marchBrick(f, voxels, words, w.local(f), w.dv, w.d, w.t0, k, kEnd, acc, mN);
+    }
+
+    /// Lane j, whose ray has no samples left to take (or that has no ray): its ray's next
+    /// brick, or else the next ray of the queue that has one (finishing the rays it leaves).
+    void refill(int j) {
+        if (mRay[j] && !mStopped[j] && seek(j)) return;
+        if (mRay[j]) mRay[j]->state->acc = {L.r[j], L.g[j], L.b[j], L.t[j]};
+        mStopped[j] = false;
+        while (mNext < mCount) {
+            const std::size_t i = mNext++;
+            const PacketRay& ray = mRays[i];
+            if (!ray.state) continue;
+            if (f.batch == 0) { // every ray is Fresh: set up a vector of them at once
+                if (i >= mReadyFrom + mReadyCount) {
+                    mReadyFrom = i;
+                    mReadyCount = std::min(std::size_t(mLanes), mCount - i);
+                    beginFresh(f, mRays + i, mReadyCount, mReady, mReadyOk);
+                }
+                if (!mReadyOk[i - mReadyFrom]) continue;
+                mWalk[j] = mReady[i - mReadyFrom];
+            } else if (!mWalk[j].begin(f, ray.sx, ray.sy, ray.shift, *ray.state)) {
+                continue;
+            }
+            mRay[j] = &ray;
+            const Accum& acc = ray.state->acc;
+            L.r[j] = acc.r;
+            L.g[j] = acc.g;
+            L.b[j] = acc.b;
+            L.t[j] = acc.t;
+            if (seek(j)) return;
+            ray.state->acc = {L.r[j], L.g[j], L.b[j], L.t[j]};
+        }
+        idle(j);
+    }
+
+    /// Steps until every lane is out of samples and the queue out of rays: each step takes one
+    /// sample of every lane in a sampled leaf and leaps the lanes in empty ones over the
+    /// coarsest empty node that holds their sample (the scalar walk's emptyLevel() and
+    /// sampleAfterNode(), to within an ulp at the node's exit, render/OCCUPANCY.md). Samples
+    /// are taken as Sample<T> takes them (lanes outside the fused range by it) and composited
+    /// lane by lane with the scalar composite(), so each ray's colour is the scalar march's.
+    /// Lanes out of samples get their next brick or ray once a quarter of the lanes still
+    /// with rays are.
+    void march() {
+        const DF df;
+        const DI di;
+        const VF step = hn::Set(df, f.stepMm), half = hn::Set(df, 0.5f), oneF = hn::Set(df, 1.0f);
+        const VF invStep = hn::Set(df, 1.0f / f.stepMm), far = hn::Set(df, 3.0e38f);
+        const VF apron = hn::Set(df, float(f.apron) - 0.5f), ertT = hn::Set(df, f.ertT);
+        const VI one = hn::Set(di, 1);
+        const auto* words = f.occ;
+        for (;;) {
+            const VF t0 = hn::Load(df, L.t0);
+            const VF lx = hn::Load(df, L.lx), ly = hn::Load(df, L.ly), lz = hn::Load(df, L.lz);
+            const VF dx = hn::Load(df, L.dx), dy = hn::Load(df, L.dy), dz = hn::Load(df, L.dz);
+            const VF ix = hn::Load(df, L.ix), iy = hn::Load(df, L.iy), iz = hn::Load(df, L.iz);
+            const VF wx = hn::Load(df, L.wx), wy = hn::Load(df, L.wy), wz = hn::Load(df, L.wz);
+            const VF rx = hn::Add(lx, apron), ry = hn::Add(ly, apron), rz = hn::Add(lz, apron);
+            const VI base = hn::Load(di, L.base), wordBase = hn::Load(di, L.words);
+            VI k = hn::Load(di, L.k), end = hn::Load(di, L.end);
+            VF Tr = hn::Load(df, L.t);
+            MI stopped = hn::FirstN(di, 0);
+            MI active = hn::Lt(k, end);
+            if (hn::AllFalse(di, active)) return;
+            // Lanes out of rays for good, and how many more out of samples call for refills.
+            std::size_t gone = 0;
+            for (int j = 0; j < mLanes; ++j)
+                gone += mRay[j] ? 0 : 1;
+            const std::size_t refillAt = gone + std::max<std::size_t>(1, (mLanes - gone) / 4);
+            while (hn::CountTrue(di, hn::Not(active)) < refillAt) {
+                const VF t = hn::Add(t0, hn::Mul(hn::Add(hn::ConvertTo(df, k), half), step));
+                MI take = active;
+                if (words) {
+                    const VI ax = leafOf(f, lx, dx, t), ay = leafOf(f, ly, dy, t),
+                             az = leafOf(f, lz, dz, t);
+                    const MI sampled = nodeSampled(f, words, wordBase, ax, ay, az, f.octDepth);
+                    const MI empty = hn::AndNot(sampled, active);
+                    if (!hn::AllFalse(di, empty)) {
+                        // The coarsest empty level per lane, walked up from the leaf
+                        // (coarsestEmpty()).
+                        VI level = hn::Set(di, 1);
+                        MI found = hn::Not(empty);
+                        for (int l = f.octDepth - 1; l >= 1 && !hn::AllTrue(di, found); --l) {
+                            const MI set =
+                                hn::AndNot(found, nodeSampled(f, words, wordBase, ax, ay, az, l));
+                            level = hn::IfThenElse(set, hn::Set(di, l + 1), level);
+                            found = hn::Or(found, set);
+                        }
+                        const VI shift = hn::Sub(hn::Set(di, f.octDepth), level);
+                        const VF size =
+                            hn::Mul(hn::Set(df, f.leaf), hn::ConvertTo(df, hn::Shl(one, shift)));
+                        // BrickRay::exitOf() on one axis.
+                        auto exitOn = [&](VI leaf, VF local, VF dir, VF inv) {
+                            const VF lo = hn::Mul(hn::ConvertTo(df, hn::Shr(leaf, shift)), size);
+                            const VF face =
+                                hn::Add(lo, hn::IfThenElseZero(hn::Gt(dir, hn::Zero(df)), size));
+                            return hn::IfThenElse(hn::Eq(dir, hn::Zero(df)), far,
+                                                  hn::Mul(hn::Sub(face, local), inv));
+                        };
+                        const VF tExit = hn::Min(
+                            hn::Min(hn::Min(far, exitOn(ax, lx, dx, ix)), exitOn(ay, ly, dy, iy)),
+                            exitOn(az, lz, dz, iz));
+                        const VF after =
+                            hn::Ceil(hn::Sub(hn::Mul(hn::Sub(tExit, t0), invStep), half));
+                        const VF to = hn::Max(hn::Min(after, hn::ConvertTo(df, end)),
+                                              hn::ConvertTo(df, hn::Add(k, one)));
+                        k = hn::IfThenElse(empty, hn::ConvertTo(di, to), k);
+                        mN.leaps += hn::CountTrue(di, empty);
+                        take = hn::And(active, sampled);
+                        if (hn::AllFalse(di, take)) {
+                            active = hn::AndNot(stopped, hn::Lt(k, end));
+                            continue;
+                        }
+                    }
+                }
+                const SamplesV<T> samples(f, mVoxels, hn::Add(rx, hn::Mul(dx, t)),
+                                          hn::Add(ry, hn::Mul(dy, t)), hn::Add(rz, hn::Mul(dz, t)),
+                                          base, false);
+                const auto takeF = hn::RebindMask(df, take);
+                const auto odd = hn::AndNot(samples.fused, takeF); // for the scalar code
+                if (!hn::AllFalse(df, odd)) {
+                    Tr = scalarLanes(odd, t, Tr);
+                    stopped = hn::Or(stopped, hn::RebindMask(di, hn::And(odd, hn::Le(Tr, ertT))));
+                }
+                mN.samples += hn::CountTrue(di, take);
+                k = hn::IfThenElse(take, hn::Add(k, one), k);
+                // composite()'s transmittance now, its colour sums once the colour is known.
+                const VF a = samples.a;
+                const auto vis = hn::And(hn::And(takeF, samples.fused), hn::Gt(a, hn::Zero(df)));
+                if (!hn::AllFalse(df, vis)) {
+                    defer(samples, vis, hn::Mul(Tr, a), wx, wy, wz);
+                    Tr = hn::IfThenElse(vis, hn::Mul(Tr, hn::Sub(oneF, a)), Tr);
+                    stopped = hn::Or(stopped, hn::RebindMask(di, hn::And(vis, hn::Le(Tr, ertT))));
+                }
+                active = hn::AndNot(stopped, hn::Lt(k, end));
+            }
+            flush(true);
+            // A quarter of the lanes (or all) are out of samples: their next bricks or rays.
+            hn::Store(Tr, df, L.t);
+            hn::Store(k, di, L.k);
+            std::uint8_t doneBits[(kMax + 7) / 8 + 8] = {}, stopBits[(kMax + 7) / 8 + 8] = {};
+            hn::StoreMaskBits(di, hn::Not(active), doneBits);
+            hn::StoreMaskBits(di, stopped, stopBits);
+            for (int j = 0; j < mLanes; ++j) {
+                if (((doneBits[j >> 3] >> (j & 7)) & 1) == 0) continue;
+                mStopped[j] = ((stopBits[j >> 3] >> (j & 7)) & 1) != 0;
+                refill(j);
+            }
+        }
+    }
+
+    /// The lanes of `odd` (outside the fused range) sampled by the scalar code, Sample<T>,
+    /// and composited at once (after the colours deferred so far); returns the transmittance.
+    VF scalarLanes(hn::Mask<DF> odd, VF t, VF tr) {
+        const DF df;
+        flush(true);
+        HWY_ALIGN float ts[kMax];
+        hn::Store(t, df, ts);
+        hn::Store(tr, df, L.t);
+        std::uint8_t bits[(kMax + 7) / 8 + 8] = {};
+        hn::StoreMaskBits(df, odd, bits);
+        for (std::size_t j = 0; j < kMax; ++j) {
+            if (((bits[j >> 3] >> (j & 7)) & 1) == 0) continue;
+            const glm::vec3 rel = glm::vec3(L.lx[j], L.ly[j], L.lz[j]) + (float(f.apron) - 0.5f);
+            const glm::vec3 dv(L.dx[j], L.dy[j], L.dz[j]);
+            const Rgba c = colourOf(f, Sample<T>(mLaneVoxels[j], f.edge, rel + dv * ts[j]),
+                                    glm::vec3(L.wx[j], L.wy[j], L.wz[j]));
+            if (c.a <= 0.0f) continue;
+            Accum acc{L.r[j], L.g[j], L.b[j], L.t[j]};
+            composite(acc, c);
+            L.r[j] = acc.r;
+            L.g[j] = acc.g;
+            L.b[j] = acc.b;
+            L.t[j] = acc.t;
+        }
+        return hn::Load(df, L.t);
+    }
+
+    /// Queues the visible lanes' samples for their colour (classify()'s colour, shaded), with
+    /// their compositing weights w = t a: a lane's colour sums add w * colour in the order
+    /// its samples were taken, as composite() does, when flush() has the colours.
+    void defer(const SamplesV<T>& s, hn::Mask<DF> vis, VF w, VF wx, VF wy, VF wz) {
+        const DF df;
+        const DI di;
+        const auto visI = hn::RebindMask(di, vis);
+        Deferred& q = mQueue;
+        const std::size_t at = q.count;
+        hn::CompressStore(s.o, visI, di, q.o + at);
+        hn::CompressStore(s.e, visI, di, q.e + at);
+        hn::CompressStore(hn::Iota(di, 0), visI, di, q.lane + at);
+        hn::CompressStore(s.fx, vis, df, q.fx + at);
+        hn::CompressStore(s.fy, vis, df, q.fy + at);
+        hn::CompressStore(s.fz, vis, df, q.fz + at);
+        hn::CompressStore(s.w, vis, df, q.tw + at);
+        hn::CompressStore(w, vis, df, q.w + at);
+        hn::CompressStore(wx, vis, df, q.dx + at);
+        hn::CompressStore(wy, vis, df, q.dy + at);
+        q.count += hn::CompressStore(wz, vis, df, q.dz + at);
+        if (q.count >= std::size_t(mLanes)) flush(false);
+    }
+
+    /// The colours of the queued samples, a vector at a time, added to their lanes' sums in
+    /// queue order; `all`: down to the last (else whole vectors only).
+    void flush(bool all) {
+        const DF df;
+        const DI di;
+        Deferred& q = mQueue;
+        const std::size_t lanes = hn::Lanes(df);
+        std::size_t done = 0;
+        while (q.count - done >= lanes || (all && done < q.count)) {
+            const std::size_t count = std::min(lanes, q.count - done);
+            const auto valid = hn::FirstN(di, count);
+            const auto validF = hn::RebindMask(df, valid);
+            // Lanes past the queue read a cell inside the packet's first brick.
+            const VI o = hn::IfThenElse(valid, hn::LoadU(di, q.o + done),
+                                        hn::Set(di, 1 + f.edge + f.edge * f.edge));
+            const VI e = hn::IfThenElseZero(valid, hn::LoadU(di, q.e + done));
+            const VF tw = hn::IfThenElseZero(validF, hn::LoadU(df, q.tw + done));
+            auto channel = [&](int ch) {
+                return lerpV(hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch))),
+                             hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch + 4))), tw);
+            };
+            VF r = channel(0), g = channel(1), b = channel(2);
+            if (f.shading) {
+                const VF fx = hn::LoadU(df, q.fx + done), fy = hn::LoadU(df, q.fy + done),
+                         fz = hn::LoadU(df, q.fz + done);
+                const VI sy = hn::Set(di, f.edge), sz = hn::Set(di, f.edge * f.edge);
+                CellRows c;
+                cellRows(mVoxels, o, sy, sz, true, c);
+                VF gx, gy, gz;
+                gradientOf(mVoxels, o, sy, sz, c, fx, fy, fz, gx, gy, gz);
+                shadeV(f, hn::LoadU(df, q.dx + done), hn::LoadU(df, q.dy + done),
+                       hn::LoadU(df, q.dz + done), gx, gy, gz, r, g, b);
+            }
+            const VF w = hn::LoadU(df, q.w + done);
+            HWY_ALIGN float wr[kMax], wg[kMax], wb[kMax];
+            hn::Store(hn::Mul(w, r), df, wr);
+            hn::Store(hn::Mul(w, g), df, wg);
+            hn::Store(hn::Mul(w, b), df, wb);
+            for (std::size_t i = 0; i < count; ++i) {
+                const std::int32_t j = q.lane[done + i];
+                L.r[j] += wr[i];
+                L.g[j] += wg[i];
+                L.b[j] += wb[i];
+            }
+            done += count;
+        }
+        if (done == 0) return;
+        q.count -= done;
+        for (std::size_t i = 0; i < q.count; ++i) { // the rest to the front
+            q.o[i] = q.o[done + i];
+            q.e[i] = q.e[done + i];
+            q.lane[i] = q.lane[done + i];
+            q.fx[i] = q.fx[done + i];
+            q.fy[i] = q.fy[done + i];
+            q.fz[i] = q.fz[done + i];
+            q.tw[i] = q.tw[done + i];
+            q.w[i] = q.w[done + i];
+            q.dx[i] = q.dx[done + i];
+            q.dy[i] = q.dy[done + i];
+            q.dz[i] = q.dz[done + i];
+        }
+    }
+
+    /// Visible samples waiting for their colours (defer(), flush()): up to a vector's lanes
+    /// less one, and a vector's more while one is queued (CompressStore writes whole vectors).
+    struct Deferred {
+        static constexpr std::size_t kSize = 2 * kMax + 8;
+        HWY_ALIGN std::int32_t o[kSize], e[kSize], lane[kSize];
+        HWY_ALIGN float fx[kSize], fy[kSize], fz[kSize], tw[kSize], w[kSize];
+        HWY_ALIGN float dx[kSize], dy[kSize], dz[kSize];
+        std::size_t count = 0;
+    };
+
+    const Frame& f;
+    const PacketRay* mRays;
+    std::size_t mCount, mNext = 0;
+    int mLanes;
+    RayCount& mN;
+    Lanes L;
+    RayWalk mWalk[kMax];
+    const PacketRay* mRay[kMax] = {}; ///< each lane's ray (null: none)
+    bool mStopped[kMax] = {};         ///< its ray became opaque
+    RayWalk mReady[kMax];             ///< walks of rays [mReadyFrom, + mReadyCount) (beginFresh)
+    bool mReadyOk[kMax] = {};
+    std::size_t mReadyFrom = 0, mReadyCount = 0;
+    const T* mVoxels = nullptr;      ///< the first brick the packet sampled: the lanes' base
+    const T* mLaneVoxels[kMax] = {}; ///< each lane's brick
+    Deferred mQueue;
+};
+
+void MarchPacket(brickstore::VoxelType type, const Frame& f, const PacketRay* rays,
+                 std::size_t count, RayCount& n) {
+    const int lanes = int(hn::Lanes(DF()));
+    switch (type) {
+    case brickstore::VoxelType::U8:
+        return Packet<std::uint8_t>(f, rays, count, lanes, n).run();
+    case brickstore::VoxelType::U16:
+        return Packet<std::uint16_t>(f, rays, count, lanes, n).run();
+    case brickstore::VoxelType::I16:
+        return Packet<std::int16_t>(f, rays, count, lanes, n).run();
+    case brickstore::VoxelType::F32:
+        return Packet<float>(f, rays, count, lanes, n).run();
+    }
+}
+
 std::int64_t Target() {
     return HWY_TARGET;
 }
@@ -491,6 +1091,7 @@ HWY_AFTER_NAMESPACE();
 namespace bc::render::detail {
 
 HWY_EXPORT(MarchBrick);
+HWY_EXPORT(MarchPacket);
 HWY_EXPORT(Target);
 HWY_EXPORT(LaneCount);
 
@@ -499,6 +1100,11 @@ bool marchBrickSimd(brickstore::VoxelType type, const Frame& f, const void* voxe
                     float t0, int& k, int kEnd, Accum& acc, RayCount& n) {
     return HWY_DYNAMIC_DISPATCH(MarchBrick)(type, f, voxels, words, local, dv, dir, t0, k, kEnd,
                                             acc, n);
+}
+
+void marchPacketSimd(brickstore::VoxelType type, const Frame& f, const PacketRay* rays,
+                     std::size_t count, RayCount& n) {
+    HWY_DYNAMIC_DISPATCH(MarchPacket)(type, f, rays, count, n);
 }
 
 std::string simdTargetName() {

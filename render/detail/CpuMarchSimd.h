@@ -1,6 +1,7 @@
 #pragma once
-// The CPU raycaster's march through one brick, vectorised across consecutive samples of a ray
-// with Highway (render/detail/CpuMarchSimd.cpp), for the widest instruction set the host has.
+// The CPU raycaster's march vectorised with Highway (render/detail/CpuMarchSimd.cpp), for the
+// widest instruction set the host has: across rays (a packet of rays, one sample per lane), or
+// across consecutive samples of one ray in one brick.
 #include "brickstore/BrickStore.h"
 #include "render/detail/CpuRay.h"
 
@@ -18,6 +19,26 @@ namespace bc::render::detail {
 bool marchBrickSimd(brickstore::VoxelType type, const Frame& f, const void* voxels,
                     const std::uint32_t* words, glm::vec3 local, glm::vec3 dv, glm::vec3 dir,
                     float t0, int& k, int kEnd, Accum& acc, RayCount& n);
+
+/// One pixel's ray for marchPacketSimd(): its image-plane position and sample shift
+/// (RayWalk::begin()) and its state; no state: no pixel.
+struct PacketRay {
+    float sx = 0.0f, sy = 0.0f, shift = 0.0f;
+    RayState* state = nullptr;
+};
+
+/// The rays `rays[0, count)` for the bricks of batch f.batch, a vector of rays at a time: each
+/// lane holds one ray (the next of the list when its own has no samples left in the pass), and
+/// a step takes one sample of every lane, or leaps the lanes in empty octree leaves over their
+/// nodes. Each ray walks the brick grid on its own (RayWalk); lanes in different bricks sample
+/// their own bricks in the same step. List neighbouring pixels next to each other (blocks of
+/// 4x4): the lanes' rays then read the same voxels and octree words.
+///
+/// The same image as marchRay() with marchBrick(), bit for bit: every lane takes the scalar
+/// code's samples with its float operations in its order and composites them in order; it may
+/// take a few more transparent samples, like marchBrickSimd(). Not for pre-integration.
+void marchPacketSimd(brickstore::VoxelType type, const Frame& f, const PacketRay* rays,
+                     std::size_t count, RayCount& n);
 
 /// The instruction set marchBrickSimd() runs on this host ("AVX3", "AVX2", "SSE4", ...).
 std::string simdTargetName();

@@ -43,6 +43,7 @@ struct Frame {
     float ertT = -1; ///< stop a ray once its transmittance is at most this (-1: never)
     bool shading = true;
     bool simd = true;    ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
+    bool packets = true; ///< with simd: march rays a vector at a time (marchPacketSimd)
     bool jitter = false; ///< RenderOptions::jitter
     /// RenderOptions::preintegrate: segments classify through this table (the scalar
     /// marchBrickPre), `segment` long in the opacity's units (the step in voxels).
@@ -140,8 +141,9 @@ struct RayCount {
 /// transparent if either leaf is: render/OCCUPANCY.md). A face on the brick's own boundary is
 /// not a limit: a sample there may lie a rounding error outside and count as the edge leaf.
 /// `invDv`: 1 / dv per axis (any value where dv is 0); `invStep`: 1 / f.stepMm.
-inline bool clipToSampled(const Frame& f, const SampledBox& box, glm::vec3 local, glm::vec3 dv,
-                          glm::vec3 invDv, float invStep, float t0, int& k, int& kEnd) {
+[[gnu::always_inline]] inline bool clipToSampled(const Frame& f, const SampledBox& box,
+                                                 glm::vec3 local, glm::vec3 dv, glm::vec3 invDv,
+                                                 float invStep, float t0, int& k, int& kEnd) {
     if (box.none()) return false;
     constexpr float kInf = std::numeric_limits<float>::infinity();
     float ta = -kInf, tb = kInf;
@@ -236,6 +238,138 @@ bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec
     }
     return true;
 }
+
+/// Samples [k, kEnd) of a brick of one value `value`; false once the ray is opaque.
+inline bool marchConstant(const Frame& f, float value, int& k, int kEnd, Accum& acc, RayCount& n) {
+    const Rgba c = classify(f, value);
+    n.samples += std::uint64_t(kEnd - k);
+    for (; c.a > 0.0f && k < kEnd; ++k) {
+        composite(acc, c);
+        if (acc.t <= f.ertT) return false;
+    }
+    return true;
+}
+
+enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
+
+/// A ray between batches: its colour so far and, while it waits for a brick of a later batch,
+/// its DDA state at that brick (so the next pass goes on with the same floats).
+struct RayState {
+    Accum acc;
+    glm::ivec3 cell{0};
+    glm::vec3 tMax{0.0f};
+    int k = 0;
+    int brick = 0; ///< the brick it waits for
+    RayPhase phase = RayPhase::Fresh;
+};
+
+/// One ray's walk through the brick grid (the shader's main()) for the bricks of batch
+/// f.batch: a 3D DDA over bricks that stops at each brick with samples of the ray to draw,
+/// and, state saved, at the first such brick of a later batch. Samples are k = 0 .. total - 1
+/// at t0 + (k + 1/2) step; those in the brick next() stopped at are [k, kEnd).
+struct RayWalk {
+    glm::vec3 d{0.0f}, ov{0.0f}, dv{0.0f}; ///< direction (world), origin and direction (voxels)
+    glm::vec3 invDv{0.0f};                 ///< 1 / dv (inf on an axis it does not move along)
+    float t0 = 0.0f, invStep = 1.0f;
+    int total = 0, k = 0, kEnd = 0;
+    int index = 0; ///< the brick next() stopped at
+    glm::ivec3 cell{0}, stepDir{0};
+    glm::vec3 tDelta{0.0f}, tMax{0.0f};
+    bool entered = false; ///< next() stopped at a brick, which the next call leaves
+
+    /// Sets up the ray of image-plane position (sx, sy) for this pass; false when it has
+    /// nothing to draw in it (done, waiting for a later batch, or missing the volume).
+    /// `shift`: where its samples start, in steps, relative to the unjittered lattice
+    /// (rayJitter() - 1/2 with RenderOptions::jitter, else 0).
+    bool begin(const Frame& f, float sx, float sy, float shift, RayState& s) {
+        if (s.phase == RayPhase::Done) return false;
+        if (s.phase == RayPhase::Waiting && f.bricks[s.brick].batch != f.batch) return false;
+        const RayPhase phase = s.phase;
+        s.phase = RayPhase::Done; // unless it stops to wait in next()
+        const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
+        d = f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
+        ov = o * f.invSpacing;
+        dv = d * f.invSpacing;
+        // Reciprocals once: divisions are most of a ray's set-up.
+        invDv = 1.0f / dv;
+        invStep = 1.0f / f.stepMm;
+        float t1 = 3.0e38f;
+        t0 = 0.0f;
+        for (int a = 0; a < 3; ++a) {
+            if (dv[a] == 0.0f) {
+                if (ov[a] < 0.0f || ov[a] > f.dims[a]) return false;
+                continue;
+            }
+            const float ta = -ov[a] * invDv[a], tb = (f.dims[a] - ov[a]) * invDv[a];
+            t0 = std::max(t0, std::min(ta, tb));
+            t1 = std::min(t1, std::max(ta, tb));
+        }
+        t0 += shift * f.stepMm; // sample k at t0 + (k + 1/2) step: the entry + (k + jitter) step
+        total = int(std::ceil((t1 - t0) * invStep - 0.5f));
+        if (total <= 0) return false;
+        cell = s.cell;
+        tMax = s.tMax;
+        if (phase == RayPhase::Fresh) {
+            const glm::vec3 pin = ov + dv * t0;
+            cell =
+                glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
+        }
+        for (int a = 0; a < 3; ++a) {
+            stepDir[a] = dv[a] > 0.0f ? 1 : dv[a] < 0.0f ? -1 : 0;
+            if (stepDir[a] == 0) {
+                tDelta[a] = 3.0e38f;
+                if (phase == RayPhase::Fresh) tMax[a] = 3.0e38f;
+                continue;
+            }
+            tDelta[a] = float(f.brick) * std::abs(invDv[a]);
+            if (phase != RayPhase::Fresh) continue;
+            const float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * f.brick);
+            tMax[a] = (plane - ov[a]) * invDv[a];
+        }
+        k = phase == RayPhase::Fresh ? 0 : s.k;
+        entered = false;
+        return true;
+    }
+
+    /// On to the next brick of this batch, sampled or of one value, with samples [k, kEnd) of
+    /// the ray; false at the end of the ray or when it stops to wait for a later batch.
+    bool next(const Frame& f, RayState& s) {
+        if (entered && !leave(f)) return false;
+        entered = false;
+        while (k < total) {
+            const float tOut = std::min({tMax.x, tMax.y, tMax.z});
+            kEnd = std::min(total, int(std::ceil((tOut - t0) * invStep - 0.5f)));
+            index = (cell.z * f.grid.y + cell.y) * f.grid.x + cell.x;
+            const BrickRef& b = f.bricks[index];
+            if (b.slot != Slot::Absent && kEnd > k) {
+                if (b.batch != f.batch) {
+                    s.cell = cell;
+                    s.tMax = tMax;
+                    s.k = k;
+                    s.brick = index;
+                    s.phase = RayPhase::Waiting;
+                    return false;
+                }
+                entered = true;
+                return true;
+            }
+            if (!leave(f)) return false;
+        }
+        return false;
+    }
+
+    /// The ray's origin relative to the corner of the brick next() stopped at.
+    glm::vec3 local(const Frame& f) const { return ov - glm::vec3(cell * f.brick); }
+
+  private:
+    bool leave(const Frame& f) {
+        k = std::max(k, kEnd);
+        const int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
+        cell[a] += stepDir[a];
+        tMax[a] += tDelta[a];
+        return cell[a] >= 0 && cell[a] < f.grid[a];
+    }
+};
 
 /// The pre-integrated march's link from one sample to the next: the segment end of the last
 /// sample whose value was read, and which sample that was (-1: none yet).

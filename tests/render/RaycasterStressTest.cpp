@@ -33,7 +33,8 @@ bool hasHole(const Image& got, const Image& want) {
     return false;
 }
 
-/// The raycaster under test: "gpu", "cpu" (the SIMD march) or "cpu_scalar".
+/// The raycaster under test: "gpu", "cpu" (the SIMD march across rays, the default),
+/// "cpu_samples" (SIMD across one ray's samples) or "cpu_scalar".
 class RaycasterStress : public ::testing::TestWithParam<std::string> {
   protected:
     void SetUp() override {
@@ -48,7 +49,8 @@ class RaycasterStress : public ::testing::TestWithParam<std::string> {
             Raycaster r;
             image = r.render(*t.store, *t.cache, tf, camera, o, s);
         } else {
-            o.simd = GetParam() == "cpu";
+            o.simd = GetParam() != "cpu_scalar";
+            o.packets = GetParam() == "cpu";
             CpuRaycaster r;
             image = r.render(*t.store, *t.cache, tf, camera, o, s);
         }
@@ -231,7 +233,8 @@ TEST_P(RaycasterStress, SixteenThousandVoxelWideVolumeHasNoNaNHolesOrSeams) {
     expectCloseToReference(*c.store, c.tf, c.camera, small(), "checker 16384 wide, far end", 40.0);
 }
 
-INSTANTIATE_TEST_SUITE_P(Raycasters, RaycasterStress, ::testing::Values("gpu", "cpu", "cpu_scalar"),
+INSTANTIATE_TEST_SUITE_P(Raycasters, RaycasterStress,
+                         ::testing::Values("gpu", "cpu", "cpu_samples", "cpu_scalar"),
                          [](const auto& info) { return info.param; });
 
 } // namespace

@@ -41,8 +41,8 @@ struct RenderCliOptions {
                                ert = "0.99", skip = "all", statsPath, renderer = "auto";
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32;
-    bool ortho = false, noShading = false, noSimd = false, jitter = false, preintegrate = false,
-         reference = false, interactive = false;
+    bool ortho = false, noShading = false, noSimd = false, noPackets = false, jitter = false,
+         preintegrate = false, reference = false, interactive = false;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
     std::uint32_t repeat = 1;
@@ -90,6 +90,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.skip = render::parseSkipMode(o.skip);
     r.shading = !o.noShading;
     r.simd = !o.noSimd;
+    r.packets = !o.noPackets;
     r.jitter = o.jitter;
     r.preintegrate = o.preintegrate;
     r.level = o.level;
@@ -307,7 +308,9 @@ void runRender(const RenderCliOptions& o) {
             };
             describe = [&o] {
                 return "CPU raycaster (float, " +
-                       (o.noSimd ? std::string("scalar") : render::CpuRaycaster::simdTarget()) +
+                       (o.noSimd ? std::string("scalar")
+                                 : render::CpuRaycaster::simdTarget() +
+                                       (o.noPackets || o.preintegrate ? " samples" : " packets")) +
                        ", " + std::to_string(std::thread::hardware_concurrency()) + " threads)";
             };
         } else {
@@ -421,6 +424,9 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_flag("--no-shading", o->noShading, "No gradient shading");
     cmd->add_flag("--no-simd", o->noSimd,
                   "CPU raycaster: the scalar sample loop instead of the SIMD one (same image)");
+    cmd->add_flag("--no-packets", o->noPackets,
+                  "CPU raycaster: SIMD across one ray's samples instead of across rays (same "
+                  "image)");
     cmd->add_flag("--jitter", o->jitter,
                   "Start each ray's samples at a per-pixel offset (noise instead of rings)");
     cmd->add_flag("--preintegrate", o->preintegrate,
