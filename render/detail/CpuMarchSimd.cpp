@@ -734,7 +734,7 @@ template <class T> class Packet {
                                          std::int64_t(reinterpret_cast<std::uintptr_t>(mVoxels))) /
                                         std::int64_t(sizeof(T));
             const std::int64_t span = std::int64_t(f.edge) * f.edge * f.edge;
-            if ((std::abs(offset) + span) * std::int64_t(sizeof(T)) + 8 > INT32_MAX) {
+            if ((std::abs(offset) + span) * std::int64_t(sizeof(T)) + 8 > f.gatherReach) {
                 if (!marchAlone(voxels, w, first, last, acc)) break;
                 continue;
             }

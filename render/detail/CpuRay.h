@@ -44,6 +44,9 @@ struct Frame {
     bool shading = true;
     bool simd = true;    ///< march bricks with marchBrickSimd (CpuMarchSimd.h)
     bool packets = true; ///< with simd: march rays a vector at a time (marchPacketSimd)
+    /// marchPacketSimd(): the bytes its 32-bit gather offsets reach from the packet's first
+    /// brick; a lane's brick further away marches with the scalar loop (tests shrink it).
+    std::int64_t gatherReach = std::numeric_limits<std::int32_t>::max();
     bool jitter = false; ///< RenderOptions::jitter
     /// RenderOptions::preintegrate: segments classify through this table (the scalar
     /// marchBrickPre), `segment` long in the opacity's units (the step in voxels).

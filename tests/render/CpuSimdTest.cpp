@@ -5,8 +5,11 @@
 // scalar code (aprons under 2).
 #include "RenderTestSupport.h"
 #include "render/CpuRaycaster.h"
+#include "render/detail/CpuMarchSimd.h"
 
 #include <hwy/targets.h>
+
+#include <random>
 
 namespace bc::render {
 namespace {
@@ -165,5 +168,97 @@ TEST(CpuSimdFallback, StressViewsAreExactAndFinite) {
     }
 }
 
+// The march across rays addresses each lane's voxels by 32-bit offsets from the packet's first
+// brick; a brick out of that reach (bricks are separate allocations, and a large host cache
+// can put them gigabytes apart) marches with the scalar loop. With the reach cut to nothing
+// every brick is out of it: the colours and sample counts stay the scalar walk's, bit for bit.
+TEST(CpuSimdPackets, BricksOutOfGatherReachMarchWithTheScalarLoopExactly) {
+    constexpr int kBrick = 8, kApron = 2, kEdge = kBrick + 2 * kApron, kEntries = 256;
+    std::mt19937 rng(11);
+    std::vector<std::vector<std::uint16_t>> voxels(4);
+    for (auto& v : voxels) {
+        v.resize(std::size_t(kEdge) * kEdge * kEdge);
+        for (auto& x : v)
+            x = std::uint16_t(rng() % 1000);
+    }
+    std::vector<float> tf(4 * kEntries);
+    for (int i = 0; i < kEntries; ++i) {
+        tf[4 * i] = float(i) / kEntries;
+        tf[4 * i + 1] = 0.5f;
+        tf[4 * i + 2] = 1.0f - float(i) / kEntries;
+        tf[4 * i + 3] = i < 100 ? 0.0f : 0.6f * float(i - 100) / kEntries;
+    }
+    std::vector<detail::BrickRef> bricks(4);
+    for (int i = 0; i < 4; ++i)
+        bricks[i] = {voxels[i].data(), 0.0f, 0, detail::Slot::Sampled};
+    detail::Frame f;
+    f.eye = glm::vec3(-9.0f, -7.0f, -11.0f);
+    f.forward = glm::normalize(glm::vec3(8.0f, 8.0f, 4.0f) - f.eye);
+    f.right = 0.3f * glm::normalize(glm::cross(f.forward, glm::vec3(0.0f, 0.0f, 1.0f)));
+    f.up = 0.3f * glm::normalize(glm::cross(f.right, f.forward));
+    f.invSpacing = glm::vec3(1.0f);
+    f.dims = glm::vec3(16.0f, 16.0f, 8.0f);
+    f.stepMm = 0.7f;
+    f.brick = kBrick;
+    f.apron = kApron;
+    f.edge = kEdge;
+    f.grid = glm::ivec3(2, 2, 1);
+    f.tf = tf.data();
+    f.entries = kEntries;
+    f.tfScale = float(kEntries - 1) / 1000.0f;
+    f.ertT = 0.05f;
+    f.gradScale = glm::vec3(0.5f / 1000.0f);
+    f.bricks = bricks.data();
+    constexpr std::uint32_t kSide = 16;
+    auto march = [&](std::int64_t reach, detail::RayCount& n) {
+        std::vector<detail::RayState> states(kSide * kSide);
+        std::vector<detail::PacketRay> rays;
+        for (std::uint32_t by = 0; by < kSide; by += 4)
+            for (std::uint32_t bx = 0; bx < kSide; bx += 4)
+                for (std::uint32_t y = by; y < by + 4; ++y)
+                    for (std::uint32_t x = bx; x < bx + 4; ++x)
+                        rays.push_back({2.0f * (float(x) + 0.5f) / kSide - 1.0f,
+                                        1.0f - 2.0f * (float(y) + 0.5f) / kSide, 0.0f,
+                                        &states[y * kSide + x]});
+        if (reach < 0) { // the scalar walk and loop
+            for (const detail::PacketRay& r : rays) {
+                detail::RayWalk w;
+                if (!w.begin(f, r.sx, r.sy, r.shift, *r.state)) continue;
+                while (w.next(f, *r.state)) {
+                    int k = w.k;
+                    if (!detail::marchBrick(f, voxels[std::size_t(w.index)].data(), nullptr,
+                                            w.local(f), w.dv, w.d, w.t0, k, w.kEnd, r.state->acc,
+                                            n))
+                        break;
+                }
+            }
+        } else {
+            f.gatherReach = reach;
+            detail::marchPacketSimd(brickstore::VoxelType::U16, f, rays.data(), rays.size(), n);
+        }
+        return states;
+    };
+    detail::RayCount scalarCount, nearCount, farCount;
+    const auto scalar = march(-1, scalarCount);
+    const auto near = march(std::numeric_limits<std::int32_t>::max(), nearCount);
+    const auto far = march(0, farCount);
+    double alpha = 0.0;
+    int opaque = 0;
+    for (std::size_t i = 0; i < scalar.size(); ++i) {
+        const detail::Accum& a = scalar[i].acc;
+        for (const auto* got : {&near[i].acc, &far[i].acc}) {
+            EXPECT_EQ(got->r, a.r) << "ray " << i;
+            EXPECT_EQ(got->g, a.g) << "ray " << i;
+            EXPECT_EQ(got->b, a.b) << "ray " << i;
+            EXPECT_EQ(got->t, a.t) << "ray " << i;
+        }
+        alpha += 1.0 - a.t;
+        opaque += a.t <= f.ertT ? 1 : 0;
+    }
+    EXPECT_EQ(nearCount.samples, scalarCount.samples);
+    EXPECT_EQ(farCount.samples, scalarCount.samples);
+    EXPECT_GT(alpha, 0.2 * double(scalar.size())) << "the rays see almost nothing";
+    EXPECT_GT(opaque, 0) << "no ray reaches early termination";
+}
 } // namespace
 } // namespace bc::render
