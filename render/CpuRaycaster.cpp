@@ -16,6 +16,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <type_traits>
 
 #include <glm/geometric.hpp>
@@ -35,6 +36,24 @@ using detail::RayCount;
 using detail::RayState;
 using detail::Rgba;
 using detail::Slot;
+
+/// The region's ray states, left unconstructed here: the pass's workers construct each on
+/// batch 0 as they first touch it (marchPass), so a 512² frame's 13 MB is not written twice,
+/// once by one thread.
+class RayStates {
+  public:
+    explicit RayStates(std::size_t n) : mData(std::allocator<RayState>().allocate(n)), mSize(n) {}
+    ~RayStates() { std::allocator<RayState>().deallocate(mData, mSize); }
+    RayStates(const RayStates&) = delete;
+    RayStates& operator=(const RayStates&) = delete;
+    RayState& operator[](std::size_t i) { return mData[i]; }
+    const RayState& operator[](std::size_t i) const { return mData[i]; }
+
+  private:
+    static_assert(std::is_trivially_destructible_v<RayState>);
+    RayState* mData;
+    std::size_t mSize;
+};
 
 template <class T> constexpr brickstore::VoxelType voxelTypeOf() {
     if constexpr (std::is_same_v<T, std::uint8_t>) return brickstore::VoxelType::U8;
@@ -96,7 +115,7 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, deta
 /// One pass over the region's pixels for the bricks of batch f.batch (rays: the region's, row
 /// by row).
 template <class T>
-void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& rays,
+void marchPass(const Frame& f, const PixelRect& region, RayStates& rays,
                std::vector<detail::Front>& fronts, RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0};
     const auto x0 = region.x, y0 = region.y, w = region.width;
@@ -106,6 +125,7 @@ void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& r
         p.sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
         p.shift = f.jitter ? rayJitter(x, y) - 0.5f : 0.0f;
         p.state = &rays[std::size_t(y - y0) * w + (x - x0)];
+        if (f.batch == 0) std::construct_at(p.state);
         return p;
     };
     tbb::parallel_for(
@@ -145,8 +165,7 @@ void marchPass(const Frame& f, const PixelRect& region, std::vector<RayState>& r
 }
 
 void marchPassOfType(brickstore::VoxelType type, const Frame& f, const PixelRect& region,
-                     std::vector<RayState>& rays, std::vector<detail::Front>& fronts,
-                     RayCount& total) {
+                     RayStates& rays, std::vector<detail::Front>& fronts, RayCount& total) {
     switch (type) {
     case brickstore::VoxelType::U8:
         return marchPass<std::uint8_t>(f, region, rays, fronts, total);
@@ -206,17 +225,20 @@ std::vector<BrickRef> brickRefs(const BrickPlan& plan, const std::vector<std::si
     return bricks;
 }
 
-Image imageOf(const std::vector<RayState>& rays, std::uint32_t width, std::uint32_t height) {
+Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height) {
     Image image(width, height);
-    for (std::uint32_t y = 0; y < height; ++y)
-        for (std::uint32_t x = 0; x < width; ++x) {
-            const Accum& c = rays[std::size_t(y) * width + x].acc;
-            float* px = image.pixel(x, y);
-            px[0] = std::clamp(c.r, 0.0f, 1.0f);
-            px[1] = std::clamp(c.g, 0.0f, 1.0f);
-            px[2] = std::clamp(c.b, 0.0f, 1.0f);
-            px[3] = std::clamp(1.0f - c.t, 0.0f, 1.0f);
-        }
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, height, 16),
+                      [&](const tbb::blocked_range<std::uint32_t>& r) {
+                          for (std::uint32_t y = r.begin(); y < r.end(); ++y)
+                              for (std::uint32_t x = 0; x < width; ++x) {
+                                  const Accum& c = rays[std::size_t(y) * width + x].acc;
+                                  float* px = image.pixel(x, y);
+                                  px[0] = std::clamp(c.r, 0.0f, 1.0f);
+                                  px[1] = std::clamp(c.g, 0.0f, 1.0f);
+                                  px[2] = std::clamp(c.b, 0.0f, 1.0f);
+                                  px[3] = std::clamp(1.0f - c.t, 0.0f, 1.0f);
+                              }
+                      });
     return image;
 }
 
@@ -292,7 +314,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         f.boxes = occupancy->sampledBoxes().data();
     }
     const PixelRect region = options.drawn();
-    std::vector<RayState> rays(region.pixels());
+    RayStates rays(region.pixels());
     std::vector<detail::Front> fronts(f.pre ? region.pixels() : 0);
     RayCount count;
     for (std::size_t batch = 0, first = 0; batch < ends.size(); first = ends[batch++]) {
@@ -304,6 +326,9 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         marchPassOfType(store.info().volume.type, f, region, rays, fronts, count);
         stats.renderMs += msSince(renderStart);
     }
+    if (ends.empty()) // no pass constructed the states: nothing is drawn
+        for (std::size_t i = 0; i < region.pixels(); ++i)
+            std::construct_at(&rays[i]);
     stats.samples = count.samples;
     stats.octreeLeaps = count.leaps;
     stats.occlusionReason = "not on the CPU raycaster";
