@@ -38,8 +38,8 @@ using detail::Rgba;
 using detail::Slot;
 
 /// The region's ray states, left unconstructed here: the pass's workers construct each on
-/// batch 0 as they first touch it (marchPass), so a 512² frame's 13 MB is not written twice,
-/// once by one thread.
+/// batch 0 as they first touch it (marchPass; planBatches always gives a batch 0, every pixel
+/// of the region in it), so a 512² frame's 13 MB is not written twice, once by one thread.
 class RayStates {
   public:
     explicit RayStates(std::size_t n) : mData(std::allocator<RayState>().allocate(n)), mSize(n) {}
@@ -326,9 +326,6 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         marchPassOfType(store.info().volume.type, f, region, rays, fronts, count);
         stats.renderMs += msSince(renderStart);
     }
-    if (ends.empty()) // no pass constructed the states: nothing is drawn
-        for (std::size_t i = 0; i < region.pixels(); ++i)
-            std::construct_at(&rays[i]);
     stats.samples = count.samples;
     stats.octreeLeaps = count.leaps;
     stats.occlusionReason = "not on the CPU raycaster";
