@@ -610,6 +610,20 @@ def vtk_fixed_point(args, ctx, scan, tf, tfd, view, size, shade):
     return {"medianMs": statistics.median(times), "firstMs": first, "timesMs": times, "png": png}
 
 
+def fill_references(args, ctx, scan, tf, view, size):
+    """--refs-only: the pair's converged reference and its same-step references, nothing timed."""
+    store, cache = ctx["stores"][scan], ctx["cache"]
+    tfd = load_tf(os.path.join(REPO, "configs", "tf", tf + ".json"), ctx["stats"][scan])
+    shade = tfd["shading"]
+    t = time.perf_counter()
+    _, conv, cached = cache.converged(store, scan, tf, view, size, shade)
+    for step in args.bc_step_list:
+        cache.same_step(store, scan, tf, view, size, shade, step)
+    print(f"[compare_vtk]   references {'cached' if cached else 'made'} in "
+          f"{time.perf_counter() - t:.1f} s (converged: {conv['converged']}, "
+          f"stop: {conv['stop']})", flush=True)
+
+
 def run_pair(args, ctx, scan, tf, view, size):
     store = ctx["stores"][scan]
     np, vtk, cache = ctx["np"], ctx["vtk"], ctx["cache"]
@@ -664,6 +678,10 @@ def parse_args():
                     help="finest step tried (RenderOptions accepts >= 0.01)")
     ap.add_argument("--conv-time-s", type=float, default=0.0,
                     help="no halving that would end after this (per reference; 0 = none)")
+    ap.add_argument("--refs-only", action="store_true",
+                    help="only fill the reference cache (converged and same-step references of "
+                         "every pair), time nothing: a later run with the same --out times every "
+                         "pair on a quiet machine in one go")
     args = ap.parse_args()
     args.scan_list = [s for s in args.scans.split(",") if s]
     for s in args.scan_list:
@@ -705,8 +723,15 @@ def main():
             for view in args.view_list:
                 for tf in tfs:
                     print(f"[compare_vtk] {scan} {tf} {view['text']} {size}^2", flush=True)
+                    if args.refs_only:
+                        fill_references(args, ctx, scan, tf, view, size)
+                        continue
                     results["pairs"].append(run_pair(args, ctx, scan, tf, view, size))
                     write_results(args, results, ctx, start)
+    if args.refs_only:
+        print(f"[compare_vtk] references in {args.out}/refcache, "
+              f"{(time.perf_counter() - start) / 60:.1f} min")
+        return
     table = write_results(args, results, ctx, start)
     print(table)
 
