@@ -15,7 +15,8 @@ What it does, for every scan x preset x view x size (--scans, --tfs, --views, --
      (max abs, RGBA) or --conv-floor / --conv-time-s is reached (then marked NOT converged).
      It and the same-step references are cached in OUT/refcache under a hash of everything that
      determines them (scan bytes, TF file, view, size, shading, step or convergence settings,
-     the model's sources), so reruns skip them.
+     the model's sources), so reruns skip them. --refs-only makes them and stops, timing
+     nothing.
   4. Times VTK's CPU raycaster (vtkFixedPointVolumeRayCastMapper) at --step: --warmup frames,
      then the median of --frames frames (render + framebuffer read-back); the first is the
      cold frame.
