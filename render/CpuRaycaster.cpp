@@ -4,6 +4,7 @@
 #include "brickstore/BrickStore.h"
 #include "render/BrickPlan.h"
 #include "render/Occupancy.h"
+#include "render/Partition.h"
 #include "render/TransferFunction.h"
 #include "render/detail/CpuMarchSimd.h"
 #include "render/detail/CpuRay.h"
@@ -16,6 +17,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <type_traits>
 
@@ -225,17 +227,20 @@ std::vector<BrickRef> brickRefs(const BrickPlan& plan, const std::vector<std::si
     return bricks;
 }
 
-Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height) {
+/// The rays' colours; clamped to [0, 1] unless `clamp` is false (a part's segments, which the
+/// compositing clamps once laid together: a shaded segment's colour may exceed 1).
+Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height, bool clamp) {
     Image image(width, height);
+    const float top = clamp ? 1.0f : std::numeric_limits<float>::max();
     tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, height, 16),
                       [&](const tbb::blocked_range<std::uint32_t>& r) {
                           for (std::uint32_t y = r.begin(); y < r.end(); ++y)
                               for (std::uint32_t x = 0; x < width; ++x) {
                                   const Accum& c = rays[std::size_t(y) * width + x].acc;
                                   float* px = image.pixel(x, y);
-                                  px[0] = std::clamp(c.r, 0.0f, 1.0f);
-                                  px[1] = std::clamp(c.g, 0.0f, 1.0f);
-                                  px[2] = std::clamp(c.b, 0.0f, 1.0f);
+                                  px[0] = std::clamp(c.r, 0.0f, top);
+                                  px[1] = std::clamp(c.g, 0.0f, top);
+                                  px[2] = std::clamp(c.b, 0.0f, top);
                                   px[3] = std::clamp(1.0f - c.t, 0.0f, 1.0f);
                               }
                       });
@@ -269,11 +274,22 @@ std::string CpuRaycaster::simdTarget() {
 }
 CpuRaycaster::~CpuRaycaster() = default;
 
+const Partition& CpuRaycaster::partition(const brickstore::BrickStore& store, std::uint32_t level,
+                                         std::uint32_t parts) {
+    if (!mPartition || mPartitionStore != store.instance() || mPartitionLevel != level ||
+        mPartition->parts() != parts) {
+        mPartition = std::make_unique<Partition>(Partition::ofLevel(store, level, parts));
+        mPartitionStore = store.instance();
+        mPartitionLevel = level;
+    }
+    return *mPartition;
+}
+
 Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
                            FrameStats& stats) {
     const auto frameStart = Clock::now();
     options.validate();
-    checkView(view, options, true);
+    checkView(view, options, true, true);
     stats = FrameStats{};
     const brickstore::BrickStore& store = scene.store;
     brickstore::BrickCache& cache = scene.cache;
@@ -293,8 +309,10 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         options.preintegrate
             ? std::max(1u, std::uint32_t(std::ceil(options.stepVoxels / g.brickVoxels)))
             : 0u;
-    const BrickPlan plan =
+    BrickPlan plan =
         planBricks(store, g, table, view, options.region, options.skip, occupancy, keepNear);
+    if (options.parts > 1) // only this part's bricks: the others' samples are theirs
+        keepOwned(plan, partition(store, level, options.parts).region(options.part));
     recordPlan(plan, level, stats);
 
     // Batches of the front-to-back order whose bricks fit the host budget, drawn one after
@@ -330,7 +348,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     stats.octreeLeaps = count.leaps;
     stats.occlusionReason = "not on the CPU raycaster";
     stats.totalMs = msSince(frameStart);
-    return imageOf(rays, region.width, region.height);
+    return imageOf(rays, region.width, region.height, options.parts == 1);
 }
 
 } // namespace bc::render

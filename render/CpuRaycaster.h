@@ -22,6 +22,7 @@ namespace bc::render {
 
 class TransferFunction;
 class OccupancyTrees;
+class Partition;
 
 class CpuRaycaster final : public Renderer {
   public:
@@ -41,6 +42,15 @@ class CpuRaycaster final : public Renderer {
 
     /// The instruction set RenderOptions::simd runs on here and its lanes ("AVX3_SPR x16").
     static std::string simdTarget();
+
+  private:
+    /// RenderOptions::parts: the split of the level drawn last, kept while the store (its
+    /// instance), level and part count stay.
+    const Partition& partition(const brickstore::BrickStore& store, std::uint32_t level,
+                               std::uint32_t parts);
+    std::unique_ptr<Partition> mPartition;
+    std::uint64_t mPartitionStore = 0;
+    std::uint32_t mPartitionLevel = 0;
 };
 
 } // namespace bc::render

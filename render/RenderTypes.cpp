@@ -47,6 +47,11 @@ void RenderOptions::validate() const {
             "region: " + std::to_string(region.width) + "x" + std::to_string(region.height) +
             " at " + std::to_string(region.x) + "," + std::to_string(region.y) + " is not inside " +
             std::to_string(width) + "x" + std::to_string(height));
+    if (parts == 0 || parts > 4096 || part >= parts)
+        throw std::invalid_argument("parts: part " + std::to_string(part) + " of " +
+                                    std::to_string(parts) +
+                                    " (parts must lie in 1..4096, part "
+                                    "below parts)");
     octree.validate();
     occlusion.validate();
 }

@@ -86,6 +86,16 @@ struct RenderOptions {
     /// a ray that reaches one stops there and goes on in a further pass once it is loaded.
     /// Images are those without it; only uploads and passes change.
     bool rayGuided = true;
+    /// Sort-last scale-out (render/Partition.h, render/SCALEOUT.md): with parts > 1, draw only
+    /// the samples that lie in bricks of part `part` of the level's brick grid split into
+    /// `parts` (Partition::ofLevel), each ray from zero opacity: the frame is that part's
+    /// premultiplied segment of every ray (early termination within the segment; colour not
+    /// clamped to 1, which a shaded segment may exceed: the composited frame is), which
+    /// compositeFrontToBack (render/Composite.h) lays with the other parts' in their
+    /// Partition::frontToBack order. Sample positions do not move: the parts' samples are
+    /// exactly the one-part frame's. The CPU raycaster draws parts; other renderers refuse.
+    std::uint32_t parts = 1;
+    std::uint32_t part = 0;
 
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;

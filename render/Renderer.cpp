@@ -32,7 +32,8 @@ FrameClassification classifyFrame(const Scene& scene, std::uint32_t level,
     return f;
 }
 
-void Renderer::checkView(const View& view, const RenderOptions& options, bool drawsRegions) {
+void Renderer::checkView(const View& view, const RenderOptions& options, bool drawsRegions,
+                         bool drawsParts) {
     if (view.width != options.width || view.height != options.height)
         throw std::invalid_argument("the view is " + std::to_string(view.width) + "x" +
                                     std::to_string(view.height) + ", the options ask for " +
@@ -40,6 +41,9 @@ void Renderer::checkView(const View& view, const RenderOptions& options, bool dr
                                     std::to_string(options.height));
     if (!drawsRegions && !options.region.whole())
         throw std::invalid_argument("region: this renderer draws whole images only");
+    if (!drawsParts && options.parts > 1)
+        throw std::invalid_argument("parts: this renderer draws whole volumes only (the CPU "
+                                    "raycaster draws parts)");
 }
 
 void Renderer::refusePreintegration(const RenderOptions& options, const char* renderer) {
