@@ -13,6 +13,7 @@ packages=(
   libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri  # headless OpenGL 4.5 (llvmpipe without a GPU)
   libglm-dev libpng-dev                               # vector maths, PNG images
   libhwy-dev                                          # Highway: the CPU raycaster's SIMD
+  libopenmpi-dev openmpi-bin                          # OpenMPI: sort-last scale-out over ranks (mpirun)
   libboost-dev libtomlplusplus-dev libturbojpeg0-dev  # brickcastd: Asio + Beast (network, HTTP, WebSocket), config file, JPEG frames
   libgtest-dev clang libclang-rt-14-dev               # tests; the protocol fuzzer (libFuzzer)
   clang-format                                        # the formatting check (test clang_format)

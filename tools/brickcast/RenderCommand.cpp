@@ -20,10 +20,18 @@
 #include "tools/TransferFunctionFile.h"
 #include "tools/brickcast/Commands.h"
 
+#ifdef BC_HAVE_MPI
+#include "render/Composite.h"
+#include "render/Partition.h"
+#include "server/cluster/MpiRuntime.h"
+#include "server/cluster/SortLast.h"
+#endif
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -42,7 +50,8 @@ struct RenderCliOptions {
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32;
     bool ortho = false, noShading = false, noSimd = false, noPackets = false, jitter = false,
-         preintegrate = false, reference = false, interactive = false;
+         preintegrate = false, reference = false, interactive = false, mpi = false;
+    double mpiTimeoutS = 60.0;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
     std::uint32_t repeat = 1;
@@ -165,6 +174,15 @@ void checkLeafTables(const brickstore::BrickStore& store, std::uint32_t level) {
         "; no image written");
 }
 
+/// --repeat: the first frame's time and the warm frames' median, min and max.
+void printRepeatSummary(const std::vector<double>& frameMs) {
+    if (frameMs.size() < 2) return;
+    std::vector<double> warm(frameMs.begin() + 1, frameMs.end());
+    std::sort(warm.begin(), warm.end());
+    std::printf("%zu frames: first %.1f ms, warm median %.1f ms (min %.1f, max %.1f)\n",
+                frameMs.size(), frameMs.front(), warm[warm.size() / 2], warm.front(), warm.back());
+}
+
 render::ConvergenceConfig convergenceConfigOf(const RenderCliOptions& o) {
     render::ConvergenceConfig c;
     if (o.converge != "default") {
@@ -237,7 +255,148 @@ render::Image convergedImage(const RenderCliOptions& o, const brickstore::BrickS
     return std::move(r.image);
 }
 
+#ifdef BC_HAVE_MPI
+/// --mpi, under mpirun: rank r draws part r of the level's brick grid split into one part per
+/// rank (render/Partition.h) over its footprint with the CPU raycaster, the parts are
+/// composited by direct send (server/cluster/SortLast.h), and rank 0 writes the PNG and the
+/// stats (each rank's render time, samples and bytes, the compositing time, the imbalance).
+void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRuntime& mpi) {
+    using namespace server::cluster;
+    if (o.reference || !o.converge.empty())
+        throw std::invalid_argument("--mpi draws with the CPU raycaster, not the reference");
+    if (o.renderer != "auto" && o.renderer != "cpu")
+        throw std::invalid_argument("--mpi draws with the CPU raycaster (--renderer cpu), not " +
+                                    o.renderer);
+    if (!(o.mpiTimeoutS > 0.0 && o.mpiTimeoutS <= 86400.0))
+        throw std::invalid_argument("--mpi-timeout-s must lie in (0, 86400]");
+    auto store = brickstore::BrickStore::open(o.store);
+    render::RenderOptions options = renderOptionsOf(o);
+    const auto tf =
+        tools::loadTransferFunction(o.tf, render::VolumeValueStats::fromStore(store->info()));
+    const render::Camera camera = cameraOf(o, render::LevelGeometry::of(*store, 0).box);
+    const auto levels = std::uint32_t(store->layout().levels().size());
+    const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
+    const render::LevelGeometry g = render::LevelGeometry::of(*store, level);
+    const auto ranks = std::uint32_t(mpi.size()), me = std::uint32_t(mpi.rank());
+    const render::Partition partition = render::Partition::ofLevel(*store, level, ranks);
+    const render::View view = render::View::of(camera, options.width, options.height);
+    SortLastFrame frame{options.width, options.height, {}, partition.frontToBack(g, view.basis)};
+    for (std::uint32_t r = 0; r < ranks; ++r)
+        frame.footprints.push_back(render::footprint(g, partition.region(r), view));
+    brickstore::BrickCache cache(*store, brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
+    render::CpuRaycaster raycaster;
+    render::ClassificationCache classifications;
+    const render::Scene scene{*store, cache, tf, classifications};
+    options.parts = ranks;
+    options.part = me;
+    options.region = frame.footprints[me].rect;
+    render::FrameStats stats;
+    CompositeStats composite;
+    render::Image image;
+    std::vector<double> frameMs, renderMs;
+    for (std::uint32_t i = 0; i < o.repeat; ++i) {
+        MPI_Barrier(MPI_COMM_WORLD); // every rank starts the frame together
+        const auto start = std::chrono::steady_clock::now();
+        render::PartialImage mine{frame.footprints[me].rect, {}};
+        stats = render::FrameStats{};
+        if (frame.footprints[me].visible)
+            mine.image = raycaster.render(scene, view, options, stats);
+        image = compositeDirectSend(MPI_COMM_WORLD, 0, frame, mine, int(i % 30000) + 1,
+                                    std::chrono::milliseconds(std::int64_t(o.mpiTimeoutS * 1e3)),
+                                    composite);
+        frameMs.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count());
+        renderMs.push_back(stats.totalMs);
+    }
+    // Each rank's last frame to rank 0.
+    const double mine[5] = {stats.totalMs, double(stats.samples), composite.ms,
+                            double(composite.bytesSent), double(composite.bytesReceived)};
+    std::vector<double> all(me == 0 ? 5 * ranks : 0);
+    MPI_Gather(mine, 5, MPI_DOUBLE, all.data(), 5, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    if (me != 0) return;
+    checkLeafTables(*store, level);
+    render::writePng(o.output, image);
+    double maxMs = 0, sumMs = 0, bytes = 0;
+    std::uint64_t samples = 0;
+    nlohmann::json perRank = nlohmann::json::array();
+    for (std::uint32_t r = 0; r < ranks; ++r) {
+        const double* v = &all[5 * r];
+        maxMs = std::max(maxMs, v[0]);
+        sumMs += v[0];
+        samples += std::uint64_t(v[1]);
+        bytes += v[3];
+        const render::BrickBox& b = partition.region(r);
+        perRank.push_back(
+            {{"rank", r},
+             {"renderMs", v[0]},
+             {"samples", std::uint64_t(v[1])},
+             {"compositeMs", v[2]},
+             {"bytesSent", std::uint64_t(v[3])},
+             {"bytesReceived", std::uint64_t(v[4])},
+             {"bricks", b.count()},
+             {"bricksLo", b.lo},
+             {"bricksHi", b.hi},
+             {"storedBytes", partition.weight(r)},
+             {"footprint",
+              frame.footprints[r].visible
+                  ? nlohmann::json{frame.footprints[r].rect.x, frame.footprints[r].rect.y,
+                                   frame.footprints[r].rect.width, frame.footprints[r].rect.height}
+                  : nlohmann::json(nullptr)}});
+    }
+    const double imbalance = sumMs > 0 ? maxMs / (sumMs / ranks) : 1.0;
+    std::printf("%s: %ux%u, level %u, %u ranks, %.1f ms (render max %.1f, imbalance %.2f, "
+                "composite %.1f ms, %s moved), %.1f samples/pixel\n",
+                o.output.c_str(), options.width, options.height, level, ranks, frameMs.back(),
+                maxMs, imbalance, composite.ms, tools::formatBytes(bytes).c_str(),
+                double(samples) / (double(options.width) * options.height));
+    printRepeatSummary(frameMs);
+    if (!o.statsPath.empty()) {
+        nlohmann::json j{
+            {"renderer", "CPU raycaster, sort-last over MPI ranks (direct send)"},
+            {"width", options.width},
+            {"height", options.height},
+            {"level", level},
+            {"ranks", ranks},
+            {"samples", samples},
+            {"samplesPerPixel", double(samples) / (double(options.width) * options.height)},
+            {"frameMs", frameMs},
+            {"renderMsMax", maxMs},
+            {"renderMsMean", sumMs / ranks},
+            {"imbalance", imbalance},
+            {"compositeMs", composite.ms},
+            {"bytesComposited", std::uint64_t(bytes)},
+            {"perRank", perRank}};
+        std::ofstream f(o.statsPath);
+        f << j.dump(2) << "\n";
+        if (!f) throw std::runtime_error(o.statsPath + ": cannot write the stats");
+    }
+}
+
+/// --mpi: MPI for this process; an error on any rank ends every rank (the others would wait
+/// for its part for ever), printed with its rank.
+void runRenderMpi(const RenderCliOptions& o) {
+    server::cluster::MpiRuntime mpi;
+    try {
+        renderAcrossRanks(o, mpi);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "brickcast: rank %d of %d: %s\n", mpi.rank(), mpi.size(), e.what());
+        std::fflush(stderr);
+        server::cluster::MpiRuntime::abortAll(2);
+    }
+}
+#endif
+
 void runRender(const RenderCliOptions& o) {
+    if (o.mpi) {
+#ifdef BC_HAVE_MPI
+        runRenderMpi(o);
+        return;
+#else
+        throw std::invalid_argument("--mpi: this brickcast was built without MPI "
+                                    "(libopenmpi-dev; cmake -DBC_WITH_MPI=ON)");
+#endif
+    }
     if (!o.converge.empty() && !o.reference)
         throw std::invalid_argument("--converge needs --reference");
     auto store = brickstore::BrickStore::open(o.store);
@@ -349,12 +508,7 @@ void runRender(const RenderCliOptions& o) {
         (unsigned long long)stats.bricksVisited, (unsigned long long)stats.bricksSkipped,
         (unsigned long long)stats.bricksCulled, (unsigned long long)stats.bricksUploaded,
         tools::formatBytes(double(stats.bytesUploaded)).c_str(), stats.batches, renderer.c_str());
-    if (o.repeat > 1) {
-        std::vector<double> warm(frameMs.begin() + 1, frameMs.end());
-        std::sort(warm.begin(), warm.end());
-        std::printf("%u frames: first %.1f ms, warm median %.1f ms (min %.1f, max %.1f)\n",
-                    o.repeat, frameMs.front(), warm[warm.size() / 2], warm.front(), warm.back());
-    }
+    printRepeatSummary(frameMs);
     if (!o.statsPath.empty()) {
         auto j = statsJson(stats, renderer, options);
         j["frameMs"] = frameMs; // every frame's totalMs; the other fields are the last frame's
@@ -458,6 +612,13 @@ void addRenderCommand(CLI::App& app) {
         ->capture_default_str();
     cmd->add_option("--converge-time-s", o->convergeTimeS,
                     "--converge: no halving that would end after this many seconds (0 = none)")
+        ->capture_default_str();
+    cmd->add_flag("--mpi", o->mpi,
+                  "Under mpirun: draw the frame sort-last over the job's ranks, each rank its part "
+                  "of the brick grid (CPU raycaster), composited by direct send; rank 0 writes "
+                  "the PNG and the stats (render/SCALEOUT.md)");
+    cmd->add_option("--mpi-timeout-s", o->mpiTimeoutS,
+                    "--mpi: a rank that has not answered after this many seconds fails the frame")
         ->capture_default_str();
     cmd->add_option("--stats", o->statsPath, "Write the frame's stats as JSON");
     cmd->add_option("--repeat", o->repeat,
