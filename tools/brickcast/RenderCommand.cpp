@@ -29,6 +29,7 @@
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <chrono>
@@ -38,6 +39,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -50,11 +52,13 @@ struct RenderCliOptions {
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32;
     bool ortho = false, noShading = false, noSimd = false, noPackets = false, jitter = false,
-         preintegrate = false, reference = false, interactive = false, mpi = false;
+         preintegrate = false, reference = false, interactive = false, mpi = false,
+         mpiBarrier = false;
     double mpiTimeoutS = 60.0;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
     std::int32_t level = 0;
     std::uint32_t repeat = 1;
+    std::uint32_t threads = 0; ///< 0: every core
     /// --converge [TOL]: empty when not given ("default" when given without a value).
     std::string converge;
     double convergeFloor = 1.0 / 64.0, convergeTimeS = 0.0;
@@ -293,7 +297,7 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
     render::FrameStats stats;
     CompositeStats composite;
     render::Image image;
-    std::vector<double> frameMs, renderMs;
+    std::vector<double> frameMs, renderMs, compositeMs;
     for (std::uint32_t i = 0; i < o.repeat; ++i) {
         MPI_Barrier(MPI_COMM_WORLD); // every rank starts the frame together
         const auto start = std::chrono::steady_clock::now();
@@ -301,6 +305,7 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
         stats = render::FrameStats{};
         if (frame.footprints[me].visible)
             mine.image = raycaster.render(scene, view, options, stats);
+        if (o.mpiBarrier) MPI_Barrier(MPI_COMM_WORLD); // compositing timed on its own
         image = compositeDirectSend(MPI_COMM_WORLD, 0, frame, mine, int(i % 30000) + 1,
                                     std::chrono::milliseconds(std::int64_t(o.mpiTimeoutS * 1e3)),
                                     composite);
@@ -308,6 +313,7 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
                 .count());
         renderMs.push_back(stats.totalMs);
+        compositeMs.push_back(composite.ms);
     }
     // Each rank's last frame to rank 0.
     const double mine[5] = {stats.totalMs, double(stats.samples), composite.ms,
@@ -365,6 +371,9 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
             {"renderMsMean", sumMs / ranks},
             {"imbalance", imbalance},
             {"compositeMs", composite.ms},
+            {"compositeMsFrames", compositeMs},
+            {"renderMsFrames", renderMs},
+            {"compositeAfterBarrier", o.mpiBarrier},
             {"bytesComposited", std::uint64_t(bytes)},
             {"perRank", perRank}};
         std::ofstream f(o.statsPath);
@@ -388,6 +397,10 @@ void runRenderMpi(const RenderCliOptions& o) {
 #endif
 
 void runRender(const RenderCliOptions& o) {
+    // --threads: the CPU renderers' worker threads (TBB's), e.g. one per rank's core under MPI.
+    std::optional<tbb::global_control> threads;
+    if (o.threads > 0)
+        threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
     if (o.mpi) {
 #ifdef BC_HAVE_MPI
         runRenderMpi(o);
@@ -613,10 +626,19 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--converge-time-s", o->convergeTimeS,
                     "--converge: no halving that would end after this many seconds (0 = none)")
         ->capture_default_str();
+    cmd->add_option("--threads", o->threads,
+                    "Worker threads of the CPU renderers (0 = every core; under mpirun, the "
+                    "cores of each rank)")
+        ->capture_default_str()
+        ->check(CLI::Range(0, 4096));
     cmd->add_flag("--mpi", o->mpi,
                   "Under mpirun: draw the frame sort-last over the job's ranks, each rank its part "
                   "of the brick grid (CPU raycaster), composited by direct send; rank 0 writes "
                   "the PNG and the stats (render/SCALEOUT.md)");
+    cmd->add_flag("--mpi-barrier", o->mpiBarrier,
+                  "--mpi: every rank waits for the others' parts before compositing, so that the "
+                  "compositing time is its own (benchmarks); without it a rank's compositing "
+                  "time includes waiting for slower ranks");
     cmd->add_option("--mpi-timeout-s", o->mpiTimeoutS,
                     "--mpi: a rank that has not answered after this many seconds fails the frame")
         ->capture_default_str();
