@@ -274,17 +274,6 @@ std::string CpuRaycaster::simdTarget() {
 }
 CpuRaycaster::~CpuRaycaster() = default;
 
-const Partition& CpuRaycaster::partition(const brickstore::BrickStore& store, std::uint32_t level,
-                                         std::uint32_t parts) {
-    if (!mPartition || mPartitionStore != store.instance() || mPartitionLevel != level ||
-        mPartition->parts() != parts) {
-        mPartition = std::make_unique<Partition>(Partition::ofLevel(store, level, parts));
-        mPartitionStore = store.instance();
-        mPartitionLevel = level;
-    }
-    return *mPartition;
-}
-
 Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
                            FrameStats& stats) {
     const auto frameStart = Clock::now();
@@ -312,7 +301,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     BrickPlan plan =
         planBricks(store, g, table, view, options.region, options.skip, occupancy, keepNear);
     if (options.parts > 1) // only this part's bricks: the others' samples are theirs
-        keepOwned(plan, partition(store, level, options.parts).region(options.part));
+        keepOwned(plan, mPartitions.get(store, level, options.parts).region(options.part));
     recordPlan(plan, level, stats);
 
     // Batches of the front-to-back order whose bricks fit the host budget, drawn one after

@@ -8,6 +8,7 @@
 // place in the brick grid from pass to pass, so the image does not depend on the budget
 // (render/RESIDENCY.md). No pin outlives render(). Occlusion frustums are a GPU technique and
 // are not used here. Not thread-safe: one frame at a time per instance.
+#include "render/Partition.h"
 #include "render/Renderer.h"
 
 #include <memory>
@@ -22,7 +23,6 @@ namespace bc::render {
 
 class TransferFunction;
 class OccupancyTrees;
-class Partition;
 
 class CpuRaycaster final : public Renderer {
   public:
@@ -44,13 +44,7 @@ class CpuRaycaster final : public Renderer {
     static std::string simdTarget();
 
   private:
-    /// RenderOptions::parts: the split of the level drawn last, kept while the store (its
-    /// instance), level and part count stay.
-    const Partition& partition(const brickstore::BrickStore& store, std::uint32_t level,
-                               std::uint32_t parts);
-    std::unique_ptr<Partition> mPartition;
-    std::uint64_t mPartitionStore = 0;
-    std::uint32_t mPartitionLevel = 0;
+    PartitionCache mPartitions; ///< RenderOptions::parts
 };
 
 } // namespace bc::render

@@ -172,6 +172,17 @@ std::vector<std::uint32_t> Partition::frontToBack(const LevelGeometry& g,
     return order;
 }
 
+const Partition& PartitionCache::get(const brickstore::BrickStore& store, std::uint32_t level,
+                                     std::uint32_t parts) {
+    if (!mPartition || mStore != store.instance() || mLevel != level ||
+        mPartition->parts() != parts) {
+        mPartition = Partition::ofLevel(store, level, parts);
+        mStore = store.instance();
+        mLevel = level;
+    }
+    return *mPartition;
+}
+
 Box worldBox(const LevelGeometry& g, const BrickBox& box) {
     Box b;
     for (int a = 0; a < 3; ++a) {

@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -82,6 +83,20 @@ class Partition {
 
     std::uint32_t build(const BrickBox& box, std::uint32_t firstPart, std::uint32_t parts,
                         std::span<const std::uint64_t> weights);
+};
+
+/// The split of the level a renderer drawing RenderOptions::parts last asked for, kept while
+/// the store (its instance), the level and the part count stay.
+class PartitionCache {
+  public:
+    /// @throw what Partition::ofLevel throws.
+    const Partition& get(const brickstore::BrickStore& store, std::uint32_t level,
+                         std::uint32_t parts);
+
+  private:
+    std::optional<Partition> mPartition;
+    std::uint64_t mStore = 0;
+    std::uint32_t mLevel = 0;
 };
 
 /// The world box of a box of bricks' payload (clipped to the volume).

@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <limits>
 
 namespace bc::render {
 namespace {
@@ -263,7 +264,7 @@ void Raycaster::drawPass(int pass) {
 }
 
 Image Raycaster::readBack(int passes, const PixelRect& region, std::uint32_t imageHeight,
-                          FrameStats& stats) {
+                          bool clamp, FrameStats& stats) {
     const std::uint32_t width = region.width, height = region.height;
     Image image(width, height);
     std::vector<float> rows(std::size_t(width) * height * 4);
@@ -277,10 +278,12 @@ Image Raycaster::readBack(int passes, const PixelRect& region, std::uint32_t ima
     stats.octreeLeaps = counted[1];
     stats.samplesSavedByStart = counted[2];
     const std::size_t rowFloats = std::size_t(width) * 4;
+    // A part's segments are not clamped above: the compositing clamps (render/SCALEOUT.md).
+    const float top = clamp ? 1.0f : std::numeric_limits<float>::max();
     for (std::uint32_t y = 0; y < height; ++y) // GL rows go bottom-up
         std::transform(rows.begin() + std::ptrdiff_t((height - 1 - y) * rowFloats),
                        rows.begin() + std::ptrdiff_t((height - y) * rowFloats), image.pixel(0, y),
-                       [](float v) { return std::clamp(v, 0.0f, 1.0f); });
+                       [top](float v) { return std::clamp(v, 0.0f, top); });
     return image;
 }
 
@@ -369,6 +372,8 @@ std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint
         mix(&visible, 1);
     }
     mix(&options.skip, sizeof options.skip);
+    mix(&options.parts, sizeof options.parts); // a part's rays enter only its bricks
+    mix(&options.part, sizeof options.part);
     mix(&options.octree.ratioThreshold, sizeof(double));
     mix(&options.octree.levelLimit, sizeof(std::uint32_t));
     mix(&options.stepVoxels, sizeof(double));
@@ -410,13 +415,13 @@ struct Raycaster::Prepared {
 Raycaster::Prepared Raycaster::prepare(const Scene& scene, const View& view,
                                        const RenderOptions& options, FrameStats& stats) {
     options.validate();
-    checkView(view, options, true);
+    checkView(view, options, true, true);
     refusePreintegration(options, "GPU raycaster");
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const auto asked = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
-    if (options.interactive) {
+    if (options.interactive && options.parts == 1) { // parts: every rank draws one level
         const auto tablesOnly = scene.classifications.get(scene.store, asked, scene.tf, nullptr)
                                     ->table(options.stepVoxels);
         p.level = chooseLevel(scene.store, *tablesOnly, view.basis, options);
@@ -436,8 +441,9 @@ std::uint32_t Raycaster::prefetch(const Scene& scene, const View& view,
     const std::uint32_t level = p.level;
     const TransferFunctionTable& table = *p.classified.table;
     const LevelGeometry g = LevelGeometry::of(store, level);
-    const BrickPlan plan =
-        planBricks(store, g, table, view.basis, options.skip, p.classified.occupancy);
+    BrickPlan plan = planBricks(store, g, table, view.basis, options.skip, p.classified.occupancy);
+    if (options.parts > 1)
+        keepOwned(plan, mPartitions.get(store, level, options.parts).region(options.part));
     const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
     const std::uint64_t sceneId = sceneKey(store, level, table, options);
     brickstore::BrickCache& cache = scene.cache;
@@ -477,8 +483,9 @@ Image Raycaster::render(const Scene& scene, const View& view, const RenderOption
     // frustums and ray guidance are off for it and keep the last whole frame's findings.
     const bool slice = !options.region.whole();
     const PixelRect drawn = options.drawn();
-    const BrickPlan plan =
-        planBricks(store, g, table, view, options.region, options.skip, occupancy);
+    BrickPlan plan = planBricks(store, g, table, view, options.region, options.skip, occupancy);
+    if (options.parts > 1) // only this part's bricks: the others' samples are theirs
+        keepOwned(plan, mPartitions.get(store, level, options.parts).region(options.part));
     recordPlan(plan, level, stats);
 
     mGpu->ensureTargets(options.width, options.height);
@@ -536,7 +543,7 @@ Image Raycaster::render(const Scene& scene, const View& view, const RenderOption
     }
 
     const auto readStart = Clock::now();
-    Image image = readBack(pass, drawn, options.height, stats);
+    Image image = readBack(pass, drawn, options.height, options.parts == 1, stats);
     stats.readbackMs = msSince(readStart);
     if (captures) {
         const auto captureStart = Clock::now();

@@ -7,6 +7,7 @@
 // EglContext on the calling thread; render thread only.
 #include "render/BrickPlan.h"
 #include "render/BrickPool.h"
+#include "render/Partition.h"
 #include "render/Renderer.h"
 
 #include <cstdint>
@@ -73,6 +74,7 @@ class Raycaster final : public Renderer, public GpuResidency {
   private:
     struct Gpu;
     struct Prepared;
+    PartitionCache mPartitions; ///< RenderOptions::parts
     /// Validates, readies the pool, chooses the level and classifies (octrees uploaded).
     Prepared prepare(const Scene& scene, const View& view, const RenderOptions& options,
                      FrameStats& stats);
@@ -106,7 +108,7 @@ class Raycaster final : public Renderer, public GpuResidency {
                           const RenderOptions& options, const OccupancyTrees* octree,
                           FrameStats& stats);
     /// The pixels of `region` (of an image `imageHeight` rows high) after `passes` passes.
-    Image readBack(int passes, const PixelRect& region, std::uint32_t imageHeight,
+    Image readBack(int passes, const PixelRect& region, std::uint32_t imageHeight, bool clamp,
                    FrameStats& stats);
     std::uint32_t chooseLevel(const brickstore::BrickStore& store,
                               const TransferFunctionTable& table, const ViewBasis& view,

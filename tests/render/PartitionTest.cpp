@@ -212,16 +212,16 @@ TEST(Partition, RaysMeetThePartsInTheirOrderInsideTheirFootprints) {
     }
 }
 
-/// The frame of `parts` parts, each drawn over its footprint and composited front to back;
-/// `samples`: the parts' samples together.
-Image partsFrame(test::TestStore& t, const TransferFunction& tf, const Camera& cam, RenderOptions o,
-                 std::uint32_t parts, std::uint64_t& samples) {
+/// The frame of `parts` parts, each drawn by `renderer` over its footprint and composited
+/// front to back; `samples`: the parts' samples together.
+Image partsFrame(Renderer& renderer, test::TestStore& t, const TransferFunction& tf,
+                 const Camera& cam, const RenderOptions& o, std::uint32_t parts,
+                 std::uint64_t& samples) {
     const LevelGeometry g = LevelGeometry::of(*t.store, 0);
     const Partition p = Partition::ofLevel(*t.store, 0, parts);
     const View view = View::of(cam, o.width, o.height);
     std::vector<PartialImage> images;
     samples = 0;
-    CpuRaycaster raycaster;
     for (std::uint32_t part : p.frontToBack(g, view.basis)) {
         const Footprint f = footprint(g, p.region(part), view);
         if (!f.visible) continue;
@@ -230,10 +230,16 @@ Image partsFrame(test::TestStore& t, const TransferFunction& tf, const Camera& c
         po.part = part;
         po.region = f.rect;
         FrameStats stats;
-        images.push_back({f.rect, raycaster.render(*t.store, *t.cache, tf, cam, po, stats)});
+        images.push_back({f.rect, renderer.render(*t.store, *t.cache, tf, cam, po, stats)});
         samples += stats.samples;
     }
     return compositeFrontToBack(o.width, o.height, images);
+}
+
+Image partsFrame(test::TestStore& t, const TransferFunction& tf, const Camera& cam,
+                 const RenderOptions& o, std::uint32_t parts, std::uint64_t& samples) {
+    CpuRaycaster raycaster;
+    return partsFrame(raycaster, t, tf, cam, o, parts, samples);
 }
 
 TEST(PartitionFrames, PartsCompositeToTheOnePartFrameWithItsSamples) {
@@ -280,6 +286,33 @@ TEST(PartitionFrames, PartsCompositeToTheOnePartFrameWithItsSamples) {
                 EXPECT_LE(ertSamples, samples);
             }
     }
+}
+
+// The GPU raycaster draws parts the same way (its shader walks the same brick grid): the parts
+// take its samples and composite to its frame. Occlusion frustums and ray guidance stay on:
+// each part keeps its own.
+TEST(PartitionFramesGl, GpuPartsCompositeToTheOnePartFrameWithItsSamples) {
+    auto t = test::ingestRealScan("headsq");
+    if (!t) return test::missingData("scan headsq");
+    test::glContext();
+    const auto tf = TransferFunction::preset("ct-bone", t->stats);
+    const LevelGeometry g = LevelGeometry::of(*t->store, 0);
+    Raycaster whole, parted;
+    for (const double az : {30.0, 200.0})
+        for (std::uint32_t parts : {2u, 3u}) {
+            const Camera cam = Camera::orbit(g.box, az, 20);
+            RenderOptions o;
+            o.width = o.height = 64;
+            o.earlyTermination = false;
+            FrameStats one;
+            const Image a = test::gpuFrame(*t, whole, tf, cam, o, &one);
+            std::uint64_t samples = 0;
+            for (int frame = 0; frame < 2; ++frame) { // the second with the first's frustums
+                const Image b = partsFrame(parted, *t, tf, cam, o, parts, samples);
+                EXPECT_EQ(samples, one.samples) << parts << " parts, frame " << frame;
+                EXPECT_LE(compareImages(a, b).maxAbs, 1e-5) << parts << " parts, frame " << frame;
+            }
+        }
 }
 
 TEST(PartitionFrames, RenderersThatDrawWholeVolumesRefuseParts) {
