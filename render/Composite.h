@@ -6,6 +6,7 @@
 #include "render/Image.h"
 #include "render/RenderTypes.h"
 
+#include <optional>
 #include <span>
 
 namespace bc::render {
@@ -16,6 +17,12 @@ struct PartialImage {
     PixelRect rect;
     Image image; ///< rect.width x rect.height
 };
+
+/// The pixels two rects share; nullopt when none.
+std::optional<PixelRect> overlap(const PixelRect& a, const PixelRect& b);
+
+/// Clamps every channel to [0, 1], as a renderer's frame is (partial images are not).
+void clampToUnit(Image& image);
 
 /// Lays `back` under `frame` (everything in `frame` so far lies in front of it): per pixel
 /// of back.rect, c = c + (1 - a) c_back and a = a + (1 - a) a_back, rgb and alpha alike.

@@ -13,15 +13,6 @@ using render::Image;
 using render::PartialImage;
 using render::PixelRect;
 
-std::optional<PixelRect> intersect(const PixelRect& a, const PixelRect& b) {
-    const std::uint64_t x0 = std::max(a.x, b.x), y0 = std::max(a.y, b.y);
-    const std::uint64_t x1 = std::min(std::uint64_t(a.x) + a.width, std::uint64_t(b.x) + b.width);
-    const std::uint64_t y1 = std::min(std::uint64_t(a.y) + a.height, std::uint64_t(b.y) + b.height);
-    if (x0 >= x1 || y0 >= y1) return std::nullopt;
-    return PixelRect{std::uint32_t(x0), std::uint32_t(y0), std::uint32_t(x1 - x0),
-                     std::uint32_t(y1 - y0)};
-}
-
 PixelRect bandRect(const SortLastFrame& f, std::uint32_t band, std::uint32_t bands) {
     const auto rows = bandRows(f.height, band, bands);
     return {0, rows[0], f.width, rows[1] - rows[0]};
@@ -34,7 +25,7 @@ std::optional<PixelRect> pieceOf(const SortLastFrame& f, std::uint32_t r, std::u
     if (!fp.visible) return std::nullopt;
     const PixelRect b = bandRect(f, band, bands);
     if (b.height == 0) return std::nullopt;
-    return intersect(fp.rect, b);
+    return render::overlap(fp.rect, b);
 }
 
 /// The rect of `image` (lying at `at`) copied out as a tight image.
@@ -234,8 +225,7 @@ Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,
             std::memcpy(out.pixel(b.rect.x, b.rect.y + y), b.image.pixel(0, y),
                         std::size_t(b.rect.width) * 4 * sizeof(float));
     }
-    for (float& v : out.rgba)
-        v = std::clamp(v, 0.0f, 1.0f);
+    render::clampToUnit(out);
     stats.ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return out;
