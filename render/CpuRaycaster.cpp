@@ -14,6 +14,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -35,25 +36,36 @@ using detail::Accum;
 using detail::BrickRef;
 using detail::Frame;
 using detail::RayCount;
+using detail::RayResume;
 using detail::RayState;
 using detail::Rgba;
 using detail::Slot;
 
 /// The region's ray states, left unconstructed here: the pass's workers construct each on
 /// batch 0 as they first touch it (marchPass; planBatches always gives a batch 0, every pixel
-/// of the region in it), so a 512² frame's 13 MB is not written twice, once by one thread.
+/// of the region in it), so a 512² frame's 5 MB is not written twice, once by one thread.
+/// Beside them the rays' resume data (RayResume), written only by rays that stop to wait for a
+/// later batch: a frame of one batch never touches it.
 class RayStates {
   public:
-    explicit RayStates(std::size_t n) : mData(std::allocator<RayState>().allocate(n)), mSize(n) {}
-    ~RayStates() { std::allocator<RayState>().deallocate(mData, mSize); }
+    explicit RayStates(std::size_t n)
+        : mData(std::allocator<RayState>().allocate(n)),
+          mResume(std::allocator<RayResume>().allocate(n)), mSize(n) {}
+    ~RayStates() {
+        std::allocator<RayState>().deallocate(mData, mSize);
+        std::allocator<RayResume>().deallocate(mResume, mSize);
+    }
     RayStates(const RayStates&) = delete;
     RayStates& operator=(const RayStates&) = delete;
     RayState& operator[](std::size_t i) { return mData[i]; }
     const RayState& operator[](std::size_t i) const { return mData[i]; }
+    RayResume& resume(std::size_t i) { return mResume[i]; }
 
   private:
     static_assert(std::is_trivially_destructible_v<RayState>);
+    static_assert(std::is_trivially_destructible_v<RayResume>);
     RayState* mData;
+    RayResume* mResume;
     std::size_t mSize;
 };
 
@@ -68,12 +80,12 @@ template <class T> constexpr brickstore::VoxelType voxelTypeOf() {
 /// (RayWalk). `front`: the ray's link between samples under pre-integration (f.pre), else
 /// null.
 template <class T>
-void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, detail::Front* front,
-              RayCount& n) {
+void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayResume& r,
+              detail::Front* front, RayCount& n) {
     detail::RayWalk w;
-    if (!w.begin(f, sx, sy, shift, s)) return;
+    if (!w.begin(f, sx, sy, shift, s, r)) return;
     Accum& acc = s.acc;
-    while (w.next(f, s)) {
+    while (w.next(f, s, r)) {
         const BrickRef& b = f.bricks[w.index];
         int& k = w.k;
         const int kEnd = w.kEnd;
@@ -114,10 +126,10 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, deta
     }
 }
 
-/// One pass over the region's pixels for the bricks of batch f.batch (rays: the region's, row
-/// by row).
+/// One pass over the pixels of `rect` (within `region`) for the bricks of batch f.batch (rays:
+/// the region's, row by row; only those of rect are touched).
 template <class T>
-void marchPass(const Frame& f, const PixelRect& region, RayStates& rays,
+void marchPass(const Frame& f, const PixelRect& region, const PixelRect& rect, RayStates& rays,
                std::vector<detail::Front>& fronts, RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0};
     const auto x0 = region.x, y0 = region.y, w = region.width;
@@ -126,12 +138,15 @@ void marchPass(const Frame& f, const PixelRect& region, RayStates& rays,
         p.sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
         p.sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
         p.shift = f.jitter ? rayJitter(x, y) - 0.5f : 0.0f;
-        p.state = &rays[std::size_t(y - y0) * w + (x - x0)];
+        const std::size_t i = std::size_t(y - y0) * w + (x - x0);
+        p.state = &rays[i];
+        p.resume = &rays.resume(i);
         if (f.batch == 0) std::construct_at(p.state);
         return p;
     };
     tbb::parallel_for(
-        tbb::blocked_range2d<std::uint32_t>(y0, y0 + region.height, 8, x0, x0 + w, 8),
+        tbb::blocked_range2d<std::uint32_t>(rect.y, rect.y + rect.height, 8, rect.x,
+                                            rect.x + rect.width, 8),
         [&](const tbb::blocked_range2d<std::uint32_t>& r) {
             RayCount n;
             if (f.packets) { // the rays in 4x4 blocks (partial at an edge)
@@ -156,7 +171,7 @@ void marchPass(const Frame& f, const PixelRect& region, RayStates& rays,
                 for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
                     const detail::PacketRay p = ray(x, y);
                     const std::size_t i = std::size_t(y - y0) * w + (x - x0);
-                    marchRay<T>(f, p.sx, p.sy, p.shift, *p.state,
+                    marchRay<T>(f, p.sx, p.sy, p.shift, *p.state, *p.resume,
                                 fronts.empty() ? nullptr : &fronts[i], n);
                 }
             samples += n.samples;
@@ -167,17 +182,45 @@ void marchPass(const Frame& f, const PixelRect& region, RayStates& rays,
 }
 
 void marchPassOfType(brickstore::VoxelType type, const Frame& f, const PixelRect& region,
-                     RayStates& rays, std::vector<detail::Front>& fronts, RayCount& total) {
+                     const PixelRect& rect, RayStates& rays, std::vector<detail::Front>& fronts,
+                     RayCount& total) {
     switch (type) {
     case brickstore::VoxelType::U8:
-        return marchPass<std::uint8_t>(f, region, rays, fronts, total);
+        return marchPass<std::uint8_t>(f, region, rect, rays, fronts, total);
     case brickstore::VoxelType::U16:
-        return marchPass<std::uint16_t>(f, region, rays, fronts, total);
+        return marchPass<std::uint16_t>(f, region, rect, rays, fronts, total);
     case brickstore::VoxelType::I16:
-        return marchPass<std::int16_t>(f, region, rays, fronts, total);
+        return marchPass<std::int16_t>(f, region, rect, rays, fronts, total);
     case brickstore::VoxelType::F32:
-        return marchPass<float>(f, region, rays, fronts, total);
+        return marchPass<float>(f, region, rect, rays, fronts, total);
     }
+}
+
+/// The pixels of `region` whose rays may meet a brick the plan draws: the footprint of the
+/// drawn bricks' bounding box (render/Partition.h), within the region; not visible when none
+/// is left. The rays of the other pixels could only miss every drawn brick.
+Footprint raysToMarch(const LevelGeometry& g, const BrickPlan& plan, const View& view,
+                      const PixelRect& region) {
+    if (plan.drawn.empty()) return {};
+    constexpr auto kMax = std::numeric_limits<std::uint32_t>::max();
+    BrickBox box{{kMax, kMax, kMax}, {0, 0, 0}};
+    const std::uint64_t gx = g.bricks[0], gy = g.bricks[1];
+    for (const PlannedBrick& b : plan.drawn) {
+        const std::array<std::uint32_t, 3> at{std::uint32_t(b.index % gx),
+                                              std::uint32_t(b.index / gx % gy),
+                                              std::uint32_t(b.index / (gx * gy))};
+        for (int a = 0; a < 3; ++a) {
+            box.lo[a] = std::min(box.lo[a], at[a]);
+            box.hi[a] = std::max(box.hi[a], at[a] + 1);
+        }
+    }
+    Footprint fp = footprint(g, box, view);
+    if (!fp.visible) return {};
+    const std::uint32_t x0 = std::max(fp.rect.x, region.x), y0 = std::max(fp.rect.y, region.y);
+    const std::uint32_t x1 = std::min(fp.rect.x + fp.rect.width, region.x + region.width);
+    const std::uint32_t y1 = std::min(fp.rect.y + fp.rect.height, region.y + region.height);
+    if (x0 >= x1 || y0 >= y1) return {};
+    return {PixelRect{x0, y0, x1 - x0, y1 - y0}, true};
 }
 
 Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions& o,
@@ -227,15 +270,20 @@ std::vector<BrickRef> brickRefs(const BrickPlan& plan, const std::vector<std::si
     return bricks;
 }
 
-/// The rays' colours; clamped to [0, 1] unless `clamp` is false (a part's segments, which the
-/// compositing clamps once laid together: a shaded segment's colour may exceed 1).
-Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height, bool clamp) {
-    Image image(width, height);
+/// The region's image: the rays' colours over `marched` (region coordinates; not visible: no
+/// pixel), transparent black elsewhere; clamped to [0, 1] unless `clamp` is false (a part's
+/// segments, which the compositing clamps once laid together: a shaded segment's colour may
+/// exceed 1).
+Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height,
+              const Footprint& marched, bool clamp) {
+    Image image(width, height); // transparent black
+    if (!marched.visible) return image;
+    const PixelRect& m = marched.rect;
     const float top = clamp ? 1.0f : std::numeric_limits<float>::max();
-    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, height, 16),
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(m.y, m.y + m.height, 16),
                       [&](const tbb::blocked_range<std::uint32_t>& r) {
                           for (std::uint32_t y = r.begin(); y < r.end(); ++y)
-                              for (std::uint32_t x = 0; x < width; ++x) {
+                              for (std::uint32_t x = m.x; x < m.x + m.width; ++x) {
                                   const Accum& c = rays[std::size_t(y) * width + x].acc;
                                   float* px = image.pixel(x, y);
                                   px[0] = std::clamp(c.r, 0.0f, top);
@@ -310,6 +358,8 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     stats.batches = std::uint32_t(ends.size());
     std::vector<BrickRef> bricks = brickRefs(plan, ends, g.brickCount());
     Frame f = frameOf(g, view.basis, options, table);
+    const std::vector<float> tfPairs = detail::tfPairTable(f.tf, f.entries);
+    f.tfPairs = tfPairs.data();
     f.bricks = bricks.data();
     f.pre = classified.preintegrated.get();
     if (octree && occupancy->depth() > 0) {
@@ -321,6 +371,11 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         f.boxes = occupancy->sampledBoxes().data();
     }
     const PixelRect region = options.drawn();
+    // Only the rays that may meet a drawn brick are marched (the others stay transparent
+    // black); without skipping every ray is, the reference of the skipping invariant.
+    const Footprint marched = options.skip == SkipMode::None
+                                  ? Footprint{region, region.pixels() > 0}
+                                  : raysToMarch(g, plan, view, region);
     RayStates rays(region.pixels());
     std::vector<detail::Front> fronts(f.pre ? region.pixels() : 0);
     RayCount count;
@@ -330,14 +385,18 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         stats.uploadMs += msSince(loadStart);
         const auto renderStart = Clock::now();
         f.batch = std::uint32_t(batch);
-        marchPassOfType(store.info().volume.type, f, region, rays, fronts, count);
+        if (marched.visible)
+            marchPassOfType(store.info().volume.type, f, region, marched.rect, rays, fronts, count);
         stats.renderMs += msSince(renderStart);
     }
     stats.samples = count.samples;
     stats.octreeLeaps = count.leaps;
     stats.occlusionReason = "not on the CPU raycaster";
     stats.totalMs = msSince(frameStart);
-    return imageOf(rays, region.width, region.height, options.parts == 1);
+    Footprint local = marched; // in the region's coordinates
+    local.rect.x -= region.x;
+    local.rect.y -= region.y;
+    return imageOf(rays, region.width, region.height, local, options.parts == 1);
 }
 
 } // namespace bc::render

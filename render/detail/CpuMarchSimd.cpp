@@ -10,7 +10,16 @@
 //   samples takes its next brick, or the next ray of the list, once a quarter of the lanes
 //   are. Visible samples wait in a queue for their colour (TF colour, gradient, shading),
 //   taken a full vector at a time: a step only classifies, so the gradient's 24 voxel loads
-//   are paid per visible sample, not per lane of every step with one visible sample.
+//   are paid per visible sample, not per lane of every step with one visible sample. A queued
+//   sample names its ray, not its lane, and adds to the ray's state: a lane that takes another
+//   brick or ray leaves the queue as it is (only a ray that composites outside the queue, a
+//   brick of one value or the scalar loop, has it emptied first).
+//
+// Gathers are the floor under a step's time (bench/GatherProbe.cpp: a 16-lane gather costs
+// about what 16 scalar loads do on the dev VM), so each reads as few elements as it can: a
+// 16-bit voxel pair is one 32-bit lane, a 32-bit voxel pair or a TF channel's two ends
+// (tfPairTable()) one 64-bit lane, and a cell row with its x neighbours one 64-bit lane for
+// 16-bit voxels.
 // - Across one ray's consecutive samples in one brick (marchBrickSimd): the brick DDA, the
 //   octree leaps and early termination stay the scalar code's, per ray; the per-sample work
 //   runs a vector of samples at a time. Pre-integration's scalar march aside, this is what
@@ -84,9 +93,31 @@ HWY_INLINE PairF pairAt(const std::uint16_t* v, VI o) {
 HWY_INLINE PairF pairAt(const std::int16_t* v, VI o) {
     return pair16(v, o);
 }
-HWY_INLINE PairF pairAt(const float* v, VI o) {
+/// Two 32-bit neighbours per lane from 64-bit gathers (half a vector of lanes per gather): the
+/// element loads of one 32-bit gather for both, where two 32-bit gathers would load twice.
+/// `o`: voxel offsets of the first of each pair.
+HWY_INLINE PairF pair32(const float* v, VI o) {
+#if HWY_TARGET == HWY_SCALAR
     const DF df;
     return {hn::GatherIndex(df, v, o), hn::GatherIndex(df, v, hn::Add(o, hn::Set(DI(), 1)))};
+#else
+    const DF df;
+    const DI di;
+    const hn::Repartition<std::int64_t, DF> d64;
+    const hn::Half<DI> dh;
+    const VI bytes = hn::ShiftLeft<2>(o);
+    const auto* base = reinterpret_cast<const std::int64_t*>(v);
+    const VI q0 =
+        hn::BitCast(di, hn::GatherOffset(d64, base, hn::PromoteTo(d64, hn::LowerHalf(dh, bytes))));
+    const VI q1 =
+        hn::BitCast(di, hn::GatherOffset(d64, base, hn::PromoteTo(d64, hn::UpperHalf(dh, bytes))));
+    // Lane i of q holds v[o] in its low 32 bits and v[o + 1] above (little-endian).
+    return {hn::BitCast(df, hn::ConcatEven(di, q1, q0)),
+            hn::BitCast(df, hn::ConcatOdd(di, q1, q0))};
+#endif
+}
+HWY_INLINE PairF pairAt(const float* v, VI o) {
+    return pair32(v, o);
 }
 
 /// v[o - 1] and v[o + 2]: the x neighbours of a cell row (one gather for 8 bits).
@@ -102,6 +133,13 @@ HWY_INLINE PairF outerAt(const std::uint8_t* v, VI o) {
 template <class T> HWY_INLINE PairF outerAt(const T* v, VI o) {
     const DI di;
     return {pairAt(v, hn::Sub(o, hn::Set(di, 1))).lo, pairAt(v, hn::Add(o, hn::Set(di, 1))).hi};
+}
+/// 32-bit voxels: two gathers of the two voxels themselves (a pair each would load twice).
+HWY_INLINE PairF outerAt(const float* v, VI o) {
+    const DF df;
+    const DI di;
+    return {hn::GatherIndex(df, v, hn::Sub(o, hn::Set(di, 1))),
+            hn::GatherIndex(df, v, hn::Add(o, hn::Set(di, 2)))};
 }
 
 /// A cell row with its x neighbours per lane: pair = (v[o], v[o + 1]), outer = (v[o - 1],
@@ -146,13 +184,39 @@ HWY_INLINE QuadF quadAt(const std::uint16_t* v, VI o) {
 HWY_INLINE QuadF quadAt(const std::int16_t* v, VI o) {
     return quad16(v, o);
 }
+/// 32-bit voxels: the pairs at o - 1 and o + 1 (pair32()), four 64-bit gathers in all.
 HWY_INLINE QuadF quadAt(const float* v, VI o) {
-    return {pairAt(v, o), outerAt(v, o)};
+    const DI di;
+    const PairF a = pair32(v, hn::Sub(o, hn::Set(di, 1))),
+                b = pair32(v, hn::Add(o, hn::Set(di, 1)));
+    return {{a.hi, b.lo}, {a.lo, b.hi}};
+}
+
+/// The lanes of v under m, packed, stored at p: a whole vector is written (the lanes past the
+/// packed ones are garbage). Compress into a register, then a plain store: AVX-512's
+/// compress-to-memory form is microcoded on AMD Zen 4 at about a hundred cycles a store, and
+/// Highway 1.0 has no Zen 4 target that avoids it (CompressStore would emit it).
+template <class D, class V, class M>
+HWY_INLINE void appendTo(V v, M m, D d, hn::TFromD<D>* HWY_RESTRICT p) {
+    hn::StoreU(hn::Compress(v, m), d, p);
 }
 
 HWY_INLINE VF lerpV(VF a, VF b, VF t) {
     const VF one = hn::Set(DF(), 1.0f);
     return hn::Add(hn::Mul(a, hn::Sub(one, t)), hn::Mul(b, t));
+}
+
+/// classify()'s channel ch (0 r, 1 g, 2 b, 3 a) per lane: table entries e / 4 and e / 4 + 1
+/// (e: 4 * the entry) mixed by w.
+HWY_INLINE VF tfChannel(const Frame& f, VI e, VF w, int ch) {
+    const DF df;
+    const DI di;
+    if (f.tfPairs) {
+        const PairF p = pair32(f.tfPairs, hn::Add(hn::Add(e, e), hn::Set(di, 2 * ch)));
+        return lerpV(p.lo, p.hi, w);
+    }
+    return lerpV(hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch))),
+                 hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch + 4))), w);
 }
 
 /// Trilinear in fetch()'s order (x, then y, then z) of eight corner values dXYZ.
@@ -169,12 +233,12 @@ struct CellRows {
     bool outer = false;
 };
 
-/// The rows at o, o + sy, o + sz, o + sy + sz; with their x neighbours when `withOuter` and
-/// the voxels are narrow enough to read all four in one gather lane.
+/// The rows at o, o + sy, o + sz, o + sy + sz; with their x neighbours when `withOuter`
+/// (quadAt(): for voxels of 16 bits or fewer at the cost of the rows alone).
 template <class T>
 HWY_INLINE void cellRows(const T* v, VI o, VI sy, VI sz, bool withOuter, CellRows& c) {
     const VI o10 = hn::Add(o, sy), o01 = hn::Add(o, sz), o11 = hn::Add(o10, sz);
-    if (sizeof(T) <= 2 && withOuter) {
+    if (withOuter) {
         const QuadF q00 = quadAt(v, o), q10 = quadAt(v, o10), q01 = quadAt(v, o01),
                     q11 = quadAt(v, o11);
         c.r00 = q00.pair;
@@ -298,7 +362,7 @@ template <class T> struct SamplesV {
         sy = hn::Set(di, f.edge);
         sz = hn::Set(di, f.edge * f.edge);
         o = hn::Add(hn::Add(hn::Add(hn::Mul(z0, sz), hn::Mul(y0, sy)), x0), base);
-        cellRows(v, o, sy, sz, quads, c);
+        cellRows(v, o, sy, sz, quads && sizeof(T) <= 2, c);
         const VF value =
             lerpV(lerpV(lerpV(c.r00.lo, c.r00.hi, fx), lerpV(c.r10.lo, c.r10.hi, fx), fy),
                   lerpV(lerpV(c.r01.lo, c.r01.hi, fx), lerpV(c.r11.lo, c.r11.hi, fx), fy), fz);
@@ -312,12 +376,7 @@ template <class T> struct SamplesV {
         e = hn::ShiftLeft<2>(entry);
         a = channel(3);
     }
-    VF channel(int ch) const {
-        const DF df;
-        const DI di;
-        return lerpV(hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch))),
-                     hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch + 4))), w);
-    }
+    VF channel(int ch) const { return tfChannel(f, e, w, ch); }
     /// classify()'s colour, shaded for ray directions (dx, dy, dz) where f.shading.
     void colour(VF dx, VF dy, VF dz, VF& r, VF& g, VF& b) const {
         r = channel(0);
@@ -664,7 +723,8 @@ void beginFresh(const Frame& f, const PacketRay* rays, std::size_t count, RayWal
 }
 
 /// The rays in a packet's lanes, one per lane (structure of arrays): where each is in its
-/// brick, and its colour so far. A lane without samples to take has k = end.
+/// brick, which ray it is, and its transmittance (its colour sums are its RayState's). A lane
+/// without samples to take has k = end.
 struct Lanes {
     static constexpr std::size_t kMax = hn::MaxLanes(DF());
     HWY_ALIGN std::int32_t k[kMax], end[kMax];
@@ -673,7 +733,8 @@ struct Lanes {
     HWY_ALIGN float t0[kMax], lx[kMax], ly[kMax], lz[kMax], dx[kMax], dy[kMax], dz[kMax];
     HWY_ALIGN float ix[kMax], iy[kMax], iz[kMax]; ///< 1 / (dx, dy, dz)
     HWY_ALIGN float wx[kMax], wy[kMax], wz[kMax]; ///< the rays' world directions (shading)
-    HWY_ALIGN float r[kMax], g[kMax], b[kMax], t[kMax];
+    HWY_ALIGN std::int32_t ray[kMax]; ///< the lane's ray: its index in the packet's list
+    HWY_ALIGN float t[kMax];
 };
 
 /// The march of marchPacketSimd() for voxels of type T: its lanes, each a ray of the queue
@@ -703,7 +764,7 @@ template <class T> class Packet {
         L.base[j] = L.words[j] = 0;
         L.t0[j] = L.lx[j] = L.ly[j] = L.lz[j] = L.dx[j] = L.dy[j] = L.dz[j] = 0.0f;
         L.ix[j] = L.iy[j] = L.iz[j] = L.wx[j] = L.wy[j] = L.wz[j] = 0.0f;
-        L.r[j] = L.g[j] = L.b[j] = 0.0f;
+        L.ray[j] = 0;
         L.t[j] = 1.0f;
     }
 
@@ -713,11 +774,14 @@ template <class T> class Packet {
     bool seek(int j) {
         RayWalk& w = mWalk[j];
         RayState& s = *mRay[j]->state;
-        Accum acc{L.r[j], L.g[j], L.b[j], L.t[j]};
+        // The colour sums are the state's (flush() adds the queued samples to them); the
+        // transmittance is the lane's.
+        Accum acc{s.acc.r, s.acc.g, s.acc.b, L.t[j]};
         bool found = false;
-        while (!found && w.next(f, s)) {
+        while (!found && w.next(f, s, *mRay[j]->resume)) {
             const BrickRef& b = f.bricks[w.index];
             if (b.slot == Slot::Constant) {
+                settle(s, acc); // its queued samples first: each ray's sums in sample order
                 if (!marchConstant(f, b.constant, w.k, w.kEnd, acc, mN)) break;
                 continue;
             }
@@ -735,6 +799,7 @@ template <class T> class Packet {
                                         std::int64_t(sizeof(T));
             const std::int64_t span = std::int64_t(f.edge) * f.edge * f.edge;
             if ((std::abs(offset) + span) * std::int64_t(sizeof(T)) + 8 > f.gatherReach) {
+                settle(s, acc);
                 if (!marchAlone(voxels, w, first, last, acc)) break;
                 continue;
             }
@@ -759,11 +824,19 @@ template <class T> class Packet {
             L.wz[j] = w.d.z;
             found = true;
         }
-        L.r[j] = acc.r;
-        L.g[j] = acc.g;
-        L.b[j] = acc.b;
+        s.acc = acc;
         L.t[j] = acc.t;
         return found;
+    }
+
+    /// Before the ray of state s composites outside the queue: the queued samples added to
+    /// its sums (and to every other ray's), so that acc holds them.
+    void settle(const RayState& s, Accum& acc) {
+        if (mQueue.count == 0) return;
+        flush(true);
+        acc.r = s.acc.r;
+        acc.g = s.acc.g;
+        acc.b = s.acc.b;
     }
 
     /// A brick too far from the packet's for its gathers: the scalar loop, samples [k, kEnd).
@@ -776,7 +849,7 @@ template <class T> class Packet {
     /// brick, or else the next ray of the queue that has one (finishing the rays it leaves).
     void refill(int j) {
         if (mRay[j] && !mStopped[j] && seek(j)) return;
-        if (mRay[j]) mRay[j]->state->acc = {L.r[j], L.g[j], L.b[j], L.t[j]};
+        if (mRay[j]) mRay[j]->state->acc.t = L.t[j]; // its sums are the state's already
         mStopped[j] = false;
         while (mNext < mCount) {
             const std::size_t i = mNext++;
@@ -790,17 +863,14 @@ template <class T> class Packet {
                 }
                 if (!mReadyOk[i - mReadyFrom]) continue;
                 mWalk[j] = mReady[i - mReadyFrom];
-            } else if (!mWalk[j].begin(f, ray.sx, ray.sy, ray.shift, *ray.state)) {
+            } else if (!mWalk[j].begin(f, ray.sx, ray.sy, ray.shift, *ray.state, *ray.resume)) {
                 continue;
             }
             mRay[j] = &ray;
-            const Accum& acc = ray.state->acc;
-            L.r[j] = acc.r;
-            L.g[j] = acc.g;
-            L.b[j] = acc.b;
-            L.t[j] = acc.t;
+            L.ray[j] = std::int32_t(i);
+            L.t[j] = ray.state->acc.t;
             if (seek(j)) return;
-            ray.state->acc = {L.r[j], L.g[j], L.b[j], L.t[j]};
+            ray.state->acc.t = L.t[j];
         }
         idle(j);
     }
@@ -833,7 +903,7 @@ template <class T> class Packet {
             VF Tr = hn::Load(df, L.t);
             MI stopped = hn::FirstN(di, 0);
             MI active = hn::Lt(k, end);
-            if (hn::AllFalse(di, active)) return;
+            if (hn::AllFalse(di, active)) return flush(true);
             // Lanes out of rays for good, and how many more out of samples call for refills.
             std::size_t gone = 0;
             for (int j = 0; j < mLanes; ++j)
@@ -906,8 +976,8 @@ template <class T> class Packet {
                 }
                 active = hn::AndNot(stopped, hn::Lt(k, end));
             }
-            flush(true);
             // A quarter of the lanes (or all) are out of samples: their next bricks or rays.
+            // The queued samples stay queued: they name their rays, not lanes.
             hn::Store(Tr, df, L.t);
             hn::Store(k, di, L.k);
             std::uint8_t doneBits[(kMax + 7) / 8 + 8] = {}, stopBits[(kMax + 7) / 8 + 8] = {};
@@ -938,11 +1008,12 @@ template <class T> class Packet {
             const Rgba c = colourOf(f, Sample<T>(mLaneVoxels[j], f.edge, rel + dv * ts[j]),
                                     glm::vec3(L.wx[j], L.wy[j], L.wz[j]));
             if (c.a <= 0.0f) continue;
-            Accum acc{L.r[j], L.g[j], L.b[j], L.t[j]};
+            Accum& sums = mRay[j]->state->acc;
+            Accum acc{sums.r, sums.g, sums.b, L.t[j]};
             composite(acc, c);
-            L.r[j] = acc.r;
-            L.g[j] = acc.g;
-            L.b[j] = acc.b;
+            sums.r = acc.r;
+            sums.g = acc.g;
+            sums.b = acc.b;
             L.t[j] = acc.t;
         }
         return hn::Load(df, L.t);
@@ -957,17 +1028,18 @@ template <class T> class Packet {
         const auto visI = hn::RebindMask(di, vis);
         Deferred& q = mQueue;
         const std::size_t at = q.count;
-        hn::CompressStore(s.o, visI, di, q.o + at);
-        hn::CompressStore(s.e, visI, di, q.e + at);
-        hn::CompressStore(hn::Iota(di, 0), visI, di, q.lane + at);
-        hn::CompressStore(s.fx, vis, df, q.fx + at);
-        hn::CompressStore(s.fy, vis, df, q.fy + at);
-        hn::CompressStore(s.fz, vis, df, q.fz + at);
-        hn::CompressStore(s.w, vis, df, q.tw + at);
-        hn::CompressStore(w, vis, df, q.w + at);
-        hn::CompressStore(wx, vis, df, q.dx + at);
-        hn::CompressStore(wy, vis, df, q.dy + at);
-        q.count += hn::CompressStore(wz, vis, df, q.dz + at);
+        appendTo(s.o, visI, di, q.o + at);
+        appendTo(s.e, visI, di, q.e + at);
+        appendTo(hn::Load(di, L.ray), visI, di, q.ray + at);
+        appendTo(s.fx, vis, df, q.fx + at);
+        appendTo(s.fy, vis, df, q.fy + at);
+        appendTo(s.fz, vis, df, q.fz + at);
+        appendTo(s.w, vis, df, q.tw + at);
+        appendTo(w, vis, df, q.w + at);
+        appendTo(wx, vis, df, q.dx + at);
+        appendTo(wy, vis, df, q.dy + at);
+        appendTo(wz, vis, df, q.dz + at);
+        q.count += hn::CountTrue(df, vis);
         if (q.count >= std::size_t(mLanes)) flush(false);
     }
 
@@ -988,10 +1060,7 @@ template <class T> class Packet {
                                         hn::Set(di, 1 + f.edge + f.edge * f.edge));
             const VI e = hn::IfThenElseZero(valid, hn::LoadU(di, q.e + done));
             const VF tw = hn::IfThenElseZero(validF, hn::LoadU(df, q.tw + done));
-            auto channel = [&](int ch) {
-                return lerpV(hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch))),
-                             hn::GatherIndex(df, f.tf, hn::Add(e, hn::Set(di, ch + 4))), tw);
-            };
+            auto channel = [&](int ch) { return tfChannel(f, e, tw, ch); };
             VF r = channel(0), g = channel(1), b = channel(2);
             if (f.shading) {
                 const VF fx = hn::LoadU(df, q.fx + done), fy = hn::LoadU(df, q.fy + done),
@@ -1010,10 +1079,10 @@ template <class T> class Packet {
             hn::Store(hn::Mul(w, g), df, wg);
             hn::Store(hn::Mul(w, b), df, wb);
             for (std::size_t i = 0; i < count; ++i) {
-                const std::int32_t j = q.lane[done + i];
-                L.r[j] += wr[i];
-                L.g[j] += wg[i];
-                L.b[j] += wb[i];
+                Accum& sums = mRays[q.ray[done + i]].state->acc;
+                sums.r += wr[i];
+                sums.g += wg[i];
+                sums.b += wb[i];
             }
             done += count;
         }
@@ -1022,7 +1091,7 @@ template <class T> class Packet {
         for (std::size_t i = 0; i < q.count; ++i) { // the rest to the front
             q.o[i] = q.o[done + i];
             q.e[i] = q.e[done + i];
-            q.lane[i] = q.lane[done + i];
+            q.ray[i] = q.ray[done + i];
             q.fx[i] = q.fx[done + i];
             q.fy[i] = q.fy[done + i];
             q.fz[i] = q.fz[done + i];
@@ -1035,10 +1104,10 @@ template <class T> class Packet {
     }
 
     /// Visible samples waiting for their colours (defer(), flush()): up to a vector's lanes
-    /// less one, and a vector's more while one is queued (CompressStore writes whole vectors).
+    /// less one, and a vector's more while one is queued (appendTo() writes whole vectors).
     struct Deferred {
         static constexpr std::size_t kSize = 2 * kMax + 8;
-        HWY_ALIGN std::int32_t o[kSize], e[kSize], lane[kSize];
+        HWY_ALIGN std::int32_t o[kSize], e[kSize], ray[kSize]; ///< ray: its index in mRays
         HWY_ALIGN float fx[kSize], fy[kSize], fz[kSize], tw[kSize], w[kSize];
         HWY_ALIGN float dx[kSize], dy[kSize], dz[kSize];
         std::size_t count = 0;

@@ -25,6 +25,7 @@ bool marchBrickSimd(brickstore::VoxelType type, const Frame& f, const void* voxe
 struct PacketRay {
     float sx = 0.0f, sy = 0.0f, shift = 0.0f;
     RayState* state = nullptr;
+    RayResume* resume = nullptr; ///< where it goes on if it stops to wait (with state)
 };
 
 /// The rays `rays[0, count)` for the bricks of batch f.batch, a vector of rays at a time: each

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <vector>
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -39,6 +40,9 @@ struct Frame {
     glm::ivec3 grid{1};
     const float* tf = nullptr;
     int entries = 2;
+    /// f.tf as pairs (tfPairTable()): the SIMD march reads both ends of a channel's lerp with
+    /// one 64-bit gather lane; null: it gathers them from f.tf one by one.
+    const float* tfPairs = nullptr;
     float tfScale = 1, tfOffset = 0; ///< native value -> table position
     float ertT = -1; ///< stop a ray once its transmittance is at most this (-1: never)
     bool shading = true;
@@ -72,6 +76,18 @@ inline Rgba classify(const Frame& f, float value) {
     const float* e = f.tf + 4 * i;
     auto mix = [w](float a, float b) { return a * (1.0f - w) + b * w; };
     return {mix(e[0], e[4]), mix(e[1], e[5]), mix(e[2], e[6]), mix(e[3], e[7])};
+}
+
+/// For entries e < entries - 1 of the RGBA table tf: r_e, r_e+1, g_e, g_e+1, b_e, b_e+1, a_e,
+/// a_e+1 (the same floats, so a lerp of a pair is bit for bit the lerp of tf's entries).
+inline std::vector<float> tfPairTable(const float* tf, int entries) {
+    std::vector<float> pairs(std::size_t(std::max(entries - 1, 1)) * 8, 0.0f);
+    for (int e = 0; e + 1 < entries; ++e)
+        for (int ch = 0; ch < 4; ++ch) {
+            pairs[std::size_t(e) * 8 + 2 * ch] = tf[4 * e + ch];
+            pairs[std::size_t(e) * 8 + 2 * ch + 1] = tf[4 * (e + 1) + ch];
+        }
+    return pairs;
 }
 
 /// diff^kShininess by squaring (the exponent is a whole number): std::pow costs more than
@@ -255,15 +271,21 @@ inline bool marchConstant(const Frame& f, float value, int& k, int kEnd, Accum& 
 
 enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
 
-/// A ray between batches: its colour so far and, while it waits for a brick of a later batch,
-/// its DDA state at that brick (so the next pass goes on with the same floats).
+/// A ray between batches: its colour so far and its phase. Every pass reads and writes it, so
+/// it is small (a 512^2 frame's are 5 MB): the DDA state of a waiting ray is kept apart.
 struct RayState {
     Accum acc;
+    RayPhase phase = RayPhase::Fresh;
+};
+
+/// A ray waiting for a brick of a later batch: its DDA state at that brick, so the next pass
+/// goes on with the same floats. Written only when the ray stops to wait (RayWalk::next), read
+/// only when it is Waiting: a frame of one batch never touches it.
+struct RayResume {
     glm::ivec3 cell{0};
     glm::vec3 tMax{0.0f};
     int k = 0;
     int brick = 0; ///< the brick it waits for
-    RayPhase phase = RayPhase::Fresh;
 };
 
 /// One ray's walk through the brick grid (the shader's main()) for the bricks of batch
@@ -284,9 +306,9 @@ struct RayWalk {
     /// nothing to draw in it (done, waiting for a later batch, or missing the volume).
     /// `shift`: where its samples start, in steps, relative to the unjittered lattice
     /// (rayJitter() - 1/2 with RenderOptions::jitter, else 0).
-    bool begin(const Frame& f, float sx, float sy, float shift, RayState& s) {
+    bool begin(const Frame& f, float sx, float sy, float shift, RayState& s, const RayResume& r) {
         if (s.phase == RayPhase::Done) return false;
-        if (s.phase == RayPhase::Waiting && f.bricks[s.brick].batch != f.batch) return false;
+        if (s.phase == RayPhase::Waiting && f.bricks[r.brick].batch != f.batch) return false;
         const RayPhase phase = s.phase;
         s.phase = RayPhase::Done; // unless it stops to wait in next()
         const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
@@ -310,9 +332,10 @@ struct RayWalk {
         t0 += shift * f.stepMm; // sample k at t0 + (k + 1/2) step: the entry + (k + jitter) step
         total = int(std::ceil((t1 - t0) * invStep - 0.5f));
         if (total <= 0) return false;
-        cell = s.cell;
-        tMax = s.tMax;
-        if (phase == RayPhase::Fresh) {
+        if (phase != RayPhase::Fresh) {
+            cell = r.cell;
+            tMax = r.tMax;
+        } else {
             const glm::vec3 pin = ov + dv * t0;
             cell =
                 glm::clamp(glm::ivec3(glm::floor(pin / float(f.brick))), glm::ivec3(0), f.grid - 1);
@@ -329,14 +352,14 @@ struct RayWalk {
             const float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * f.brick);
             tMax[a] = (plane - ov[a]) * invDv[a];
         }
-        k = phase == RayPhase::Fresh ? 0 : s.k;
+        k = phase == RayPhase::Fresh ? 0 : r.k;
         entered = false;
         return true;
     }
 
     /// On to the next brick of this batch, sampled or of one value, with samples [k, kEnd) of
     /// the ray; false at the end of the ray or when it stops to wait for a later batch.
-    bool next(const Frame& f, RayState& s) {
+    bool next(const Frame& f, RayState& s, RayResume& r) {
         if (entered && !leave(f)) return false;
         entered = false;
         while (k < total) {
@@ -346,10 +369,10 @@ struct RayWalk {
             const BrickRef& b = f.bricks[index];
             if (b.slot != Slot::Absent && kEnd > k) {
                 if (b.batch != f.batch) {
-                    s.cell = cell;
-                    s.tMax = tMax;
-                    s.k = k;
-                    s.brick = index;
+                    r.cell = cell;
+                    r.tMax = tMax;
+                    r.k = k;
+                    r.brick = index;
                     s.phase = RayPhase::Waiting;
                     return false;
                 }

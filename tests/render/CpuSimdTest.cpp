@@ -212,6 +212,7 @@ TEST(CpuSimdPackets, BricksOutOfGatherReachMarchWithTheScalarLoopExactly) {
     constexpr std::uint32_t kSide = 16;
     auto march = [&](std::int64_t reach, detail::RayCount& n) {
         std::vector<detail::RayState> states(kSide * kSide);
+        std::vector<detail::RayResume> resumes(kSide * kSide);
         std::vector<detail::PacketRay> rays;
         for (std::uint32_t by = 0; by < kSide; by += 4)
             for (std::uint32_t bx = 0; bx < kSide; bx += 4)
@@ -219,12 +220,12 @@ TEST(CpuSimdPackets, BricksOutOfGatherReachMarchWithTheScalarLoopExactly) {
                     for (std::uint32_t x = bx; x < bx + 4; ++x)
                         rays.push_back({2.0f * (float(x) + 0.5f) / kSide - 1.0f,
                                         1.0f - 2.0f * (float(y) + 0.5f) / kSide, 0.0f,
-                                        &states[y * kSide + x]});
+                                        &states[y * kSide + x], &resumes[y * kSide + x]});
         if (reach < 0) { // the scalar walk and loop
             for (const detail::PacketRay& r : rays) {
                 detail::RayWalk w;
-                if (!w.begin(f, r.sx, r.sy, r.shift, *r.state)) continue;
-                while (w.next(f, *r.state)) {
+                if (!w.begin(f, r.sx, r.sy, r.shift, *r.state, *r.resume)) continue;
+                while (w.next(f, *r.state, *r.resume)) {
                     int k = w.k;
                     if (!detail::marchBrick(f, voxels[std::size_t(w.index)].data(), nullptr,
                                             w.local(f), w.dv, w.d, w.t0, k, w.kEnd, r.state->acc,
