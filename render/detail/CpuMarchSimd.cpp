@@ -909,6 +909,12 @@ template <class T> class Packet {
             for (int j = 0; j < mLanes; ++j)
                 gone += mRay[j] ? 0 : 1;
             const std::size_t refillAt = gone + std::max<std::size_t>(1, (mLanes - gone) / 4);
+            // Unshaded, a sample's colour is two gathers a channel, as cheap in the step as in
+            // the queue: the step composites it at once into the lanes' sums (R, G, B), which
+            // go back to the rays' states before anything else composites into them.
+            const bool direct = !f.shading;
+            VF R = hn::Zero(df), G = hn::Zero(df), B = hn::Zero(df);
+            if (direct) loadSums(R, G, B);
             while (hn::CountTrue(di, hn::Not(active)) < refillAt) {
                 const VF t = hn::Add(t0, hn::Mul(hn::Add(hn::ConvertTo(df, k), half), step));
                 MI take = active;
@@ -961,7 +967,9 @@ template <class T> class Packet {
                 const auto takeF = hn::RebindMask(df, take);
                 const auto odd = hn::AndNot(samples.fused, takeF); // for the scalar code
                 if (!hn::AllFalse(df, odd)) {
+                    if (direct) storeSums(R, G, B);
                     Tr = scalarLanes(odd, t, Tr);
+                    if (direct) loadSums(R, G, B);
                     stopped = hn::Or(stopped, hn::RebindMask(di, hn::And(odd, hn::Le(Tr, ertT))));
                 }
                 mN.samples += hn::CountTrue(di, take);
@@ -970,7 +978,14 @@ template <class T> class Packet {
                 const VF a = samples.a;
                 const auto vis = hn::And(hn::And(takeF, samples.fused), hn::Gt(a, hn::Zero(df)));
                 if (!hn::AllFalse(df, vis)) {
-                    defer(samples, vis, hn::Mul(Tr, a), wx, wy, wz);
+                    const VF w = hn::Mul(Tr, a);
+                    if (direct) { // composite()'s sums: acc.r += w * c.r, lane by lane
+                        R = hn::IfThenElse(vis, hn::Add(R, hn::Mul(w, samples.channel(0))), R);
+                        G = hn::IfThenElse(vis, hn::Add(G, hn::Mul(w, samples.channel(1))), G);
+                        B = hn::IfThenElse(vis, hn::Add(B, hn::Mul(w, samples.channel(2))), B);
+                    } else {
+                        defer(samples, vis, w, wx, wy, wz);
+                    }
                     Tr = hn::IfThenElse(vis, hn::Mul(Tr, hn::Sub(oneF, a)), Tr);
                     stopped = hn::Or(stopped, hn::RebindMask(di, hn::And(vis, hn::Le(Tr, ertT))));
                 }
@@ -978,6 +993,7 @@ template <class T> class Packet {
             }
             // A quarter of the lanes (or all) are out of samples: their next bricks or rays.
             // The queued samples stay queued: they name their rays, not lanes.
+            if (direct) storeSums(R, G, B);
             hn::Store(Tr, df, L.t);
             hn::Store(k, di, L.k);
             std::uint8_t doneBits[(kMax + 7) / 8 + 8] = {}, stopBits[(kMax + 7) / 8 + 8] = {};
@@ -988,6 +1004,36 @@ template <class T> class Packet {
                 mStopped[j] = ((stopBits[j >> 3] >> (j & 7)) & 1) != 0;
                 refill(j);
             }
+        }
+    }
+
+    /// The colour sums of the lanes' rays, as vectors (0 in a lane without a ray).
+    void loadSums(VF& R, VF& G, VF& B) const {
+        const DF df;
+        HWY_ALIGN float r[kMax] = {}, g[kMax] = {}, b[kMax] = {};
+        for (int j = 0; j < mLanes; ++j) {
+            if (!mRay[j]) continue;
+            const Accum& acc = mRay[j]->state->acc;
+            r[j] = acc.r;
+            g[j] = acc.g;
+            b[j] = acc.b;
+        }
+        R = hn::Load(df, r);
+        G = hn::Load(df, g);
+        B = hn::Load(df, b);
+    }
+    void storeSums(VF R, VF G, VF B) {
+        const DF df;
+        HWY_ALIGN float r[kMax], g[kMax], b[kMax];
+        hn::Store(R, df, r);
+        hn::Store(G, df, g);
+        hn::Store(B, df, b);
+        for (int j = 0; j < mLanes; ++j) {
+            if (!mRay[j]) continue;
+            Accum& acc = mRay[j]->state->acc;
+            acc.r = r[j];
+            acc.g = g[j];
+            acc.b = b[j];
         }
     }
 
