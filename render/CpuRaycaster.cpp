@@ -3,6 +3,7 @@
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "render/BrickPlan.h"
+#include "render/Composite.h"
 #include "render/Occupancy.h"
 #include "render/Partition.h"
 #include "render/TransferFunction.h"
@@ -14,12 +15,12 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <type_traits>
 
 #include <glm/geometric.hpp>
@@ -204,23 +205,14 @@ Footprint raysToMarch(const LevelGeometry& g, const BrickPlan& plan, const View&
     if (plan.drawn.empty()) return {};
     constexpr auto kMax = std::numeric_limits<std::uint32_t>::max();
     BrickBox box{{kMax, kMax, kMax}, {0, 0, 0}};
-    const std::uint64_t gx = g.bricks[0], gy = g.bricks[1];
-    for (const PlannedBrick& b : plan.drawn) {
-        const std::array<std::uint32_t, 3> at{std::uint32_t(b.index % gx),
-                                              std::uint32_t(b.index / gx % gy),
-                                              std::uint32_t(b.index / (gx * gy))};
+    for (const PlannedBrick& b : plan.drawn)
         for (int a = 0; a < 3; ++a) {
-            box.lo[a] = std::min(box.lo[a], at[a]);
-            box.hi[a] = std::max(box.hi[a], at[a] + 1);
+            box.lo[a] = std::min(box.lo[a], b.key.pos[a]);
+            box.hi[a] = std::max(box.hi[a], b.key.pos[a] + 1);
         }
-    }
-    Footprint fp = footprint(g, box, view);
-    if (!fp.visible) return {};
-    const std::uint32_t x0 = std::max(fp.rect.x, region.x), y0 = std::max(fp.rect.y, region.y);
-    const std::uint32_t x1 = std::min(fp.rect.x + fp.rect.width, region.x + region.width);
-    const std::uint32_t y1 = std::min(fp.rect.y + fp.rect.height, region.y + region.height);
-    if (x0 >= x1 || y0 >= y1) return {};
-    return {PixelRect{x0, y0, x1 - x0, y1 - y0}, true};
+    const Footprint fp = footprint(g, box, view);
+    const std::optional<PixelRect> in = fp.visible ? overlap(fp.rect, region) : std::nullopt;
+    return in ? Footprint{*in, true} : Footprint{};
 }
 
 Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions& o,
