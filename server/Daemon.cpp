@@ -23,15 +23,16 @@
 namespace bc::server {
 
 struct Daemon::Impl {
-    Impl(DaemonConfig c, Log& l, bool handleSignals)
-        : config(std::move(c)), log(l), catalog(config, log),
+    Impl(DaemonConfig c, Log& l, bool handleSignals, FrameCluster* cluster)
+        : config(std::move(c)), log(l), catalog(config, log), clustered(cluster != nullptr),
           render(RenderServiceConfig{.gpuBudgetBytes = config.gpuBudgetBytes,
                                      .restMs = config.restMs,
                                      .prefetch = config.prefetch,
                                      .classificationBudgetBytes = config.hostBudgetBytes / 8,
                                      .maxFrameSamples = config.maxFrameSamples,
                                      .maxUnslicedSamples = config.maxUnslicedSamples,
-                                     .sliceMs = config.sliceMs},
+                                     .sliceMs = config.sliceMs,
+                                     .cluster = cluster},
                  catalog, log,
                  [this](std::shared_ptr<Volume> v) {
                      asio::post(io, [this, v = std::move(v)] { volumeFailed(v); });
@@ -120,6 +121,11 @@ struct Daemon::Impl {
     /// asked for while one runs follows it. Network thread.
     void reload() {
         if (draining) return;
+        if (clustered) {
+            log.error("reload: refused under MPI (every rank must serve the same catalog); "
+                      "restart the job to change it");
+            return;
+        }
         if (config.file.empty()) {
             log.error("reload: no config file to re-read (serving " + config.source +
                       "); catalog unchanged");
@@ -285,6 +291,7 @@ struct Daemon::Impl {
     DaemonConfig config;
     Log& log;
     Catalog catalog;
+    bool clustered; ///< rank 0 of an MPI job
     // Before the render service: its thread posts finished frames here, so it must be joined
     // (destroyed) while the io_context still exists.
     asio::io_context io;
@@ -302,8 +309,8 @@ struct Daemon::Impl {
     std::shared_ptr<ReloadChannel> reloadChannel; ///< the last reload's
 };
 
-Daemon::Daemon(DaemonConfig config, Log& log, bool handleSignals)
-    : mImpl(std::make_unique<Impl>(std::move(config), log, handleSignals)) {}
+Daemon::Daemon(DaemonConfig config, Log& log, bool handleSignals, FrameCluster* cluster)
+    : mImpl(std::make_unique<Impl>(std::move(config), log, handleSignals, cluster)) {}
 
 Daemon::~Daemon() = default;
 

@@ -15,14 +15,18 @@
 
 namespace bc::server {
 
+class FrameCluster;
 class Log;
 
 class Daemon {
   public:
-    /// Opens the catalog, starts the render thread and binds the listen address.
+    /// Opens the catalog, starts the render thread and binds the listen address. `cluster`
+    /// (rank 0 under MPI, outliving the daemon): the raycasters' frames are drawn across
+    /// its ranks, and reload() is refused (every rank must serve the same catalog).
     /// @throw ConfigError when the address cannot be bound (naming it) or a volume's store
     /// cannot be opened (Catalog).
-    Daemon(DaemonConfig config, Log& log, bool handleSignals = false);
+    Daemon(DaemonConfig config, Log& log, bool handleSignals = false,
+           FrameCluster* cluster = nullptr);
     ~Daemon();
     Daemon(const Daemon&) = delete;
     Daemon& operator=(const Daemon&) = delete;

@@ -88,6 +88,10 @@ slice_ms = 50
 # camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick
 # of its last frame.
 prefetch = true
+# Under mpirun (several ranks): how long rank 0 waits for another rank's part of a frame
+# (100..600000 ms). A rank that has not answered by then fails the frame (RenderFailed, naming
+# the rank) and every cluster frame after it; restart the job. Ignored by one process.
+cluster_timeout_ms = 30000
 
 # The catalog: one [[volume]] per name clients may open. Each has either store (a .bcs brick
 # store made by `brickcast ingest`) or generate (a synthetic volume, ingested on first use
@@ -377,7 +381,7 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
         const std::string p = "frames.";
         checkKeys(*t, p,
                   {"rest_ms", "write_queue", "write_queue_mb", "max_frame_gsamples",
-                   "max_unsliced_gsamples", "slice_ms", "prefetch"});
+                   "max_unsliced_gsamples", "slice_ms", "prefetch", "cluster_timeout_ms"});
         assign(c.restMs, integer(*t, p, "rest_ms", 0, 60000));
         assign(c.writeQueueFrames, integer(*t, p, "write_queue", 1, 16));
         if (auto mb = integer(*t, p, "write_queue_mb", 1, 4096))
@@ -388,6 +392,7 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
             c.maxUnslicedSamples = std::uint64_t(*g) << 30;
         assign(c.sliceMs, integer(*t, p, "slice_ms", 10, 10000));
         if (auto b = boolean(*t, "frames.", "prefetch")) c.prefetch = *b;
+        assign(c.clusterTimeoutMs, integer(*t, p, "cluster_timeout_ms", 100, 600000));
     }
 }
 

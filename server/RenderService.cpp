@@ -9,6 +9,7 @@
 #include "render/RendererRegistry.h"
 #include "render/View.h"
 #include "server/Catalog.h"
+#include "server/FrameCluster.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/ViewRequest.h"
@@ -337,6 +338,12 @@ struct RenderService::Counters {
     std::map<std::string, double> deferred, requested; ///< ray-guided residency, per volume
     double prefetchMs = 0;
     double gpuContext = 0; ///< 1 once the render thread has made its GL context
+    // Under MPI: slices drawn across the ranks, their compositing and each rank's share.
+    double clusterSlices = 0, clusterBytes = 0, clusterFailures = 0;
+    Histogram clusterCompositeMs{Histogram::series125(0.1, 10000)};
+    Histogram clusterImbalance{{1.05, 1.1, 1.25, 1.5, 2, 3, 5, 10}};
+    std::vector<double> rankRenderMs, rankSamples; ///< per rank, summed over slices
+    double lastImbalance = 1;
 };
 
 namespace {
@@ -468,6 +475,30 @@ void RenderService::collect(MetricSet& m) {
     m.counter("encode_ms_total", "Milliseconds spent encoding frames", c.encodeMs);
     m.counter("frame_bytes_total", "Encoded frame message bytes", c.bytes);
     m.counter("samples_total", "Volume samples (voxels for the splatter) taken", c.samples);
+    if (mConfig.cluster) {
+        m.gauge("cluster_ranks", "MPI ranks drawing the raycasters' frames (issue 19)",
+                double(mConfig.cluster->ranks()));
+        m.counter("cluster_slices_total", "Frames or slices drawn across the ranks",
+                  c.clusterSlices);
+        m.counter("cluster_failures_total",
+                  "Cluster frames failed because a rank did not answer (the cluster is then out "
+                  "of service)",
+                  c.clusterFailures);
+        m.counter("cluster_composited_bytes_total",
+                  "Bytes the ranks sent each other compositing (pieces and bands)", c.clusterBytes);
+        m.histogram("cluster_composite_ms", "Sort-last compositing per slice, at rank 0",
+                    c.clusterCompositeMs);
+        m.histogram("cluster_imbalance", "Per slice: the slowest rank's render ms over the mean",
+                    c.clusterImbalance);
+        m.gauge("cluster_imbalance_last", "The last slice's slowest rank's render ms over the mean",
+                c.lastImbalance);
+        for (std::size_t r = 0; r < c.rankRenderMs.size(); ++r) {
+            m.counter("cluster_rank_render_ms_total", "Milliseconds each rank spent on its parts",
+                      c.rankRenderMs[r], {{"rank", std::to_string(r)}});
+            m.counter("cluster_rank_samples_total", "Samples each rank took of its parts",
+                      c.rankSamples[r], {{"rank", std::to_string(r)}});
+        }
+    }
     m.histogram(
         "frame_latency_ms",
         "From the oldest change a frame answers to the frame encoded (queue + render + encode)",
@@ -650,6 +681,11 @@ void RenderService::run() {
             mRenderers->prune([this](const std::string& volume) { retirePool(volume); });
         lock.lock();
         mCounters->cancelled += dropped;
+        if (mConfig.cluster) { // the workers hear from rank 0 at least every kHeartbeat
+            lock.unlock();
+            mConfig.cluster->idle();
+            lock.lock();
+        }
         bool prefetchDue = false;
         for (const auto& [key, s] : mRenderers->sessions)
             prefetchDue |= s.prefetch.has_value();
@@ -696,6 +732,10 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
         if (at && (!wakeAt || *at < *wakeAt)) wakeAt = at;
     }
     if (!mayWait || mStop) return nullptr; // a stop set while the lock was let go is seen here
+    if (mConfig.cluster) { // wake at least every second: the cluster's heartbeat (run())
+        const auto beat = now + std::chrono::seconds(1);
+        if (!wakeAt || beat < *wakeAt) wakeAt = beat;
+    }
     if (wakeAt)
         mWake.wait_until(lock, *wakeAt);
     else
@@ -879,8 +919,6 @@ render::Renderer& RenderService::rendererFor(const std::shared_ptr<RenderSlot>& 
 }
 
 bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d) {
-    const auto& s = d.job.state;
-    const render::Scene scene{*s.volume->store, *s.volume->cache, *s.tf, *mClassifications};
     render::Renderer& renderer = rendererFor(slot, d);
     const auto start = Clock::now();
     // Speeds measured, per renderer: whole frames against their upper-bound cost (whether to
@@ -895,7 +933,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
         if (!fresh) it->second = perMs < it->second ? perMs : 0.5 * (it->second + perMs);
     };
     if (!d.sliced) {
-        d.rgba8 = render::toRgba8(renderer.render(scene, d.view, d.options, d.stats));
+        d.rgba8 = render::toRgba8(drawRegion(renderer, d, d.options, d.stats));
         calibrate(mCostPerMs, double(d.cost), msSince(start));
         planPrefetch(slot, d, renderer);
         return true;
@@ -906,7 +944,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     render::RenderOptions options = d.options;
     options.region = nextSlice(d, d.sliceTargetMs * perMs, cost);
     render::FrameStats stats;
-    const render::Image part = renderer.render(scene, d.view, options, stats);
+    const render::Image part = drawRegion(renderer, d, options, stats);
     paste(d.rgba8, d.options.width, part, options.region);
     accumulate(d.stats, stats, d.slices == 0);
     // The speed of the rays alone: loading bricks is a cost per slice, not per pixel (when the
@@ -927,6 +965,56 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     calibrate(mCostPerMs, double(d.cost), d.slicesMs);
     planPrefetch(slot, d, renderer);
     return true;
+}
+
+render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameDrawing& d,
+                                        const render::RenderOptions& options,
+                                        render::FrameStats& stats) {
+    const auto& s = d.job.state;
+    const render::Scene scene{*s.volume->store, *s.volume->cache, *s.tf, *mClassifications};
+    FrameCluster* cluster = mConfig.cluster;
+    // The raycasters' frames go across the ranks; the other renderers (the reference and the
+    // splatters, which do not draw parts) draw here, from the whole volume (rank 0 reads the
+    // same store).
+    if (!cluster || cluster->ranks() < 2 || (d.kind->name != "cpu" && d.kind->name != "gpu"))
+        return renderer.render(scene, d.view, options, stats);
+    ClusterOrder order{s.volume->name, d.kind->name,  *s.camera,     s.tfMessage,
+                       s.options,      d.job.refined, options.region};
+    if (order.region.whole()) order.region = {0, 0, options.width, options.height};
+    render::RenderOptions whole = options;
+    whole.region = order.region;
+    ClusterFrameStats ranks;
+    const auto start = Clock::now();
+    render::Image image;
+    try {
+        image = cluster->draw(
+            order, *s.volume->store, d.view, whole,
+            [&](const render::RenderOptions& o, render::FrameStats& mine) {
+                return renderer.render(scene, d.view, o, mine);
+            },
+            stats, ranks);
+    } catch (const ClusterFailed&) {
+        std::lock_guard lock(mMutex);
+        mCounters->clusterFailures += 1;
+        throw;
+    }
+    // The frame's work is every rank's; its time is rank 0's wall time.
+    stats.samples = ranks.samples();
+    stats.totalMs = msSince(start);
+    std::lock_guard lock(mMutex);
+    Counters& c = *mCounters;
+    c.clusterSlices += 1;
+    c.clusterBytes += double(ranks.bytesComposited());
+    c.clusterCompositeMs.observe(ranks.compositeMs);
+    c.clusterImbalance.observe(ranks.imbalance());
+    c.lastImbalance = ranks.imbalance();
+    c.rankRenderMs.resize(ranks.ranks.size());
+    c.rankSamples.resize(ranks.ranks.size());
+    for (std::size_t r = 0; r < ranks.ranks.size(); ++r) {
+        c.rankRenderMs[r] += ranks.ranks[r].renderMs;
+        c.rankSamples[r] += double(ranks.ranks[r].samples);
+    }
+    return image;
 }
 
 void RenderService::planPrefetch(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d,

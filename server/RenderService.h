@@ -18,6 +18,8 @@
 // volume out of service (Catalog::markFailed): later frames of it are refused at once.
 #include "protocol/FrameCodec.h"
 #include "protocol/Messages.h"
+#include "render/Image.h"
+#include "render/RenderTypes.h"
 #include "render/RendererChoice.h"
 #include "render/TransferFunction.h"
 
@@ -41,6 +43,8 @@ class Renderer;
 
 namespace bc::server {
 
+class FrameCluster;
+struct ClusterFrameStats;
 struct Volume;
 class Catalog;
 class Log;
@@ -137,6 +141,9 @@ struct RenderServiceConfig {
     std::uint64_t maxFrameSamples = 64ull << 30;
     std::uint64_t maxUnslicedSamples = 4ull << 30;
     std::uint32_t sliceMs = 50; ///< target length of one slice of a long frame
+    /// Under MPI (issue 19): the ranks that draw the CPU and GPU raycasters' frames with this one
+    /// (FrameCluster.h); null: this process draws every frame. Used on the render thread only.
+    FrameCluster* cluster = nullptr;
 };
 
 struct FrameDrawing;
@@ -201,6 +208,10 @@ class RenderService {
     void prepare(FrameDrawing& d);
     /// Draws the next slice; true when the frame is complete.
     bool drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
+    /// Draws `options.region` of the frame: with `renderer` here, or across the cluster's
+    /// ranks when there is one and the frame is the CPU raycaster's.
+    render::Image drawRegion(render::Renderer& renderer, const FrameDrawing& d,
+                             const render::RenderOptions& options, render::FrameStats& stats);
     /// After a GPU frame `d` completed: its session's next view, predicted from its last two,
     /// is prefetched while the render thread is idle (frames.prefetch).
     void planPrefetch(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d,
