@@ -43,18 +43,20 @@ class MpiRenderCli : public ::testing::Test {
         GTEST_SKIP() << "built without MPI (libopenmpi-dev)";
 #endif
     }
-    /// The one-process CPU frame and the frame of `ranks` ranks; returns the latter's stats.
+    /// The one-process frame and the frame of `ranks` ranks of `renderer` (cpu or gpu);
+    /// returns the latter's stats.
     nlohmann::json expectRanksDrawTheFrame(const std::string& store, const std::string& view,
-                                           int ranks, bool ert, std::uint64_t* samples = nullptr) {
+                                           int ranks, bool ert, std::uint64_t* samples = nullptr,
+                                           const std::string& renderer = "cpu") {
 #ifdef BC_MPIEXEC
         const std::string one = dir.file("one.png"), many = dir.file("many.png"),
                           oneStats = dir.file("one.json"), manyStats = dir.file("many.json");
         const std::string args = " --size 120,96 " + view + (ert ? "" : " --ert off");
-        auto a = brickcast("render " + store + " -o " + one + " --renderer cpu --stats " +
-                           oneStats + args);
+        auto a = brickcast("render " + store + " -o " + one + " --renderer " + renderer +
+                           " --stats " + oneStats + args);
         EXPECT_EQ(a.exitCode, 0) << a.text;
-        auto b =
-            mpirun(ranks, "render " + store + " -o " + many + " --mpi --stats " + manyStats + args);
+        auto b = mpirun(ranks, "render " + store + " -o " + many + " --mpi --renderer " + renderer +
+                                   " --stats " + manyStats + args);
         EXPECT_EQ(b.exitCode, 0) << b.text;
         if (a.exitCode != 0 || b.exitCode != 0) return {};
         const ImageComparison c = compareImages(readPng(one), readPng(many));
@@ -115,6 +117,29 @@ TEST_F(MpiRenderCli, AGeneratedVolumeUnderAHostBudgetPerRankSmallerThanIt) {
                                 false);
 }
 
+TEST_F(MpiRenderCli, TwoAndFourRanksDrawTheOneProcessGpuFrame) {
+    // Every rank makes its own GL context (llvmpipe in CI): small frames of a generated volume
+    // under a 1 MiB host budget per rank and of a real scan.
+    const std::string vessels = dir.file("vessels.bcs");
+    auto r = brickcast("ingest synth:vessels --dims 128,128,128 --brick 32 -q -o " + vessels);
+    ASSERT_EQ(r.exitCode, 0) << r.text;
+    for (int ranks : {2, 4})
+        for (bool ert : {false, true})
+            expectRanksDrawTheFrame(vessels, "--tf vessels --orbit 60,30 --host-budget-mb 1", ranks,
+                                    ert, nullptr, "gpu");
+    if (!test::haveData("vtk_headsq_quarter_64x64x93_uint16.raw"))
+        return test::missingData("scan headsq");
+    const std::string headsq = dir.file("headsq.bcs");
+    r = brickcast("ingest " + test::dataPath("vtk_headsq_quarter_64x64x93_uint16.raw") +
+                  " --dims 64,64,93 --type u16 --spacing 3.2,3.2,1.5 --endian little --brick 32 "
+                  "-q -o " +
+                  headsq);
+    ASSERT_EQ(r.exitCode, 0) << r.text;
+    for (int ranks : {2, 4})
+        expectRanksDrawTheFrame(headsq, "--tf ct-bone --orbit 120,-30", ranks, false, nullptr,
+                                "gpu");
+}
+
 TEST_F(MpiRenderCli, MoreRanksThanBricksLeaveRanksWithNothingToDraw) {
     const std::string store = dir.file("small.bcs");
     auto r = brickcast("ingest synth:phantom --dims 40,40,20 --brick 32 -q -o " + store);
@@ -158,7 +183,11 @@ TEST_F(MpiRenderCli, MpiRefusesOtherRenderers) {
               0);
     auto r = mpirun(2, "render " + store + " -o " + dir.file("a.png") + " --mpi --reference");
     EXPECT_NE(r.exitCode, 0);
-    EXPECT_NE(r.text.find("--mpi draws with the CPU raycaster"), std::string::npos) << r.text;
+    EXPECT_NE(r.text.find("--mpi draws with the CPU or GPU raycaster"), std::string::npos)
+        << r.text;
+    r = mpirun(2, "render " + store + " -o " + dir.file("a.png") + " --mpi --renderer splat");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.text.find("not splat"), std::string::npos) << r.text;
 #endif
 }
 

@@ -261,16 +261,17 @@ render::Image convergedImage(const RenderCliOptions& o, const brickstore::BrickS
 
 #ifdef BC_HAVE_MPI
 /// --mpi, under mpirun: rank r draws part r of the level's brick grid split into one part per
-/// rank (render/Partition.h) over its footprint with the CPU raycaster, the parts are
+/// rank (render/Partition.h) over its footprint with the CPU raycaster (the GPU one with
+/// --renderer gpu), the parts are
 /// composited by direct send (server/cluster/SortLast.h), and rank 0 writes the PNG and the
 /// stats (each rank's render time, samples and bytes, the compositing time, the imbalance).
 void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRuntime& mpi) {
     using namespace server::cluster;
     if (o.reference || !o.converge.empty())
-        throw std::invalid_argument("--mpi draws with the CPU raycaster, not the reference");
-    if (o.renderer != "auto" && o.renderer != "cpu")
-        throw std::invalid_argument("--mpi draws with the CPU raycaster (--renderer cpu), not " +
-                                    o.renderer);
+        throw std::invalid_argument("--mpi draws with the CPU or GPU raycaster, not the reference");
+    if (o.renderer != "auto" && o.renderer != "cpu" && o.renderer != "gpu")
+        throw std::invalid_argument(
+            "--mpi draws with the CPU or GPU raycaster (--renderer cpu or gpu), not " + o.renderer);
     if (!(o.mpiTimeoutS > 0.0 && o.mpiTimeoutS <= 86400.0))
         throw std::invalid_argument("--mpi-timeout-s must lie in (0, 86400]");
     auto store = brickstore::BrickStore::open(o.store);
@@ -288,7 +289,16 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
     for (std::uint32_t r = 0; r < ranks; ++r)
         frame.footprints.push_back(render::footprint(g, partition.region(r), view));
     brickstore::BrickCache cache(*store, brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
-    render::CpuRaycaster raycaster;
+    // auto is the CPU raycaster here: every rank would otherwise make a GL context to decide.
+    std::unique_ptr<render::EglContext> context;
+    std::unique_ptr<render::Renderer> drawer;
+    if (o.renderer == "gpu") {
+        context = std::make_unique<render::EglContext>();
+        drawer = std::make_unique<render::Raycaster>();
+    } else {
+        drawer = std::make_unique<render::CpuRaycaster>();
+    }
+    render::Renderer& raycaster = *drawer;
     render::ClassificationCache classifications;
     const render::Scene scene{*store, cache, tf, classifications};
     options.parts = ranks;
@@ -359,7 +369,8 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
     printRepeatSummary(frameMs);
     if (!o.statsPath.empty()) {
         nlohmann::json j{
-            {"renderer", "CPU raycaster, sort-last over MPI ranks (direct send)"},
+            {"renderer", std::string(o.renderer == "gpu" ? "GPU" : "CPU") +
+                             " raycaster, sort-last over MPI ranks (direct send)"},
             {"width", options.width},
             {"height", options.height},
             {"level", level},
@@ -633,8 +644,9 @@ void addRenderCommand(CLI::App& app) {
         ->check(CLI::Range(0, 4096));
     cmd->add_flag("--mpi", o->mpi,
                   "Under mpirun: draw the frame sort-last over the job's ranks, each rank its part "
-                  "of the brick grid (CPU raycaster), composited by direct send; rank 0 writes "
-                  "the PNG and the stats (render/SCALEOUT.md)");
+                  "of the brick grid (the CPU raycaster, or the GPU one with --renderer gpu: a "
+                  "GL context per rank), composited by direct send; rank 0 writes the PNG and "
+                  "the stats (render/SCALEOUT.md)");
     cmd->add_flag("--mpi-barrier", o->mpiBarrier,
                   "--mpi: every rank waits for the others' parts before compositing, so that the "
                   "compositing time is its own (benchmarks); without it a rank's compositing "
