@@ -17,10 +17,12 @@ The model (render/SCALEOUT.md has the algorithm it describes):
   crosses the volume's edge), so T1 scales by that.
 - Compositing (direct send): the parts' footprints add up to k N^(1/3) image areas (a k-d split
   of a cube: N parts, each seen over N^(-2/3) of the area), 16 bytes a pixel (RGBA float); k is
-  fitted on 2 ranks. A rank sends its footprint to the N band owners and receives its band's
-  pieces: time = latency (N - 1) + bytes per rank / bandwidth + gamma bytes per rank, gamma the
-  compositing work per byte measured here (over loopback, where moving bytes is a memcpy), and
-  rank 0 gathers the bands (16 P bytes / bandwidth).
+  fitted on 2 ranks. A rank sends the N - 1 other band owners the pieces of its footprint in
+  their bands (the piece in its own band stays: (N - 1) / N of it moves), and every band but
+  rank 0's goes to rank 0: bytes moved = 16 P (k N^(1/3) + 1) (N - 1) / N. Time = latency
+  (N - 1) + bytes per rank / bandwidth + gamma bytes per rank, gamma the compositing work per
+  byte measured here (over loopback, where moving bytes is a memcpy), plus rank 0's gather of
+  the bands (16 P bytes / bandwidth).
 - Memory per node: the volume's decompressed bricks over N (the parts are balanced by bytes),
   capped by the host budget, plus the frame buffers (16 P bytes, twice).
 Nothing here is measured past 4 ranks on 2 cores: the extrapolation is the model's, not a
@@ -47,7 +49,8 @@ def fit(rows):
         two = rs[2]
         imbalance = max(0.0, two["imbalance"] - 1.0)  # 1 + c log2 2
         extra = max(0.0, two["samples"] / rs[1]["samples"] - 1.0)
-        k = two["bytes"] / (16.0 * p * 2 ** (1 / 3))
+        # bytes(2) = 16 P (k 2^(1/3) + 1) / 2
+        k = max(0.0, (two["bytes"] / (16.0 * p) * 2.0 - 1.0) / 2 ** (1 / 3))
         gamma = two["compositeMs"] / max(1.0, two["bytes"] / 2)  # ms per byte per rank
         out[size] = {"t1": t1, "imbalance": imbalance, "extra": extra, "k": k, "gamma": gamma,
                      "rows": rs}
@@ -63,7 +66,7 @@ def predict(m, n, size, volume_ratio, latency_ms, bandwidth_bpms, budget_bytes=N
     render = t1 / n * min(n, 1 + m["imbalance"] * lg) * (1 + m["extra"] * lg)
     if n == 1:
         return {"render": render, "composite": 0.0, "frame": render, "bytes": 0.0}
-    total_bytes = 16.0 * p * m["k"] * n ** (1 / 3)
+    total_bytes = 16.0 * p * (m["k"] * n ** (1 / 3) + 1.0) * (n - 1) / n
     per_rank = total_bytes / n
     composite = (latency_ms * (n - 1) + per_rank / bandwidth_bpms + m["gamma"] * per_rank +
                  16.0 * p / bandwidth_bpms)

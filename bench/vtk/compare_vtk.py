@@ -558,24 +558,31 @@ def ingest_scan(args, scan):
 
 
 def errors(np, vtk, png, conv_png, same_png):
-    """Linear RGB over black against the converged and the same-step reference."""
+    """Linear RGB over black against the converged and the same-step reference (None: no
+    same-step reference, e.g. a pre-integrated frame, whose own would cost a float64 render)."""
     img = read_rgb(vtk, np, png)
     return {"vsConverged": metrics(np, img, read_rgb(vtk, np, conv_png)),
-            "vsSameStep": metrics(np, img, read_rgb(vtk, np, same_png))}
+            "vsSameStep": metrics(np, img, read_rgb(vtk, np, same_png)) if same_png else None}
 
 
 def bc_sweep(args, ctx, store, scan, tf, view, size, shade, conv_png):
-    """brickcast cpu at every --bc-steps step: warm median ms and errors."""
+    """brickcast cpu at every --bc-steps step, and pre-integrated at every --bc-preint-steps
+    step: warm median ms and errors."""
     np, vtk, cache = ctx["np"], ctx["vtk"], ctx["cache"]
     out = []
-    for step in args.bc_step_list:
-        png = os.path.join(args.out, "frames", f"bc_{scan}_{tf}_{view['name']}_{size}_s{step:g}.png")
+    configs = [(step, False) for step in args.bc_step_list] + \
+              [(step, True) for step in args.bc_preint_step_list]
+    for step, preint in configs:
+        tag = f"s{step:g}" + ("_pi" if preint else "")
+        png = os.path.join(args.out, "frames", f"bc_{scan}_{tf}_{view['name']}_{size}_{tag}.png")
         stats = brickcast_render(args, store, png, tf, view, size, step,
                                  ["--renderer", "cpu", "--ert", args.bc_ert,
                                   "--repeat", str(args.warmup + args.frames)]
-                                 + ([] if shade else ["--no-shading"]))
-        same = cache.same_step(store, scan, tf, view, size, shade, step)
-        out.append({"step": step, "medianMs": statistics.median(stats["frameMs"][args.warmup:]),
+                                 + ([] if shade else ["--no-shading"])
+                                 + (["--preintegrate"] if preint else []))
+        same = None if preint else cache.same_step(store, scan, tf, view, size, shade, step)
+        out.append({"step": step, "preintegrated": preint,
+                    "medianMs": statistics.median(stats["frameMs"][args.warmup:]),
                     "firstMs": stats["frameMs"][0], "timesMs": stats["frameMs"][args.warmup:],
                     "samplesPerPixel": stats["samplesPerPixel"], "png": png, "sameStepRef": same,
                     **errors(np, vtk, png, conv_png, same)})
@@ -637,7 +644,7 @@ def run_pair(args, ctx, scan, tf, view, size):
     v = vtk_fixed_point(args, ctx, scan, tf, tfd, view, size, shade)
     v.update(errors(np, vtk, v["png"], conv_png, same_png))
     sweep = bc_sweep(args, ctx, store, scan, tf, view, size, shade, conv_png)
-    same = next(b for b in sweep if b["step"] == args.step)
+    same = next(b for b in sweep if b["step"] == args.step and not b["preintegrated"])
     target = v["vsConverged"]["rmse"]
     fits = [b for b in sweep if b["vsConverged"]["rmse"] <= target]
     equal = min(fits, key=lambda b: b["medianMs"]) if fits else None
@@ -666,6 +673,12 @@ def parse_args():
     ap.add_argument("--bc-steps", default="1,1.25,1.5,2,2.5,3,4",
                     help="brickcast cpu steps; the fastest whose error against the converged "
                          "image is no worse than VTK's is the equal-error point")
+    ap.add_argument("--bc-preint-steps", default="",
+                    help="steps (voxels) at which brickcast is also run with --preintegrate for "
+                         "the equal-error column, e.g. 1.5,2,3,4 (default none: on the shared "
+                         "scans' presets it is slower and less accurate than plain at every "
+                         "step; bench/vtk/README.md); a pre-integrated frame has no same-step "
+                         "reference (its dB after / is n/a)")
     ap.add_argument("--fov", type=float, default=30.0)
     ap.add_argument("--frames", type=int, default=10, help="timed frames per renderer and pair")
     ap.add_argument("--warmup", type=int, default=2)
@@ -690,6 +703,7 @@ def parse_args():
             ap.error(f"--scans: unknown scan '{s}' (known: {', '.join(SCANS)})")
     args.size_list = [int(v) for v in args.sizes.split(",") if v]
     args.bc_step_list = sorted({float(v) for v in args.bc_steps.split(",") if v} | {args.step})
+    args.bc_preint_step_list = sorted({float(v) for v in args.bc_preint_steps.split(",") if v})
     args.view_list = [parse_view(v) for v in args.views.split(";") if v]
     if not (args.conv_tol > 0 and math.isfinite(args.conv_tol)):
         ap.error("--conv-tol must be a finite number > 0")
@@ -758,7 +772,8 @@ def fmt(v, spec):
 
 def err_text(e):
     """PSNR vs converged / vs same step (dB)."""
-    return f"{fmt(e['vsConverged']['psnr'], '.1f')} / {fmt(e['vsSameStep']['psnr'], '.1f')}"
+    same = fmt(e['vsSameStep']['psnr'], '.1f') if e['vsSameStep'] else "n/a"
+    return f"{fmt(e['vsConverged']['psnr'], '.1f')} / {same}"
 
 
 def format_tables(results, args):
@@ -766,7 +781,10 @@ def format_tables(results, args):
              f"brickcast --renderer cpu (--ert {args.bc_ert}), {os.cpu_count()} CPUs; times: "
              f"median of {args.frames} frames after {args.warmup} warm-up. Errors: PSNR dB of "
              f"linear RGB over black, against the converged reference / against the float64 "
-             f"reference at the renderer's own step. Ratios: brickcast ms / VTK ms. "
+             f"reference at the renderer's own step. Equal error: the fastest brickcast "
+             f"configuration (steps {args.bc_steps}; pre-integrated, 'pi', at steps "
+             f"{args.bc_preint_steps or 'none'}) whose error against the converged reference is "
+             f"no worse than VTK's. Ratios: brickcast ms / VTK ms. "
              f"Run took {results['wallS'] / 60:.1f} min.", "",
              "| scan | TF | view | size | VTK ms | VTK dB | bc same step ms | dB | ratio "
              "| bc equal error: step | ms | dB | ratio |",
@@ -776,7 +794,8 @@ def format_tables(results, args):
         lines.append("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |".format(
             p["scan"], p["tf"], p["view"], p["size"], fmt(v["medianMs"], ".1f"), err_text(v),
             fmt(s["medianMs"], ".1f"), err_text(s), fmt(p["ratioSameStep"], ".2f") + "x",
-            fmt(e["step"], "g") if e else "none", fmt(e["medianMs"], ".1f") if e else "n/a",
+            (fmt(e["step"], "g") + (" pi" if e["preintegrated"] else "")) if e else "none",
+            fmt(e["medianMs"], ".1f") if e else "n/a",
             err_text(e) if e else "n/a",
             fmt(p["ratioEqualError"], ".2f") + "x" if e else "n/a"))
     lines += ["", "Converged references (max abs RGBA difference between successive halvings; "
