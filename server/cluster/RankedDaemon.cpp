@@ -373,7 +373,7 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
     // (the rank's GPU budget split among the volumes drawn).
     std::map<std::string, std::unique_ptr<render::Renderer>, std::less<>> renderers;
     std::unique_ptr<render::EglContext> context;
-    std::map<const Volume*, std::shared_ptr<render::BrickPool>> pools;
+    std::map<const Volume*, std::pair<std::shared_ptr<render::BrickPool>, std::uint64_t>> pools;
     render::ClassificationCache classifications;
     render::PartitionCache partitions;
     std::map<std::string, VolumeLease> leases; // held while the job runs: budgets by use
@@ -448,12 +448,17 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
             }
             render::Renderer& raycaster = *drawer->second;
             if (render::GpuResidency* gpu = raycaster.gpuResidency()) {
-                auto& pool = pools[&volume];
-                if (!pool) {
-                    pool = std::make_shared<render::BrickPool>(
-                        volume.store->info().volume.type, volume.store->layout().storedEdge(),
-                        render::BrickPoolConfig{config.gpuBudgetBytes /
-                                                std::max<std::uint64_t>(1, leases.size())});
+                // The volume's share of the rank's GPU budget (by the volumes drawn here, as
+                // rank 0 shares by sessions); a new pool only when the share moved by more
+                // than an eighth.
+                auto& [pool, budget] = pools[&volume];
+                const std::uint64_t share = catalog.shareOf(volume, config.gpuBudgetBytes);
+                if (!pool || share < budget - budget / 8 || share > budget + budget / 8) {
+                    pool.reset(); // the old texture goes before the new one is allocated
+                    pool = std::make_shared<render::BrickPool>(volume.store->info().volume.type,
+                                                               volume.store->layout().storedEdge(),
+                                                               render::BrickPoolConfig{share});
+                    budget = share;
                 }
                 gpu->setSharedPool(pool);
             }

@@ -221,16 +221,18 @@ class MpiDaemon : public ::testing::Test {
 
     /// Every frame of an orbit of each case, drawn by one brickcastd process and by jobs of
     /// each rank count, early termination off and on; then SIGTERM to rank 0 ends each job.
+    /// llvmpipe draws with one thread per process (LP_NUM_THREADS): up to 4 ranks share 2
+    /// cores, and its threads would only contend (the images do not depend on it).
     void expectRanksServeTheOneProcessFrames(const std::string& config, protocol::Renderer renderer,
                                              const std::vector<Case>& cases,
                                              const std::vector<int>& rankCounts) {
 #ifdef BC_MPIEXEC
         // One process first: it ingests the generated volumes the jobs then reuse.
         const std::string onePort = dir.file("one.port");
-        Job one = startJob(
-            dir,
-            {"-np", "1", BC_BRICKCASTD_EXE, "--config", config, "--port-file", onePort, "--quiet"},
-            onePort, 120);
+        Job one = startJob(dir,
+                           {"-x", "LP_NUM_THREADS=1", "-np", "1", BC_BRICKCASTD_EXE, "--config",
+                            config, "--port-file", onePort, "--quiet"},
+                           onePort, 120);
         JobGuard oneGuard{one};
         ASSERT_TRUE(one.started) << one.text();
         std::map<std::string, std::vector<client::ReceivedFrame>> reference[2];
@@ -239,11 +241,12 @@ class MpiDaemon : public ::testing::Test {
                 reference[ert][c.volume] = orbit(one.client, c.volume, c.tf, renderer, ert, 6);
         for (int ranks : rankCounts) {
             const std::string port = dir.file("ranks" + std::to_string(ranks) + ".port");
-            Job job = startJob(dir,
-                               {"-np", std::to_string(ranks), BC_BRICKCASTD_EXE, "--config", config,
-                                "--port-file", port, "--metrics", "127.0.0.1:0",
-                                "--metrics-port-file", port + ".metrics", "--quiet"},
-                               port, 120);
+            Job job =
+                startJob(dir,
+                         {"-x", "LP_NUM_THREADS=1", "-np", std::to_string(ranks), BC_BRICKCASTD_EXE,
+                          "--config", config, "--port-file", port, "--metrics", "127.0.0.1:0",
+                          "--metrics-port-file", port + ".metrics", "--quiet"},
+                         port, 120);
             JobGuard guard{job};
             ASSERT_TRUE(job.started) << job.text();
             for (const Case& c : cases)
