@@ -43,7 +43,7 @@ void Renderer::checkView(const View& view, const RenderOptions& options, bool dr
         throw std::invalid_argument("region: this renderer draws whole images only");
     if (!drawsParts && options.parts > 1)
         throw std::invalid_argument("parts: this renderer draws whole volumes only (the CPU "
-                                    "raycaster draws parts)");
+                                    "and GPU raycasters draw parts)");
 }
 
 void Renderer::refusePreintegration(const RenderOptions& options, const char* renderer) {

@@ -17,10 +17,13 @@ const RendererRegistry& RendererRegistry::builtin() {
                .description = "GPU raycaster (OpenGL 4.5)",
                .needsGl = true,
                .regions = true,
+               .parts = true,
                .create = [] { return std::make_unique<Raycaster>(); }});
-        r.add({.name = "cpu", .description = "CPU raycaster", .regions = true, .create = [] {
-                   return std::make_unique<CpuRaycaster>();
-               }});
+        r.add({.name = "cpu",
+               .description = "CPU raycaster",
+               .regions = true,
+               .parts = true,
+               .create = [] { return std::make_unique<CpuRaycaster>(); }});
         r.add({.name = "reference",
                .description = "CPU reference raycaster (double precision, no skipping)",
                .sharedPerVolume = true,

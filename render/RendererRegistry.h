@@ -27,6 +27,9 @@ struct RendererKind {
     bool regions = false;
     /// Its cost follows the voxels it projects (the splatters), not pixels x samples per ray.
     bool objectOrder = false;
+    /// Draws RenderOptions::parts (one part of the brick grid, render/SCALEOUT.md): the
+    /// daemon's MPI ranks draw its frames together (the raycasters).
+    bool parts = false;
     std::function<std::unique_ptr<Renderer>()> create;
 };
 

@@ -976,7 +976,7 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     // The raycasters' frames go across the ranks; the other renderers (the reference and the
     // splatters, which do not draw parts) draw here, from the whole volume (rank 0 reads the
     // same store).
-    if (!cluster || cluster->ranks() < 2 || (d.kind->name != "cpu" && d.kind->name != "gpu"))
+    if (!cluster || cluster->ranks() < 2 || !d.kind->parts)
         return renderer.render(scene, d.view, options, stats);
     ClusterOrder order{s.volume->name, d.kind->name,  *s.camera,     s.tfMessage,
                        s.options,      d.job.refined, options.region};

@@ -41,18 +41,6 @@ struct Report {
 };
 static_assert(sizeof(Report) == 256);
 
-double msSince(Clock::time_point t) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
-
-void check(int code, const std::string& what) {
-    if (code == MPI_SUCCESS) return;
-    char text[MPI_MAX_ERROR_STRING];
-    int length = 0;
-    MPI_Error_string(code, text, &length);
-    throw ClusterError(what + ": " + std::string(text, std::size_t(length)));
-}
-
 /// Waits for `request` until `deadline`: false when it is not complete by then. `patient`
 /// sleeps between tests (an idle worker), else the thread only yields (a frame in flight).
 bool waitUntil(MPI_Request& request, Clock::time_point deadline, bool patient,
@@ -60,7 +48,7 @@ bool waitUntil(MPI_Request& request, Clock::time_point deadline, bool patient,
     auto nap = std::chrono::microseconds(50);
     for (;;) {
         int done = 0;
-        check(MPI_Test(&request, &done, MPI_STATUS_IGNORE), what);
+        checkMpi(MPI_Test(&request, &done, MPI_STATUS_IGNORE), what);
         if (done) return true;
         if (Clock::now() >= deadline) return false;
         if (patient) {
@@ -237,8 +225,8 @@ std::optional<std::string> compareStarts(MPI_Comm comm, const RankStart& mine) {
     Start me{mine.configFingerprint, {}};
     std::strncpy(me.error, mine.error.c_str(), sizeof me.error - 1);
     std::vector<Start> all(std::size_t(ranks), Start{});
-    check(MPI_Allgather(&me, sizeof(Start), MPI_BYTE, all.data(), sizeof(Start), MPI_BYTE, comm),
-          "comparing the ranks' configs");
+    checkMpi(MPI_Allgather(&me, sizeof(Start), MPI_BYTE, all.data(), sizeof(Start), MPI_BYTE, comm),
+             "comparing the ranks' configs");
     std::string why;
     for (int r = 0; r < ranks; ++r) {
         const Start& s = all[std::size_t(r)];
@@ -266,15 +254,15 @@ void MpiFrameCluster::send(std::uint32_t kind, const std::vector<std::uint8_t>& 
     OrderHeader header{kOrderMagic, kind, ++mSeq, std::uint32_t(payload.size())};
     const auto deadline = Clock::now() + mTimeout;
     MPI_Request request = MPI_REQUEST_NULL;
-    check(MPI_Ibcast(&header, sizeof header, MPI_BYTE, 0, mComm, &request),
-          "broadcasting an order");
+    checkMpi(MPI_Ibcast(&header, sizeof header, MPI_BYTE, 0, mComm, &request),
+             "broadcasting an order");
     if (!waitUntil(request, deadline, false, "broadcasting an order"))
         throw ClusterError("an order's broadcast did not complete within " +
                            std::to_string(mTimeout.count()) + " ms");
     if (!payload.empty()) {
-        check(MPI_Ibcast(const_cast<std::uint8_t*>(payload.data()), int(payload.size()), MPI_BYTE,
-                         0, mComm, &request),
-              "broadcasting an order");
+        checkMpi(MPI_Ibcast(const_cast<std::uint8_t*>(payload.data()), int(payload.size()),
+                            MPI_BYTE, 0, mComm, &request),
+                 "broadcasting an order");
         if (!waitUntil(request, deadline, false, "broadcasting an order"))
             throw ClusterError("an order's broadcast did not complete within " +
                                std::to_string(mTimeout.count()) + " ms");
@@ -308,9 +296,9 @@ render::Image MpiFrameCluster::draw(const ClusterOrder& order, const brickstore:
         Report report{mine.totalMs, double(mine.samples), double(composite.bytesSent), {}};
         std::vector<Report> reports(std::size_t(mRanks), Report{});
         MPI_Request request = MPI_REQUEST_NULL;
-        check(MPI_Igather(&report, sizeof report, MPI_BYTE, reports.data(), sizeof report, MPI_BYTE,
-                          0, mComm, &request),
-              "gathering the ranks' stats");
+        checkMpi(MPI_Igather(&report, sizeof report, MPI_BYTE, reports.data(), sizeof report,
+                             MPI_BYTE, 0, mComm, &request),
+                 "gathering the ranks' stats");
         if (!waitUntil(request, Clock::now() + mTimeout, false, "gathering the ranks' stats"))
             throw ClusterError("the ranks' stats did not arrive within " +
                                std::to_string(mTimeout.count()) + " ms");
@@ -385,8 +373,8 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
     for (;;) {
         OrderHeader header;
         MPI_Request request = MPI_REQUEST_NULL;
-        check(MPI_Ibcast(&header, sizeof header, MPI_BYTE, 0, comm, &request),
-              "waiting for an order");
+        checkMpi(MPI_Ibcast(&header, sizeof header, MPI_BYTE, 0, comm, &request),
+                 "waiting for an order");
         if (!waitUntil(request, Clock::now() + silence, true, "waiting for an order")) {
             log.error(
                 who + ": rank 0 has been silent for " +
@@ -402,22 +390,22 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
         if (header.kind == kStop) return 0;
         if (header.kind == kHeartbeatOrder) continue;
         payload.resize(header.payloadBytes);
-        check(MPI_Ibcast(payload.data(), int(payload.size()), MPI_BYTE, 0, comm, &request),
-              "receiving an order");
+        checkMpi(MPI_Ibcast(payload.data(), int(payload.size()), MPI_BYTE, 0, comm, &request),
+                 "receiving an order");
         if (!waitUntil(request, Clock::now() + timeout, false, "receiving an order")) {
             log.error(who + ": an order's payload did not arrive: ending the job");
             return 3;
         }
-        const auto start = Clock::now();
         std::exception_ptr error;
         render::FrameStats stats;
         SliceLayout s;
         render::PartialImage part;
         try {
             const ClusterOrder order = decodeOrder(payload);
-            if (order.renderer != "cpu" && order.renderer != "gpu")
-                throw std::runtime_error("draws parts with the CPU or GPU raycaster, not " +
-                                         order.renderer);
+            const render::RendererKind* kind =
+                render::RendererRegistry::builtin().find(order.renderer);
+            if (!kind || !kind->parts)
+                throw std::runtime_error("no renderer '" + order.renderer + "' that draws parts");
             auto it = leases.find(order.volume);
             if (it == leases.end()) {
                 VolumeLease lease = catalog.lease(order.volume);
@@ -439,12 +427,8 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
             const render::Scene scene{*volume.store, *volume.cache, *tf, classifications};
             auto drawer = renderers.find(order.renderer);
             if (drawer == renderers.end()) {
-                if (order.renderer == "gpu" && !context)
-                    context = std::make_unique<render::EglContext>();
-                drawer = renderers
-                             .emplace(order.renderer,
-                                      render::RendererRegistry::builtin().create(order.renderer))
-                             .first;
+                if (kind->needsGl && !context) context = std::make_unique<render::EglContext>();
+                drawer = renderers.emplace(order.renderer, kind->create()).first;
             }
             render::Renderer& raycaster = *drawer->second;
             if (render::GpuResidency* gpu = raycaster.gpuResidency()) {
@@ -487,13 +471,13 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
         CompositeStats composite;
         compositeDirectSend(comm, 0, s.frame, part, int(header.seq % 30000) + 1, timeout,
                             composite);
-        Report report{msSince(start), double(stats.samples), double(composite.bytesSent), {}};
+        Report report{stats.totalMs, double(stats.samples), double(composite.bytesSent), {}};
         if (error) {
             const std::string why = messageOf(error);
             log.error(who + ": " + why);
             std::strncpy(report.error, why.c_str(), kReportErrorBytes - 1);
         }
-        check(
+        checkMpi(
             MPI_Igather(&report, sizeof report, MPI_BYTE, nullptr, 0, MPI_BYTE, 0, comm, &request),
             "reporting stats");
         if (!waitUntil(request, Clock::now() + timeout, false, "reporting stats")) {

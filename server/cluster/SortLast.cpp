@@ -49,12 +49,7 @@ std::optional<PixelRect> unite(const std::optional<PixelRect>& a, const PixelRec
 }
 
 void check(int code, const char* what) {
-    if (code == MPI_SUCCESS) return;
-    char text[MPI_MAX_ERROR_STRING];
-    int length = 0;
-    MPI_Error_string(code, text, &length);
-    throw ClusterError(std::string("sort-last compositing: ") + what + ": " +
-                       std::string(text, std::size_t(length)));
+    if (code != MPI_SUCCESS) checkMpi(code, std::string("sort-last compositing: ") + what);
 }
 
 int countOf(const PixelRect& r) {
@@ -101,6 +96,14 @@ std::array<std::uint32_t, 2> bandRows(std::uint32_t height, std::uint32_t band,
         return std::uint32_t(std::uint64_t(height) * b / bands);
     };
     return {at(band), at(band + 1)};
+}
+
+void checkMpi(int code, const std::string& what) {
+    if (code == MPI_SUCCESS) return;
+    char text[MPI_MAX_ERROR_STRING];
+    int length = 0;
+    MPI_Error_string(code, text, &length);
+    throw ClusterError(what + ": " + std::string(text, std::size_t(length)));
 }
 
 Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,

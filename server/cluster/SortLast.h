@@ -25,6 +25,9 @@ class ClusterError : public std::runtime_error {
     explicit ClusterError(const std::string& what) : std::runtime_error(what) {}
 };
 
+/// Returns when `code` is MPI_SUCCESS. @throw ClusterError "what: MPI's text for the code".
+void checkMpi(int code, const std::string& what);
+
 /// What every rank knows about one frame: its size, each rank's footprint (footprints[r];
 /// not visible: rank r sends nothing) and the ranks front to back (ranks whose part is empty
 /// or out of view may be left out).
