@@ -27,6 +27,11 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+std::uint64_t nsSince(Clock::time_point t) {
+    return std::uint64_t(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t).count());
+}
+
 struct CCtxDeleter {
     void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); }
 };
@@ -91,6 +96,8 @@ struct IngestState {
     std::vector<BrickRecord> records;
     std::atomic<std::uint64_t> bricksDone{0};
     std::atomic<std::uint64_t> uncompressedBytes{0};
+    std::atomic<std::uint64_t> compressNs{0}, writeNs{0};
+    std::uint64_t readNs = 0, cutNs = 0, queueWaitNs = 0; ///< the reading thread's
     std::mutex errorMutex;
     std::exception_ptr error;
 
@@ -102,10 +109,12 @@ struct IngestState {
 
 void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
                    std::vector<std::byte>& buf) {
+    const auto start = Clock::now();
     BrickRecord& rec = s.records[job.index];
     const std::size_t vb = voxelBytes(s.type);
     if (detail::isConstant(job.voxels, vb)) {
         rec.range = detail::brickRange(s.type, std::span(job.voxels).first(vb));
+        s.compressNs += nsSince(start);
         return;
     }
     // Only the leaves inside the volume are kept (FORMAT.md "Leaf table"). Their windows
@@ -129,7 +138,11 @@ void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
     rec.leafBytes = static_cast<std::uint32_t>(leaves.size());
     rec.payloadChecksum = detail::checksum(buf.data(), n);
     rec.leafChecksum = detail::checksum(leaves);
+    const auto writeStart = Clock::now();
+    s.compressNs += std::uint64_t(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(writeStart - start).count());
     rec.offset = s.file.append(std::span(buf).first(n + leaves.size()));
+    s.writeNs += nsSince(writeStart);
     s.uncompressedBytes += job.voxels.size();
 }
 
@@ -215,9 +228,14 @@ void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestStat
     for (std::uint64_t z = 0; z < info.dims[2];) {
         throwIfCancelled(config);
         std::uint64_t n = std::min(chunk, info.dims[2] - z);
+        const auto readStart = Clock::now();
         source.readSlices(n, std::span(staging).first(n * sliceBytes));
+        const auto cutStart = Clock::now();
+        s.readNs += std::uint64_t(
+            std::chrono::duration_cast<std::chrono::nanoseconds>(cutStart - readStart).count());
         for (std::uint64_t i = 0; i < n; ++i)
             level0.pushSlice(staging.data() + i * sliceBytes);
+        s.cutNs += nsSince(cutStart); // the queue's waits included: ingest() takes them out
         z += n;
         {
             std::lock_guard lock(s.errorMutex);
@@ -309,7 +327,7 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     if (config.staleFileRemoved)
         for (const std::string& stale : file.removedStalePartials())
             config.staleFileRemoved(stale);
-    IngestState s{layout, info.type, config.zstdLevel, file, {}, {}, {}, {}, {}};
+    IngestState s{layout, info.type, config.zstdLevel, file, {}, {}, {}, {}, {}, 0, 0, 0, {}, {}};
     s.records.resize(layout.brickCount());
     JobQueue queue(config.queueBricks ? config.queueBricks : 4 * threads);
 
@@ -318,7 +336,9 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     std::vector<std::unique_ptr<detail::LevelBuilder>> levels(nLevels);
     auto sink = [&](detail::BrickJob&& job) {
         throwIfCancelled(config); // between bricks too: a row of wide bricks takes a while
+        const auto waitStart = Clock::now();
         queue.push(std::move(job));
+        s.queueWaitNs += nsSince(waitStart);
     };
     for (std::uint32_t l = nLevels; l-- > 0;)
         levels[l] = std::make_unique<detail::LevelBuilder>(
@@ -344,8 +364,11 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
         hi = std::max<double>(hi, s.records[i].range.max);
     }
     throwIfCancelled(config);
+    const auto histogramStart = Clock::now();
     auto histogram = buildHistogram(s, bins, lo, hi, threads);
+    report.times.histogram = std::chrono::duration<double>(Clock::now() - histogramStart).count();
     throwIfCancelled(config);
+    const auto finishStart = Clock::now();
 
     detail::StoreHeader h;
     h.volume = info;
@@ -382,6 +405,12 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     report.memoryBytes = memoryBytes;
     report.memoryBudgetBytes = memoryBudgetBytes;
     report.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    report.times.finish = std::chrono::duration<double>(Clock::now() - finishStart).count();
+    report.times.read = 1e-9 * double(s.readNs);
+    report.times.queueWait = 1e-9 * double(s.queueWaitNs);
+    report.times.cut = 1e-9 * double(s.cutNs - std::min(s.cutNs, s.queueWaitNs));
+    report.times.compress = 1e-9 * double(s.compressNs.load());
+    report.times.write = 1e-9 * double(s.writeNs.load());
     return report;
 }
 

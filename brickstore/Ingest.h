@@ -57,6 +57,18 @@ struct IngestProgress {
     double seconds = 0.0;
 };
 
+/// Where an ingest's time went. The reading thread's stages are wall seconds on that thread;
+/// the workers' are seconds summed over the workers (they run side by side).
+struct IngestTimes {
+    double read = 0.0;      ///< in the source's readSlices: reading and decoding the input
+    double cut = 0.0;       ///< cutting slices into bricks and the coarser levels
+    double queueWait = 0.0; ///< the reading thread waiting for a worker to take a brick
+    double compress = 0.0;  ///< workers: leaf ranges and zstd, summed
+    double write = 0.0;     ///< workers: appending frames to the store file, summed
+    double histogram = 0.0; ///< the histogram pass over the stored bricks (wall)
+    double finish = 0.0;    ///< the index, the header and the commit (wall)
+};
+
 struct IngestReport {
     std::uint64_t sourceBytes = 0; ///< level-0 voxels in native type
     std::uint64_t bricks = 0;      ///< all levels
@@ -70,6 +82,7 @@ struct IngestReport {
     std::uint64_t constantBrickBytes = 0;     ///< bytes the constant bricks would have taken
     std::uint64_t fileBytes = 0;
     double seconds = 0.0;
+    IngestTimes times;
 };
 
 /// Ingests `source` into a new store at `storePath`. An existing file there is replaced only

@@ -2,6 +2,8 @@
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 
+#include <algorithm>
+#include <cctype>
 #include <filesystem>
 #include <regex>
 
@@ -50,6 +52,28 @@ std::unique_ptr<VolumeSource> openRawFromSpec(const SourceSpec& spec) {
     return openRaw(spec.input, layout);
 }
 
+std::string lowerCase(std::string s) {
+    std::transform(s.begin(), s.end(), s.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    return s;
+}
+
+enum class FolderKind { Zarr, Tiff, Dicom };
+
+/// A folder is a Zarr array or OME-Zarr image when it holds Zarr metadata, a TIFF stack when
+/// it holds .tif/.tiff files, and a DICOM series otherwise (DICOM files need no extension).
+FolderKind folderKind(const std::string& folder) {
+    const std::filesystem::path p(folder);
+    std::error_code ec;
+    for (const char* meta : {".zarray", ".zattrs", ".zgroup"})
+        if (std::filesystem::exists(p / meta, ec)) return FolderKind::Zarr;
+    for (const auto& entry : std::filesystem::directory_iterator(p, ec)) {
+        const std::string name = lowerCase(entry.path().filename().string());
+        if (endsWith(name, ".tif") || endsWith(name, ".tiff")) return FolderKind::Tiff;
+    }
+    return FolderKind::Dicom;
+}
+
 std::unique_ptr<VolumeSource> openOne(const SourceSpec& spec) {
     const std::string& in = spec.input;
     if (in.rfind("synth:", 0) == 0) {
@@ -61,11 +85,29 @@ std::unique_ptr<VolumeSource> openOne(const SourceSpec& spec) {
         return makeSynthetic(*kind, *spec.dims, spec.seed);
     }
     std::error_code ec;
-    if (std::filesystem::is_directory(in, ec)) return openDicomSeries(in);
+    if (std::filesystem::is_directory(in, ec)) {
+        switch (folderKind(in)) {
+        case FolderKind::Zarr:
+            return openZarr(in, spec.level);
+        case FolderKind::Tiff:
+            return openTiff(in, spec.spacingMm);
+        case FolderKind::Dicom:
+            return openDicomSeries(in);
+        }
+    }
     if (!std::filesystem::exists(in, ec)) throw FormatError(in, "path", "no such file or folder");
-    if (endsWith(in, ".vdb")) return openVdb(in, spec.gridName);
-    if (endsWith(in, ".nii") || endsWith(in, ".nii.gz")) return openNifti(in);
-    if (endsWith(in, ".nrrd") || endsWith(in, ".nhdr")) return openNrrd(in);
+    const std::string lower = lowerCase(in);
+    if (endsWith(lower, ".vdb")) return openVdb(in, spec.gridName);
+    if (endsWith(lower, ".nii") || endsWith(lower, ".nii.gz")) return openNifti(in);
+    if (endsWith(lower, ".nrrd") || endsWith(lower, ".nhdr")) return openNrrd(in);
+    if (endsWith(lower, ".tif") || endsWith(lower, ".tiff") || endsWith(lower, ".btf") ||
+        endsWith(lower, ".tf8"))
+        return openTiff(in, spec.spacingMm);
+    if (endsWith(lower, ".h5") || endsWith(lower, ".hdf5") || endsWith(lower, ".hdf") ||
+        endsWith(lower, ".he5") || endsWith(lower, ".ims"))
+        return openHdf5(in, spec.dataset);
+    if (endsWith(lower, ".mha") || endsWith(lower, ".mhd")) return openMetaImage(in);
+    if (endsWith(lower, ".vti")) return openVti(in);
     return openRawFromSpec(spec);
 }
 

@@ -9,9 +9,10 @@
 #   scripts/fuzz.sh TARGET [SECONDS] [BUILD_DIR]     (defaults: 30, ./build)
 #   scripts/fuzz.sh list                             (the targets)
 #
-# Targets: protocol_decoder, nrrd_header, nifti_header, dicom, brick_store, frame_codec,
-# daemon_config. Each is compiled from the sources it needs only (object files cached by
-# ccache when present), and rebuilt when one of its module's sources or headers is newer.
+# Targets: protocol_decoder, nrrd_header, nifti_header, dicom, metaimage, vti, brick_store,
+# frame_codec, daemon_config. Each is compiled from the sources it needs only (object files
+# cached by ccache when present), and rebuilt when one of its module's sources or headers is
+# newer.
 # The corpus (BUILD/fuzz/TARGET/corpus) is kept between runs and re-seeded each time from
 # the real scans (BC_SHARED_DATA_DIR, default ../shared/data) and configs/. CTest runs every
 # target for 30 s (label fuzz); a long run is e.g. `scripts/fuzz.sh nifti_header 600 build`.
@@ -19,7 +20,8 @@
 # another compiler. Extra libFuzzer flags: FUZZ_FLAGS (e.g. FUZZ_FLAGS=-jobs=2).
 set -euo pipefail
 
-targets=(protocol_decoder nrrd_header nifti_header dicom brick_store frame_codec daemon_config)
+targets=(protocol_decoder nrrd_header nifti_header dicom metaimage vti brick_store frame_codec
+    daemon_config)
 target=${1:?usage: scripts/fuzz.sh TARGET|list [SECONDS] [BUILD_DIR]}
 if [[ $target == list ]]; then printf '%s\n' "${targets[@]}"; exit 0; fi
 seconds=${2:-30}
@@ -57,8 +59,9 @@ protocol_decoder)
     ;;
 nrrd_header)
     harness=NrrdHeaderFuzz
-    sources=(brickstore/readers/NrrdReader.cpp brickstore/readers/detail/RawStream.cpp
-        brickstore/readers/detail/GzipStream.cpp "${reader_common[@]}")
+    sources=(brickstore/readers/NrrdReader.cpp brickstore/readers/detail/FolderPath.cpp
+        brickstore/readers/detail/RawStream.cpp brickstore/readers/detail/GzipStream.cpp
+        "${reader_common[@]}")
     folders=(brickstore brickstore/readers brickstore/readers/detail)
     libs=(-lzstd -lz)
     max_len=65536
@@ -83,6 +86,24 @@ dicom)
     # The harness forks the parser sandbox per input; fork and exit cost grows with the
     # resident size, which ASan's 256 MiB quarantine mostly is (69 -> 88 inputs/s).
     asan_options=detect_leaks=1:quarantine_size_mb=16
+    ;;
+metaimage)
+    harness=MetaImageFuzz
+    sources=(brickstore/readers/MetaImageReader.cpp brickstore/readers/detail/FolderPath.cpp
+        brickstore/readers/detail/RawStream.cpp brickstore/readers/detail/GzipStream.cpp
+        "${reader_common[@]}")
+    folders=(brickstore brickstore/readers brickstore/readers/detail)
+    libs=(-lzstd -lz)
+    max_len=65536
+    ;;
+vti)
+    harness=VtiFuzz
+    sources=(brickstore/readers/VtiReader.cpp brickstore/readers/detail/VtiXml.cpp
+        brickstore/readers/detail/VtiStreams.cpp brickstore/readers/detail/RawStream.cpp
+        "${reader_common[@]}")
+    folders=(brickstore brickstore/readers brickstore/readers/detail)
+    libs=(-lexpat -lzstd -lz)
+    max_len=65536
     ;;
 brick_store)
     harness=BrickStoreFuzz

@@ -9,6 +9,8 @@ packages=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev   # OpenVDB reader (+ what FindOpenVDB needs)
   libzstd-dev zstd libxxhash-dev zlib1g-dev           # brick compression, checksums, gzip input
   libnifti2-dev libgdcm-dev                           # NIfTI-1 and DICOM readers
+  libtiff-dev libhdf5-dev libblosc-dev libexpat1-dev  # TIFF, HDF5, Zarr (blosc chunks) and .vti readers
+  python3-numpy python3-tifffile python3-zarr python3-numcodecs python3-h5py python3-vtk9 libtiff-tools  # the readers' tests: independent writers (tiffcp: LZW and zstd TIFFs)
   nlohmann-json3-dev libcli11-dev                     # info --json, command line
   libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri  # headless OpenGL 4.5 (llvmpipe without a GPU)
   libglm-dev libpng-dev                               # vector maths, PNG images

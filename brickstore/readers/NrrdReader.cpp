@@ -3,7 +3,9 @@
 // bounded in size; the data streams through detail/RawStream.h and detail/GzipStream.h.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/readers/detail/FolderPath.h"
 #include "brickstore/readers/detail/GzipStream.h"
+#include "brickstore/readers/detail/HeaderFields.h"
 #include "brickstore/readers/detail/RawStream.h"
 
 #include <algorithm>
@@ -21,6 +23,11 @@
 namespace bc::brickstore {
 
 namespace {
+
+using detail::parseDouble;
+using detail::parseUnsigned;
+using detail::trim;
+using detail::words;
 
 namespace fs = std::filesystem;
 
@@ -42,24 +49,6 @@ struct NrrdHeader {
     std::string dataFile; ///< empty: data attached
     std::uint64_t lineSkip = 0;
 };
-
-std::string trim(const std::string& s) {
-    const char* ws = " \t\r\n";
-    std::size_t b = s.find_first_not_of(ws);
-    if (b == std::string::npos) return {};
-    return s.substr(b, s.find_last_not_of(ws) - b + 1);
-}
-
-std::vector<std::string> words(const std::string& s) {
-    std::vector<std::string> out;
-    std::size_t i = 0;
-    while ((i = s.find_first_not_of(" \t", i)) != std::string::npos) {
-        std::size_t e = std::min(s.find_first_of(" \t", i), s.size());
-        out.push_back(s.substr(i, e - i));
-        i = e;
-    }
-    return out;
-}
 
 std::string canonicalKey(const std::string& key) {
     static const std::map<std::string, std::string> kAliases = {{"datafile", "data file"},
@@ -118,23 +107,6 @@ HeaderText readHeaderText(const std::string& path) {
             throw FormatError(path, key, "field given twice");
     }
     return text;
-}
-
-std::uint64_t parseUnsigned(const std::string& s, const std::string& path,
-                            const std::string& field) {
-    std::uint64_t v = 0;
-    auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec != std::errc() || end != s.data() + s.size())
-        throw FormatError(path, field, "'" + s + "' is not a non-negative integer");
-    return v;
-}
-
-double parseDouble(const std::string& s, const std::string& path, const std::string& field) {
-    double v = 0;
-    auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec != std::errc() || end != s.data() + s.size())
-        throw FormatError(path, field, "'" + s + "' is not a number");
-    return v;
 }
 
 /// "(1.5,0,-2)" -> {1.5, 0, -2}.
@@ -330,32 +302,7 @@ std::string resolveDataFile(const std::string& headerPath, const std::string& na
     if (parts[0] == "LIST" || (parts.size() >= 4 && parts[0].find('%') != std::string::npos))
         throw FormatError(headerPath, "data file",
                           "lists of data files are not supported; give one file");
-    fs::path rel(name);
-    if (rel.is_absolute() || rel.has_root_path())
-        throw FormatError(headerPath, "data file",
-                          "'" + name + "' is an absolute path; it must be " +
-                              "relative to the header's folder");
-    for (const fs::path& part : rel)
-        if (part == "..")
-            throw FormatError(headerPath, "data file",
-                              "'" + name + "' has a '..' component; it must " +
-                                  "lie in the header's folder");
-    fs::path dir = fs::path(headerPath).parent_path();
-    if (dir.empty()) dir = ".";
-    std::error_code ec;
-    fs::path realDir = fs::canonical(dir, ec);
-    fs::path real = ec ? fs::path() : fs::weakly_canonical(dir / rel, ec);
-    if (ec)
-        throw FormatError(headerPath, "data file",
-                          "cannot resolve '" + name + "': " + ec.message());
-    if (fs::is_symlink(fs::symlink_status(real, ec)))
-        throw FormatError(headerPath, "data file", "'" + name + "' is a symlink to a missing file");
-    auto [dirEnd, realIt] = std::mismatch(realDir.begin(), realDir.end(), real.begin(), real.end());
-    if (dirEnd != realDir.end() || realIt == real.end())
-        throw FormatError(headerPath, "data file",
-                          "'" + name + "' resolves to " + real.string() +
-                              ", outside the header's folder (symlink?)");
-    return real.string();
+    return detail::resolveInFolder(headerPath, name, "data file");
 }
 
 /// Skips `lines` lines of the data file (before any decompression, as teem does).

@@ -10,15 +10,19 @@
 #include <atomic>
 #include <csignal>
 #include <cstdio>
+#include <fstream>
 #include <memory>
 #include <new>
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 
 namespace bc::cli {
 namespace {
 
 struct IngestOptions {
-    std::string input, output, dims, type, spacing, endian = "little", grid, mosaic;
+    std::string input, output, dims, type, spacing, endian = "little", grid, mosaic, dataset;
+    std::string statsPath;
+    std::uint32_t level = 0;
     std::uint64_t seed = 1;
     std::uint32_t brick = 64, apron = 2, leaf = 8;
     unsigned threads = 0;
@@ -103,6 +107,8 @@ brickstore::SourceSpec toSpec(const IngestOptions& o) {
                                       "'" + o.endian + "' is neither little nor big");
     spec.endian = o.endian == "big" ? brickstore::Endian::Big : brickstore::Endian::Little;
     spec.gridName = o.grid;
+    spec.dataset = o.dataset;
+    spec.level = o.level;
     spec.seed = o.seed;
     if (!o.mosaic.empty()) spec.mosaic = tools::parseTriple(o.mosaic, "--mosaic");
     return spec;
@@ -155,11 +161,42 @@ brickstore::IngestReport ingestInput(brickstore::VolumeSource& source, const Ing
     }
 }
 
+/// The report as JSON (--stats): what the ingest benchmark reads.
+void writeStats(const std::string& path, const brickstore::VolumeInfo& info,
+                const brickstore::IngestReport& r) {
+    const brickstore::IngestTimes& t = r.times;
+    const nlohmann::json j = {
+        {"input", info.description},
+        {"dims", info.dims},
+        {"type", brickstore::voxelTypeName(info.type)},
+        {"sourceBytes", r.sourceBytes},
+        {"bricks", r.bricks},
+        {"storedBricks", r.storedBricks},
+        {"constantBricks", r.constantBricks},
+        {"storedBytes", r.storedBytes},
+        {"fileBytes", r.fileBytes},
+        {"memoryBytes", r.memoryBytes},
+        {"seconds", r.seconds},
+        {"times",
+         {{"read", t.read},
+          {"cut", t.cut},
+          {"queueWait", t.queueWait},
+          {"compress", t.compress},
+          {"write", t.write},
+          {"histogram", t.histogram},
+          {"finish", t.finish}}},
+    };
+    std::ofstream out(path);
+    out << j.dump(2) << "\n";
+    if (!out) throw std::runtime_error("cannot write " + path);
+}
+
 void runIngest(const IngestOptions& o) {
     const TerminationGuard guard;
     auto source = openInput(o);
     auto report = ingestInput(*source, o);
     if (gCancel.load()) TerminationGuard::dieOfSignal(); // a signal after the commit
+    if (!o.statsPath.empty()) writeStats(o.statsPath, source->info(), report);
     if (o.quiet) return;
     std::printf("ingested %s -> %s\n", source->info().description.c_str(), o.output.c_str());
     std::printf(
@@ -174,6 +211,10 @@ void runIngest(const IngestOptions& o) {
                     ? double(report.uncompressedBrickBytes) / double(report.storedBytes)
                     : 0.0,
                 tools::formatBytes(double(report.constantBrickBytes)).c_str());
+    const brickstore::IngestTimes& t = report.times;
+    std::printf("  time: read+decode %.2f s, cut %.2f s, waiting on workers %.2f s; workers "
+                "(summed): compress %.2f s, write %.2f s; histogram %.2f s, index %.2f s\n",
+                t.read, t.cut, t.queueWait, t.compress, t.write, t.histogram, t.finish);
     std::printf("  memory: %s estimated for the buffers, budget %s\n",
                 tools::formatBytes(double(report.memoryBytes)).c_str(),
                 tools::formatBytes(double(report.memoryBudgetBytes)).c_str());
@@ -194,13 +235,16 @@ void addIngestCommand(CLI::App& app) {
     cmd->add_option(
            "INPUT", o->input,
            "Raw (.raw, .raw.zst), NRRD (.nrrd, .nhdr), NIfTI (.nii, .nii.gz), a DICOM folder, "
-           "OpenVDB (.vdb), or synth:phantom|vessels|checker")
+           "OpenVDB (.vdb), TIFF (.tif, .tiff, .btf; or a folder of .tif slices), a Zarr or "
+           "OME-Zarr folder, HDF5 (.h5, .hdf5, .hdf, .he5, .ims; with --dataset), MetaImage "
+           "(.mha, .mhd), VTK image data (.vti), or synth:phantom|vessels|checker")
         ->required();
     cmd->add_option("-o,--output", o->output, "Store file to write (replaced only when complete)")
         ->required();
     cmd->add_option("--dims", o->dims, "X,Y,Z voxels (raw input and generators)");
     cmd->add_option("--type", o->type, "u8|u16|i16|f32 (raw input)");
-    cmd->add_option("--spacing", o->spacing, "A,B,C voxel size in mm (raw input; default 1,1,1)");
+    cmd->add_option("--spacing", o->spacing,
+                    "A,B,C voxel size in mm (raw input, default 1,1,1; overrides a TIFF's own)");
     cmd->add_option("--endian", o->endian, "little|big (raw input)")->capture_default_str();
     cmd->add_option("--brick", o->brick, "Brick payload edge in voxels")->capture_default_str();
     cmd->add_option("--apron", o->apron, "Overlap voxels on every side of a brick")
@@ -208,14 +252,21 @@ void addIngestCommand(CLI::App& app) {
     cmd->add_option("--leaf", o->leaf, "Leaf block edge of the per-brick min/max summaries")
         ->capture_default_str();
     cmd->add_option("--grid", o->grid, "OpenVDB grid name (default: the first scalar grid)");
+    cmd->add_option("--dataset", o->dataset,
+                    "HDF5: the dataset's path in the file, e.g. /entry/data (without it, the "
+                    "error lists the file's 3D datasets)");
+    cmd->add_option("--level", o->level, "OME-Zarr: the multiscale level to ingest (0: the finest)")
+        ->capture_default_str();
+    cmd->add_option("--stats", o->statsPath,
+                    "Write the ingest's report (sizes, seconds, where the time went) as JSON");
     cmd->add_option("--parser-memory-mb,--vdb-memory-mb", o->parserMemoryMb,
-                    "Address-space limit of the sandboxed process that parses an OpenVDB file "
-                    "or a DICOM series (MiB)")
+                    "Address-space limit of the sandboxed process that parses an OpenVDB, TIFF "
+                    "or HDF5 file or a DICOM series (MiB)")
         ->capture_default_str()
         ->check(CLI::Range(std::uint64_t(64), std::uint64_t(1) << 30));
     cmd->add_option("--parser-time-s,--vdb-parse-s", o->parserTimeS,
-                    "Seconds the sandboxed parser may take (OpenVDB: to parse the file; DICOM: "
-                    "per file read) before it is killed")
+                    "Seconds the sandboxed parser may take (OpenVDB, HDF5: to parse the file; "
+                    "DICOM, TIFF: per file read) before it is killed")
         ->capture_default_str()
         ->check(CLI::Range(1u, 86400u));
     cmd->add_option("--mosaic", o->mosaic, "I,J,K: tile the input I x J x K times");

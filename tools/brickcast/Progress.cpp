@@ -15,9 +15,10 @@ void ProgressLine::update(const brickstore::IngestProgress& p) {
     double mbps = p.seconds > 0 ? double(p.sourceBytesRead) / 1e6 / p.seconds : 0.0;
     double done = p.sourceBytesTotal ? double(p.sourceBytesRead) / double(p.sourceBytesTotal) : 0.0;
     double left = done > 0 ? p.seconds * (1.0 - done) / done : 0.0;
-    std::fprintf(stderr, "\r  bricks %llu/%llu  %5.1f%%  %7.1f MB/s  %5.0f s left   ",
-                 (unsigned long long)p.bricksDone, (unsigned long long)p.bricksTotal, 100.0 * done,
-                 mbps, left);
+    std::fprintf(stderr,
+                 "\r  %.1f / %.1f MB read  %5.1f%%  %7.1f MB/s  %5.0f s left  bricks %llu/%llu ",
+                 double(p.sourceBytesRead) / 1e6, double(p.sourceBytesTotal) / 1e6, 100.0 * done,
+                 mbps, left, (unsigned long long)p.bricksDone, (unsigned long long)p.bricksTotal);
     std::fflush(stderr);
 }
 
