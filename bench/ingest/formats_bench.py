@@ -11,7 +11,8 @@ time went (read + decode, cutting bricks, zstd, writing); beside them the ceilin
 machine on the same bytes: `cat` (read only), `cp` (read and write) and `zstd -T2` at the
 ingest's level. Each command starts with a cold page cache when the script may drop it (root).
 
-Needs /usr/bin/python3 with numpy, tifffile, zarr, numcodecs and h5py (Debian packages).
+Needs /usr/bin/python3 with numpy, tifffile, zarr, numcodecs and h5py, and /usr/bin/time
+(Debian packages).
 
     /usr/bin/python3 bench/ingest/formats_bench.py --brickcast build/tools/brickcast \\
         --work /var/tmp/bc-ingest [--dims 1536,1536,920] [--formats raw,tiff,...] [--json F]
@@ -24,6 +25,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -49,15 +51,20 @@ def drop_caches(enabled):
 
 
 def run(cmd, cold, stdout=None):
-    """Runs cmd; returns wall seconds and the peak RSS in MiB of it and its reaped children."""
+    """Runs cmd; returns wall seconds and the peak RSS in MiB of it and its reaped children
+    (the sandboxed parser's child). Measured by /usr/bin/time, a small process: Linux keeps the
+    high-water RSS of the image a process had before exec, so a child forked straight from this
+    script (gigabytes of memory-mapped volume) would report this script's peak as its own."""
     dropped = drop_caches(cold)
-    start = time.monotonic()
-    proc = subprocess.Popen(cmd, stdout=stdout)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.monotonic() - start
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"failed ({status}): {' '.join(cmd)}")
-    return wall, usage.ru_maxrss / 1024.0, dropped
+    with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss:
+        start = time.monotonic()
+        status = subprocess.run(["/usr/bin/time", "-f", "%M", "-o", rss.name] + cmd,
+                                stdout=stdout).returncode
+        wall = time.monotonic() - start
+        if status != 0:
+            raise SystemExit(f"failed ({status}): {' '.join(cmd)}")
+        kib = int(rss.read().split()[-1])
+    return wall, kib / 1024.0, dropped
 
 
 def file_bytes(path):

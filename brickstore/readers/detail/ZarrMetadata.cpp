@@ -389,30 +389,4 @@ ZarrImage readZarrImage(const std::string& path, std::uint32_t level) {
     return image;
 }
 
-std::string resolveInside(const std::string& root, const std::string& rel, const std::string& file,
-                          const std::string& field) {
-    const fs::path r(rel);
-    if (rel.empty()) throw FormatError(file, field, "is empty");
-    if (r.is_absolute() || r.has_root_path())
-        throw FormatError(file, field,
-                          "'" + rel + "' is an absolute path; it must lie in the store's folder");
-    for (const fs::path& part : r)
-        if (part == "..")
-            throw FormatError(file, field,
-                              "'" + rel + "' has a '..' component; it must lie in the store's " +
-                                  "folder");
-    std::error_code ec;
-    const fs::path real = fs::weakly_canonical(fs::path(root) / r, ec);
-    if (ec) throw FormatError(file, field, "cannot resolve '" + rel + "': " + ec.message());
-    if (fs::is_symlink(fs::symlink_status(real, ec)))
-        throw FormatError(file, field, "'" + rel + "' is a symlink to a missing file");
-    const fs::path base(root);
-    auto [baseEnd, realIt] = std::mismatch(base.begin(), base.end(), real.begin(), real.end());
-    if (baseEnd != base.end())
-        throw FormatError(file, field,
-                          "'" + rel + "' resolves to " + real.string() +
-                              ", outside the store's folder (symlink?)");
-    return real.string();
-}
-
 } // namespace bc::brickstore::detail

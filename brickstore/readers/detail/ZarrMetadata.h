@@ -5,6 +5,7 @@
 // spacing. Every file named by the metadata is resolved inside the store's folder first
 // (ZarrMetadata.cpp).
 #include "brickstore/Readers.h"
+#include "brickstore/readers/detail/FolderPath.h"
 
 #include <array>
 #include <cstddef>
@@ -54,11 +55,5 @@ struct ZarrImage {
 /// `level` of the OME-Zarr image at `path` (a folder whose .zattrs holds "multiscales").
 /// @throw FormatError naming the metadata file and the field at fault.
 ZarrImage readZarrImage(const std::string& path, std::uint32_t level);
-
-/// The path of a file (or folder) `rel` inside the folder `root` (canonical), which it must
-/// not leave: no absolute path, no "..", no symlink out. `file` and `field` name the metadata
-/// that named it in errors. Returns the canonical path.
-std::string resolveInside(const std::string& root, const std::string& rel, const std::string& file,
-                          const std::string& field);
 
 } // namespace bc::brickstore::detail
