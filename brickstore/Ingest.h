@@ -60,7 +60,7 @@ struct IngestProgress {
 /// Where an ingest's time went. The reading thread's stages are wall seconds on that thread;
 /// the workers' are seconds summed over the workers (they run side by side).
 struct IngestTimes {
-    double read = 0.0;      ///< in the source's readSlices: reading and decoding the input
+    double read = 0.0;      ///< waiting for the source's next slab (read on its own thread)
     double cut = 0.0;       ///< cutting slices into bricks and the coarser levels
     double queueWait = 0.0; ///< the reading thread waiting for a worker to take a brick
     double compress = 0.0;  ///< workers: leaf ranges and zstd, summed

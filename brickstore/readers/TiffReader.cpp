@@ -295,7 +295,19 @@ class TiffVolume final : public VolumeSource {
         const TiffPage page = mFile->layout();
         checkSameLayout(page, *mFile);
         mFile->readPage(page, out);
+        readAhead(z);
         if (mInfo.type == VoxelType::F32) checkFinite(out, *mFile);
+    }
+
+    /// The next slices' bytes asked of the kernel while this one is decoded and sent (see
+    /// TiffFile::readAhead): a window of pages of a file, or of the folder's next files.
+    void readAhead(std::uint64_t z) {
+        if (!mFolder) return mFile->readAhead();
+        const std::uint64_t window =
+            std::max<std::uint64_t>(1, detail::kReadAheadBytes / mInfo.sliceBytes());
+        for (mAdvised = std::max(mAdvised, z + 1);
+             mAdvised < std::min(mFiles.size(), z + 1 + window); ++mAdvised)
+            detail::willNeed(mFiles[mAdvised]);
     }
 
     /// NaN or infinity would poison every min/max and average the store keeps.
@@ -335,6 +347,7 @@ class TiffVolume final : public VolumeSource {
     std::unique_ptr<TiffFile> mFile; ///< the multi-page file, or the folder's current slice
     TiffPage mFirst;
     VolumeInfo mInfo;
+    std::uint64_t mAdvised = 0; ///< a folder's files before this one were asked for (readAhead)
 };
 
 } // namespace

@@ -11,8 +11,10 @@
 #include <cstring>
 #include <new>
 
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <tiffio.h>
+#include <unistd.h>
 
 namespace bc::brickstore::detail {
 namespace {
@@ -236,7 +238,7 @@ TiffResolution TiffFile::resolution() const {
     return r;
 }
 
-void TiffFile::checkStrile(std::uint32_t index, bool tiled, const char* kind) const {
+std::uint64_t TiffFile::checkStrile(std::uint32_t index, bool tiled, const char* kind) const {
     int offsetError = 0, bytesError = 0;
     const std::uint64_t offset = TIFFGetStrileOffsetWithErr(mTiff, index, &offsetError);
     const std::uint64_t bytes = TIFFGetStrileByteCountWithErr(mTiff, index, &bytesError);
@@ -248,6 +250,21 @@ void TiffFile::checkStrile(std::uint32_t index, bool tiled, const char* kind) co
              name + " (" + std::to_string(bytes) + " bytes at offset " + std::to_string(offset) +
                  ") runs past the end of the file (" + std::to_string(mFileBytes) +
                  " bytes); is it truncated?");
+    return offset + bytes;
+}
+
+void TiffFile::readAhead() {
+    if (mReadEnd + kReadAheadBytes / 2 <= mAdvisedEnd) return; // asked in half-window steps
+    const std::uint64_t from = std::max(mReadEnd, mAdvisedEnd);
+    mAdvisedEnd = mReadEnd + kReadAheadBytes;
+    ::posix_fadvise(TIFFFileno(mTiff), off_t(from), off_t(mAdvisedEnd - from), POSIX_FADV_WILLNEED);
+}
+
+void willNeed(const std::string& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return;
+    ::posix_fadvise(fd, 0, 0, POSIX_FADV_WILLNEED);
+    ::close(fd);
 }
 
 void TiffFile::readPage(const TiffPage& page, std::span<std::byte> out) {
@@ -266,7 +283,7 @@ void TiffFile::readStrips(const TiffPage& page, std::span<std::byte> out) {
                                  std::to_string(strips) + " ImageLength and RowsPerStrip need");
     for (std::uint32_t s = 0; s < strips; ++s) {
         const std::uint64_t first = s * rows, n = std::min(rows, page.length - first);
-        checkStrile(s, false, "strip");
+        mReadEnd = std::max(mReadEnd, checkStrile(s, false, "strip"));
         mError.clear();
         const auto want = tmsize_t(n * rowBytes);
         if (TIFFReadEncodedStrip(mTiff, s, out.data() + first * rowBytes, want) != want)
@@ -290,7 +307,7 @@ void TiffFile::readTiles(const TiffPage& page, std::span<std::byte> out) {
         const std::uint32_t rows = std::min(page.tileLength, page.length - y);
         for (std::uint32_t x = 0; x < page.width; x += page.tileWidth) {
             const std::uint32_t tile = TIFFComputeTile(mTiff, x, y, 0, 0);
-            checkStrile(tile, true, "tile");
+            mReadEnd = std::max(mReadEnd, checkStrile(tile, true, "tile"));
             mError.clear();
             if (TIFFReadEncodedTile(mTiff, tile, mTile.data(), tileBytes) != tileBytes)
                 fail("data", "tile " + std::to_string(tile) + " (" +

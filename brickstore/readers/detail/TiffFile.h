@@ -39,6 +39,14 @@ struct TiffResolution {
     std::uint16_t unit = 2;
 };
 
+/// How far ahead of its decoding a TIFF reader asks the kernel to read (TiffFile::readAhead,
+/// willNeed): the sandbox's slab.
+constexpr std::uint64_t kReadAheadBytes = 64ull << 20;
+
+/// Asks the kernel to read the whole file at `path` into the page cache, without waiting (a
+/// TIFF folder's next slices); a file that cannot be opened is left to the reader to report.
+void willNeed(const std::string& path);
+
 /// "LZW", "deflate": a supported Compression value as descriptions write it.
 const char* compressionName(std::uint16_t compression);
 
@@ -77,6 +85,10 @@ class TiffFile {
     /// @throw FormatError(path, "StripByteCounts"/"TileByteCounts", ...) for data past the
     /// file's end, FormatError(path, "data") when libtiff cannot decode it.
     void readPage(const TiffPage& page, std::span<std::byte> out);
+    /// Asks the kernel to read the kReadAheadBytes past the last strip or tile read: in the
+    /// parser sandbox the child decodes a slab and then waits while the pipe drains, so the
+    /// next pages come from the disk meanwhile instead of after (pages are written in order).
+    void readAhead();
 
     /// "page 3: " in a multi-page file, "" otherwise: how errors name the page.
     std::string where() const;
@@ -88,7 +100,8 @@ class TiffFile {
                        std::va_list args);
     void checkSupported(const TiffPage& page, std::uint16_t samples,
                         std::uint16_t photometric) const;
-    void checkStrile(std::uint32_t index, bool tiled, const char* kind) const;
+    /// Checks that strip or tile `index` lies inside the file; returns where it ends.
+    std::uint64_t checkStrile(std::uint32_t index, bool tiled, const char* kind) const;
     void readStrips(const TiffPage& page, std::span<std::byte> out);
     void readTiles(const TiffPage& page, std::span<std::byte> out);
 
@@ -97,7 +110,9 @@ class TiffFile {
     struct tiff* mTiff = nullptr;
     std::uint64_t mFileBytes = 0;
     std::uint64_t mPage = 0;
-    mutable std::string mError; ///< libtiff's first error since the last call that checks
+    std::uint64_t mReadEnd = 0;    ///< the end of the furthest strip or tile read
+    std::uint64_t mAdvisedEnd = 0; ///< how far readAhead() has asked the kernel to read
+    mutable std::string mError;    ///< libtiff's first error since the last call that checks
     std::vector<std::byte> mTile;
 };
 
