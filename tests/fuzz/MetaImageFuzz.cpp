@@ -18,14 +18,6 @@ namespace {
 using namespace bc;
 using fuzz::Bytes;
 
-/// 16x16x8 u8 voxels: the detached data file of the seeds.
-Bytes detachedVoxels() {
-    Bytes v(16 * 16 * 8);
-    for (std::size_t i = 0; i < v.size(); ++i)
-        v[i] = std::uint8_t((i * 37) ^ (i >> 4));
-    return v;
-}
-
 /// `raw` as one zlib stream (compress2, as MetaIO writes CompressedData).
 Bytes zlibBytes(const Bytes& raw) {
     uLongf size = compressBound(uLong(raw.size()));
@@ -39,7 +31,7 @@ Bytes zlibBytes(const Bytes& raw) {
 const std::filesystem::path& folder() {
     static const std::filesystem::path dir = [] {
         const auto& d = fuzz::scratchDir();
-        const Bytes voxels = detachedVoxels();
+        const Bytes voxels = fuzz::detachedVoxels();
         fuzz::writeFile(d / "data.raw", voxels);
         fuzz::writeFile(d / "data.zlib", zlibBytes(voxels));
         return d;
@@ -47,26 +39,16 @@ const std::filesystem::path& folder() {
     return dir;
 }
 
-struct Scan {
-    const char* file;
-    const char* type;
-    unsigned x, y, bytes;
-    const char* spacing;
-};
-
 void writeScanSeeds(const std::string& seeds, const std::string& data) {
-    const Scan scans[] = {
+    const fuzz::SeedScan scans[] = {
         {"vtk_headsq_quarter_64x64x93_uint16.raw", "MET_USHORT", 64, 64, 2, "3.2 3.2 1.5"},
         {"hydrogen_64x64x64_float32.raw", "MET_FLOAT", 64, 64, 4, "1 1 1"},
         {"CT_AVM_256x242x154_uint8.raw", "MET_UCHAR", 256, 242, 1, "0.72 0.721 1"},
     };
     int n = 0;
-    for (const Scan& s : scans) {
-        // A 32x32x4 corner: the seed stays well under -max_len.
-        const unsigned slices = 4, edge = 32;
-        const Bytes whole = fuzz::readPrefix(std::filesystem::path(data) / s.file,
-                                             std::size_t(s.x) * s.y * s.bytes * slices);
-        const Bytes voxels = fuzz::cropVoxels(whole, 0, s.x, s.y, s.bytes, edge, edge, slices);
+    for (const fuzz::SeedScan& s : scans) {
+        const unsigned slices = 4, edge = fuzz::kSeedEdge;
+        const Bytes voxels = fuzz::scanCorner(data, s, slices);
         if (voxels.empty()) continue;
         for (bool zlib : {false, true}) {
             const Bytes payload = zlib ? zlibBytes(voxels) : voxels;
@@ -102,7 +84,7 @@ void writeSeeds(const std::string& seeds) {
         head + "DimSize = 16 16 8\nElementType = MET_UCHAR\nElementSpacing = 1 1 2\n"
                "ElementDataFile = data.raw\n",
         head + "CompressedData = True\nCompressedDataSize = " +
-            std::to_string(zlibBytes(detachedVoxels()).size()) +
+            std::to_string(zlibBytes(fuzz::detachedVoxels()).size()) +
             "\nDimSize = 16 16 8\nElementType = MET_UCHAR\nElementDataFile = data.zlib\n",
         // HeaderSize skips the first half of data.raw; -1 takes its last 1 KiB.
         head + "DimSize = 16 16 4\nElementType = MET_UCHAR\nHeaderSize = 1024\n"

@@ -60,6 +60,34 @@ int fuzzReader(const std::uint8_t* data, std::size_t size, const std::string& pa
     return 0;
 }
 
+/// 16x16x8 u8 voxels: the detached data file of the seeds of readers whose headers name one.
+inline Bytes detachedVoxels() {
+    Bytes v(16 * 16 * 8);
+    for (std::size_t i = 0; i < v.size(); ++i)
+        v[i] = std::uint8_t((i * 37) ^ (i >> 4));
+    return v;
+}
+
+/// A shared scan the seeds crop: its file, its type as the format names it, its slice size,
+/// bytes per voxel and its spacing as the format writes it.
+struct SeedScan {
+    const char* file;
+    const char* type;
+    unsigned x, y, bytes;
+    const char* spacing;
+};
+
+/// Edge of the corner the seeds crop from a scan: a seed stays well under -max_len.
+constexpr unsigned kSeedEdge = 32;
+
+/// The kSeedEdge x kSeedEdge x `slices` corner of `scan` in the folder `data`; empty when the
+/// scan is missing.
+inline Bytes scanCorner(const std::string& data, const SeedScan& scan, unsigned slices) {
+    const Bytes whole = readPrefix(std::filesystem::path(data) / scan.file,
+                                   std::size_t(scan.x) * scan.y * scan.bytes * slices);
+    return cropVoxels(whole, 0, scan.x, scan.y, scan.bytes, kSeedEdge, kSeedEdge, slices);
+}
+
 /// `raw` compressed as one gzip member (the targets link zlib when they use it).
 inline Bytes gzipBytes(const Bytes& raw) {
     z_stream z{};

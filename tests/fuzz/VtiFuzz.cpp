@@ -128,27 +128,16 @@ void writeLayouts(const std::string& seeds, const std::string& name, const Bytes
             }
 }
 
-struct Scan {
-    const char* file;
-    const char* type;
-    unsigned x, y, bytes;
-    const char* spacing;
-};
-
 void writeScanSeeds(const std::string& seeds, const std::string& data) {
-    const Scan scans[] = {
+    const fuzz::SeedScan scans[] = {
         {"vtk_headsq_quarter_64x64x93_uint16.raw", "UInt16", 64, 64, 2, "3.2 3.2 1.5"},
         {"hydrogen_64x64x64_float32.raw", "Float32", 64, 64, 4, "1 1 1"},
         {"CT_AVM_256x242x154_uint8.raw", "UInt8", 256, 242, 1, "0.72 0.721 1"},
     };
     int n = 0;
-    for (const Scan& s : scans) {
-        // A 32x32x4 corner: the seed stays well under -max_len.
-        const unsigned dims[3] = {32, 32, 4};
-        const Bytes whole = fuzz::readPrefix(std::filesystem::path(data) / s.file,
-                                             std::size_t(s.x) * s.y * s.bytes * dims[2]);
-        const Bytes voxels =
-            fuzz::cropVoxels(whole, 0, s.x, s.y, s.bytes, dims[0], dims[1], dims[2]);
+    for (const fuzz::SeedScan& s : scans) {
+        const unsigned dims[3] = {fuzz::kSeedEdge, fuzz::kSeedEdge, 4};
+        const Bytes voxels = fuzz::scanCorner(data, s, dims[2]);
         if (!voxels.empty())
             writeLayouts(seeds, "scan" + std::to_string(n++), voxels, s.type, dims, s.spacing,
                          false);
