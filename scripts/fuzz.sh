@@ -142,6 +142,11 @@ daemon_config)
     read -ra toml_libs <<<"$(pkg-config --libs tomlplusplus)"
     cflags+=("${toml_cflags[@]}")
     libs+=("${toml_libs[@]}")
+    # The TIFF, HDF5, Zarr (blosc) and .vti (expat) readers of issue 20.
+    read -ra reader_cflags <<<"$(pkg-config --cflags hdf5 libtiff-4 blosc expat)"
+    read -ra reader_libs <<<"$(pkg-config --libs hdf5 libtiff-4 blosc expat)"
+    cflags+=("${reader_cflags[@]/#-I/-isystem}")
+    libs+=("${reader_libs[@]}")
     max_len=16384
     ;;
 *)

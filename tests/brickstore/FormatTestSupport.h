@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cstring>
 #include <fstream>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,11 @@ inline std::vector<SharedScan> sharedScans() {
         {"hydrogen", "hydrogen_64x64x64_float32.raw", "float32"},
         {"gaffer", "gaffer_smoke.vdb", "float32"},
     };
+}
+
+/// How GoogleTest prints a scan (test lists, failures): by its name, not its bytes.
+inline void PrintTo(const SharedScan& scan, std::ostream* os) {
+    *os << scan.name;
 }
 
 inline brickstore::SourceSpec sharedSpec(const SharedScan& scan) {
