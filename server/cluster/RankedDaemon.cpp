@@ -40,23 +40,37 @@ struct Report {
     char error[kReportErrorBytes] = {}; ///< NUL-terminated; empty: drawn
 };
 static_assert(sizeof(Report) == 256);
+// Point-to-point tags: above the compositing's (1 to 30000), below the least MPI_TAG_UB (32767).
+constexpr int kReportTag = 32000; ///< a worker's report to rank 0
+constexpr int kQuitTag = 32001;   ///< rank 0 to a worker: the cluster failed, end
 
-/// Waits for `request` until `deadline`: false when it is not complete by then. `patient`
-/// sleeps between tests (an idle worker), else the thread only yields (a frame in flight).
-bool waitUntil(MPI_Request& request, Clock::time_point deadline, bool patient,
-               const std::string& what) {
+enum class Wait { Done, TimedOut, Quit };
+
+/// waitUntil for a worker's next order, which also ends when rank 0's quit (`quit`, a posted
+/// receive) arrives.
+Wait waitForOrder(MPI_Request& request, MPI_Request& quit, Clock::time_point deadline) {
     auto nap = std::chrono::microseconds(50);
+    for (;;) {
+        int done = 0;
+        checkMpi(MPI_Test(&request, &done, MPI_STATUS_IGNORE), "waiting for an order");
+        if (done) return Wait::Done;
+        checkMpi(MPI_Test(&quit, &done, MPI_STATUS_IGNORE), "waiting for an order");
+        if (done) return Wait::Quit;
+        if (Clock::now() >= deadline) return Wait::TimedOut;
+        std::this_thread::sleep_for(nap);
+        nap = std::min(nap * 2, std::chrono::microseconds(2000));
+    }
+}
+
+/// Waits for `request` (a frame in flight: the thread only yields) until `deadline`: false
+/// when it is not complete by then.
+bool waitUntil(MPI_Request& request, Clock::time_point deadline, const std::string& what) {
     for (;;) {
         int done = 0;
         checkMpi(MPI_Test(&request, &done, MPI_STATUS_IGNORE), what);
         if (done) return true;
         if (Clock::now() >= deadline) return false;
-        if (patient) {
-            std::this_thread::sleep_for(nap);
-            nap = std::min(nap * 2, std::chrono::microseconds(2000));
-        } else {
-            std::this_thread::yield();
-        }
+        std::this_thread::yield();
     }
 }
 
@@ -256,14 +270,14 @@ void MpiFrameCluster::send(std::uint32_t kind, const std::vector<std::uint8_t>& 
     MPI_Request request = MPI_REQUEST_NULL;
     checkMpi(MPI_Ibcast(&header, sizeof header, MPI_BYTE, 0, mComm, &request),
              "broadcasting an order");
-    if (!waitUntil(request, deadline, false, "broadcasting an order"))
+    if (!waitUntil(request, deadline, "broadcasting an order"))
         throw ClusterError("an order's broadcast did not complete within " +
                            std::to_string(mTimeout.count()) + " ms");
     if (!payload.empty()) {
         checkMpi(MPI_Ibcast(const_cast<std::uint8_t*>(payload.data()), int(payload.size()),
                             MPI_BYTE, 0, mComm, &request),
                  "broadcasting an order");
-        if (!waitUntil(request, deadline, false, "broadcasting an order"))
+        if (!waitUntil(request, deadline, "broadcasting an order"))
             throw ClusterError("an order's broadcast did not complete within " +
                                std::to_string(mTimeout.count()) + " ms");
     }
@@ -294,14 +308,21 @@ render::Image MpiFrameCluster::draw(const ClusterOrder& order, const brickstore:
         render::Image image = compositeDirectSend(mComm, 0, s.frame, part, int(mSeq % 30000) + 1,
                                                   mTimeout, composite);
         Report report{mine.totalMs, double(mine.samples), double(composite.bytesSent), {}};
+        // Each rank's report by a receive of its own (not a gather): a rank that does not
+        // answer is named.
         std::vector<Report> reports(std::size_t(mRanks), Report{});
-        MPI_Request request = MPI_REQUEST_NULL;
-        checkMpi(MPI_Igather(&report, sizeof report, MPI_BYTE, reports.data(), sizeof report,
-                             MPI_BYTE, 0, mComm, &request),
-                 "gathering the ranks' stats");
-        if (!waitUntil(request, Clock::now() + mTimeout, false, "gathering the ranks' stats"))
-            throw ClusterError("the ranks' stats did not arrive within " +
-                               std::to_string(mTimeout.count()) + " ms");
+        reports[0] = report;
+        std::vector<MPI_Request> requests;
+        std::vector<int> peers;
+        for (int r = 1; r < mRanks; ++r) {
+            requests.push_back(MPI_REQUEST_NULL);
+            peers.push_back(r);
+            checkMpi(MPI_Irecv(&reports[std::size_t(r)], sizeof(Report), MPI_BYTE, r, kReportTag,
+                               mComm, &requests.back()),
+                     "gathering the ranks' stats");
+        }
+        waitForRanks(requests, peers, std::vector<bool>(requests.size(), true),
+                     Clock::now() + mTimeout, "gathering the ranks' stats");
         cluster.compositeMs = composite.ms;
         cluster.ranks.clear();
         std::string failed;
@@ -347,6 +368,23 @@ bool MpiFrameCluster::stop() {
     }
 }
 
+void MpiFrameCluster::quitWorkers() {
+    std::vector<int> codes(std::size_t(mRanks), 3);
+    std::vector<MPI_Request> requests;
+    std::vector<int> peers;
+    for (int r = 1; r < mRanks; ++r) {
+        requests.push_back(MPI_REQUEST_NULL);
+        peers.push_back(r);
+        MPI_Isend(&codes[std::size_t(r)], 1, MPI_INT, r, kQuitTag, mComm, &requests.back());
+    }
+    try {
+        waitForRanks(requests, peers, std::vector<bool>(requests.size(), false),
+                     Clock::now() + mTimeout, "telling the ranks to quit");
+    } catch (const ClusterError& e) {
+        mLog.error(std::string("cluster: ") + e.what());
+    }
+}
+
 // ---- the other ranks --------------------------------------------------------------------------
 
 int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log& log) {
@@ -370,12 +408,30 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
     protocol::SetTransferFunction tfMessage;
     std::shared_ptr<const render::TransferFunction> tf;
     std::vector<std::uint8_t> payload;
+    // Rank 0's quit after a failure, listened for while waiting for orders; cancelled when
+    // this rank stops otherwise (MPI_Finalize wants no receive pending).
+    int quitCode = 0;
+    MPI_Request quit = MPI_REQUEST_NULL;
+    checkMpi(MPI_Irecv(&quitCode, 1, MPI_INT, 0, kQuitTag, comm, &quit), "listening for a quit");
+    struct CancelQuit {
+        MPI_Request& quit;
+        ~CancelQuit() {
+            if (quit == MPI_REQUEST_NULL) return;
+            MPI_Cancel(&quit);
+            MPI_Request_free(&quit);
+        }
+    } cancelQuit{quit};
     for (;;) {
         OrderHeader header;
         MPI_Request request = MPI_REQUEST_NULL;
         checkMpi(MPI_Ibcast(&header, sizeof header, MPI_BYTE, 0, comm, &request),
                  "waiting for an order");
-        if (!waitUntil(request, Clock::now() + silence, true, "waiting for an order")) {
+        const Wait wait = waitForOrder(request, quit, Clock::now() + silence);
+        if (wait == Wait::Quit) {
+            log.error(who + ": rank 0 ends the job (the cluster failed)");
+            return 3;
+        }
+        if (wait == Wait::TimedOut) {
             log.error(
                 who + ": rank 0 has been silent for " +
                 std::to_string(std::chrono::duration_cast<std::chrono::seconds>(silence).count()) +
@@ -392,7 +448,7 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
         payload.resize(header.payloadBytes);
         checkMpi(MPI_Ibcast(payload.data(), int(payload.size()), MPI_BYTE, 0, comm, &request),
                  "receiving an order");
-        if (!waitUntil(request, Clock::now() + timeout, false, "receiving an order")) {
+        if (!waitUntil(request, Clock::now() + timeout, "receiving an order")) {
             log.error(who + ": an order's payload did not arrive: ending the job");
             return 3;
         }
@@ -477,10 +533,9 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
             log.error(who + ": " + why);
             std::strncpy(report.error, why.c_str(), kReportErrorBytes - 1);
         }
-        checkMpi(
-            MPI_Igather(&report, sizeof report, MPI_BYTE, nullptr, 0, MPI_BYTE, 0, comm, &request),
-            "reporting stats");
-        if (!waitUntil(request, Clock::now() + timeout, false, "reporting stats")) {
+        checkMpi(MPI_Isend(&report, sizeof report, MPI_BYTE, 0, kReportTag, comm, &request),
+                 "reporting stats");
+        if (!waitUntil(request, Clock::now() + timeout, "reporting stats")) {
             log.error(who + ": rank 0 did not take this rank's stats: ending the job");
             return 3;
         }

@@ -67,6 +67,11 @@ class MpiFrameCluster : public FrameCluster {
     /// Tells every worker to stop (after the render thread has ended). False when the
     /// cluster had failed (nothing is sent: the caller ends the job with MPI_Abort).
     bool stop();
+    /// After a failure: tells each worker still listening to end (a message of its own, not
+    /// an order: the broadcast tree may pass through the rank at fault), waiting at most the
+    /// cluster timeout for the sends. Call before MPI_Abort, which under `mpirun
+    /// --enable-recovery` ends only the caller and would leave the others serving nothing.
+    void quitWorkers();
     /// Why the cluster is out of service, if it is.
     const std::optional<std::string>& failure() const { return mFailure; }
 
@@ -85,7 +90,8 @@ class MpiFrameCluster : public FrameCluster {
 };
 
 /// A worker rank's life: draws its part of every order from `catalog`'s volumes until rank 0
-/// says stop (returns 0) or is silent for twice `config`'s cluster timeout plus a minute
+/// says stop (returns 0), tells it to quit after a failure (MpiFrameCluster::quitWorkers;
+/// returns 3, logged) or is silent for twice `config`'s cluster timeout plus a minute
 /// (returns 3, logged). The CPU and GPU raycasters draw parts; the GPU one on a GL context
 /// made at the first GPU order, with the rank's GPU budget.
 /// An order it cannot draw (an unknown volume, a store error) is composited as an empty part

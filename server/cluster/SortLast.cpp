@@ -60,34 +60,6 @@ int countOf(const PixelRect& r) {
     return int(floats);
 }
 
-/// Waits for `requests` until `deadline`; on time-out cancels the receives among them and
-/// throws naming the ranks of those not complete (`peers[i]` is request i's).
-void waitAll(std::vector<MPI_Request>& requests, const std::vector<int>& peers,
-             const std::vector<bool>& receives, std::chrono::steady_clock::time_point deadline,
-             const char* what) {
-    for (;;) {
-        int done = 0;
-        check(MPI_Testall(int(requests.size()), requests.data(), &done, MPI_STATUSES_IGNORE), what);
-        if (done) return;
-        if (std::chrono::steady_clock::now() >= deadline) break;
-        std::this_thread::yield();
-    }
-    std::string ranks;
-    for (std::size_t i = 0; i < requests.size(); ++i) {
-        if (requests[i] == MPI_REQUEST_NULL) continue;
-        int flag = 0;
-        MPI_Test(&requests[i], &flag, MPI_STATUS_IGNORE);
-        if (flag) continue;
-        ranks += (ranks.empty() ? "" : ", ") + std::to_string(peers[i]);
-        if (receives[i]) {
-            MPI_Cancel(&requests[i]);
-            MPI_Request_free(&requests[i]);
-        }
-    }
-    throw ClusterError(std::string("sort-last compositing: ") + what + ": rank(s) " + ranks +
-                       " did not answer in time");
-}
-
 } // namespace
 
 std::array<std::uint32_t, 2> bandRows(std::uint32_t height, std::uint32_t band,
@@ -104,6 +76,32 @@ void checkMpi(int code, const std::string& what) {
     int length = 0;
     MPI_Error_string(code, text, &length);
     throw ClusterError(what + ": " + std::string(text, std::size_t(length)));
+}
+
+void waitForRanks(std::vector<MPI_Request>& requests, const std::vector<int>& peers,
+                  const std::vector<bool>& receives, std::chrono::steady_clock::time_point deadline,
+                  const std::string& what) {
+    for (;;) {
+        int done = 0;
+        checkMpi(MPI_Testall(int(requests.size()), requests.data(), &done, MPI_STATUSES_IGNORE),
+                 what);
+        if (done) return;
+        if (std::chrono::steady_clock::now() >= deadline) break;
+        std::this_thread::yield();
+    }
+    std::string ranks;
+    for (std::size_t i = 0; i < requests.size(); ++i) {
+        if (requests[i] == MPI_REQUEST_NULL) continue;
+        int flag = 0;
+        MPI_Test(&requests[i], &flag, MPI_STATUS_IGNORE);
+        if (flag) continue;
+        ranks += (ranks.empty() ? "" : ", ") + std::to_string(peers[i]);
+        if (receives[i]) {
+            MPI_Cancel(&requests[i]);
+            MPI_Request_free(&requests[i]);
+        }
+    }
+    throw ClusterError(what + ": rank(s) " + ranks + " did not answer in time");
 }
 
 Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,
@@ -172,7 +170,7 @@ Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,
         receives.push_back(false);
         stats.bytesSent += piece->pixels() * 16;
     }
-    waitAll(requests, peers, receives, deadline, "exchanging pieces");
+    waitForRanks(requests, peers, receives, deadline, "sort-last compositing: exchanging pieces");
     requests.clear();
     peers.clear();
     receives.clear();
@@ -193,7 +191,8 @@ Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,
             peers.push_back(root);
             receives.push_back(false);
             stats.bytesSent += covered->pixels() * 16;
-            waitAll(requests, peers, receives, deadline, "sending the band to the root");
+            waitForRanks(requests, peers, receives, deadline,
+                         "sort-last compositing: sending the band to the root");
         }
         stats.ms =
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
@@ -220,7 +219,7 @@ Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,
         receives.push_back(true);
         stats.bytesReceived += c->pixels() * 16;
     }
-    waitAll(requests, peers, receives, deadline, "gathering the bands");
+    waitForRanks(requests, peers, receives, deadline, "sort-last compositing: gathering the bands");
     Image out(frame.width, frame.height);
     for (const PartialImage& b : bands) {
         if (b.image.width == 0) continue;

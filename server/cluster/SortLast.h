@@ -28,6 +28,14 @@ class ClusterError : public std::runtime_error {
 /// Returns when `code` is MPI_SUCCESS. @throw ClusterError "what: MPI's text for the code".
 void checkMpi(int code, const std::string& what);
 
+/// Waits for `requests` (request i is with rank `peers[i]`; `receives[i]`: it is a receive)
+/// until `deadline`. @throw ClusterError "what: rank(s) a, b did not answer in time", naming
+/// the ranks whose requests are not complete (their receives are cancelled first), or
+/// "what: MPI's text" when MPI fails.
+void waitForRanks(std::vector<MPI_Request>& requests, const std::vector<int>& peers,
+                  const std::vector<bool>& receives, std::chrono::steady_clock::time_point deadline,
+                  const std::string& what);
+
 /// What every rank knows about one frame: its size, each rank's footprint (footprints[r];
 /// not visible: rank r sends nothing) and the ranks front to back (ranks whose part is empty
 /// or out of view may be left out).

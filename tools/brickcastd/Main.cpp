@@ -132,6 +132,7 @@ int serveRanks(const Options& o, bc::server::Log& log) {
     if (!frames.stop()) {
         log.error(who + "the cluster failed (" + frames.failure().value_or("") +
                   "): ending every rank");
+        frames.quitWorkers();
         cluster::MpiRuntime::abortAll(3);
     }
     return 0;
