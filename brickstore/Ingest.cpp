@@ -11,9 +11,9 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <deque>
 #include <exception>
-#include <future>
 #include <limits>
 #include <mutex>
 #include <optional>
@@ -88,13 +88,45 @@ class JobQueue {
     bool mDone = false, mClosed = false;
 };
 
+/// Brick buffers passed back from the workers to the cutting thread, so that a brick is not a
+/// fresh allocation (zeroed, and page-faulted in when it is mmapped) each time. Holds at most
+/// `capacity` idle buffers.
+class BufferPool {
+  public:
+    explicit BufferPool(std::size_t capacity) : mCapacity(capacity) {}
+    std::vector<std::byte> take() {
+        std::lock_guard lock(mMutex);
+        if (mIdle.empty()) return {};
+        std::vector<std::byte> b = std::move(mIdle.back());
+        mIdle.pop_back();
+        return b;
+    }
+    void give(std::vector<std::byte>&& b) {
+        std::lock_guard lock(mMutex);
+        if (mIdle.size() < mCapacity) mIdle.push_back(std::move(b));
+    }
+
+  private:
+    std::size_t mCapacity;
+    std::mutex mMutex;
+    std::vector<std::vector<std::byte>> mIdle;
+};
+
 /// Everything the workers share while an ingest runs.
 struct IngestState {
+    IngestState(const StoreLayout& layout_, VoxelType type_, int zstdLevel_,
+                detail::StoreFile& file_)
+        : layout(layout_), type(type_), zstdLevel(zstdLevel_), file(file_) {}
+
     const StoreLayout& layout;
     VoxelType type;
     int zstdLevel;
     detail::StoreFile& file;
     std::vector<BrickRecord> records;
+    /// Per worker: level-0 voxels counted per raw value as they are compressed (8- and
+    /// 16-bit integer types; empty otherwise), binned once the value range is known.
+    std::vector<std::vector<std::uint64_t>> valueCounts;
+    BufferPool* buffers = nullptr;
     std::atomic<std::uint64_t> bricksDone{0};
     std::atomic<std::uint64_t> uncompressedBytes{0};
     std::atomic<std::uint64_t> compressNs{0}, writeNs{0};
@@ -108,16 +140,33 @@ struct IngestState {
     }
 };
 
+/// Counts a level-0 brick's own voxels (its payload, no apron) per value.
+void countBrick(IngestState& s, const detail::BrickJob& job, bool constant,
+                std::vector<std::uint64_t>& counts) {
+    if (counts.empty() || job.index >= s.layout.levels()[0].brickCount()) return;
+    const auto extent = s.layout.payloadExtent(s.layout.keyOf(job.index));
+    if (constant) {
+        std::uint16_t raw = 0; // the value's bits, read as unsigned (little-endian host)
+        std::memcpy(&raw, job.voxels.data(), voxelBytes(s.type));
+        counts[raw] += extent[0] * extent[1] * extent[2];
+        return;
+    }
+    const std::uint32_t a = s.layout.geometry().apronVoxels;
+    detail::countValues(s.type, job.voxels, s.layout.storedEdge(), {a, a, a}, extent, counts);
+}
+
 void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
-                   std::vector<std::byte>& buf) {
+                   std::vector<std::byte>& buf, std::vector<std::uint64_t>& counts) {
     const auto start = Clock::now();
     BrickRecord& rec = s.records[job.index];
     const std::size_t vb = voxelBytes(s.type);
     if (detail::isConstant(job.voxels, vb)) {
         rec.range = detail::brickRange(s.type, std::span(job.voxels).first(vb));
+        countBrick(s, job, true, counts);
         s.compressNs += nsSince(start);
         return;
     }
+    countBrick(s, job, false, counts);
     // Only the leaves inside the volume are kept (FORMAT.md "Leaf table"). Their windows
     // still reach every value of the stored brick (what lies past the volume's far border is
     // clamped copies of the voxels at it): the brick's range is theirs; verify checks it.
@@ -147,7 +196,7 @@ void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
     s.uncompressedBytes += job.voxels.size();
 }
 
-void workerLoop(IngestState& s, JobQueue& queue) {
+void workerLoop(IngestState& s, JobQueue& queue, std::vector<std::uint64_t>& counts) {
     std::unique_ptr<ZSTD_CCtx, CCtxDeleter> cctx(ZSTD_createCCtx());
     std::vector<std::byte> buf;
     try {
@@ -155,7 +204,8 @@ void workerLoop(IngestState& s, JobQueue& queue) {
                   "level");
         zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_checksumFlag, 1), "checksum flag");
         while (auto job = queue.pop()) {
-            compressBrick(s, cctx.get(), *job, buf);
+            compressBrick(s, cctx.get(), *job, buf, counts);
+            s.buffers->give(std::move(job->voxels));
             ++s.bricksDone;
         }
     } catch (...) {
@@ -164,9 +214,17 @@ void workerLoop(IngestState& s, JobQueue& queue) {
     }
 }
 
-/// Level-0 histogram over [lo, hi]; stored bricks are read back and decompressed.
+/// Level-0 histogram over [lo, hi]: from the workers' counts per value where they kept them,
+/// else by reading every stored brick back and decompressing it.
 std::vector<std::uint64_t> buildHistogram(IngestState& s, std::uint32_t bins, double lo, double hi,
                                           unsigned threads) {
+    if (detail::countsValues(s.type)) {
+        const detail::HistogramBinner binner(s.type, lo, hi, bins);
+        std::vector<std::uint64_t> total(bins);
+        for (const auto& counts : s.valueCounts)
+            binner.addValueCounts(counts, total);
+        return total;
+    }
     const auto& level0 = s.layout.levels()[0];
     const std::uint32_t a = s.layout.geometry().apronVoxels, edge = s.layout.storedEdge();
     std::vector<std::vector<std::uint64_t>> partial(threads, std::vector<std::uint64_t>(bins));
@@ -217,39 +275,99 @@ void throwIfCancelled(const IngestConfig& config) {
         throw IngestCancelled("ingest cancelled; the partial store was removed");
 }
 
-/// Reads every slice of the source into the level chain, reporting progress. The source reads
-/// the next staging slab on a thread of its own while this one cuts the last into bricks: a
-/// reader that waits on the disk or on its sandboxed parser (TIFF, HDF5, DICOM, OpenVDB) then
-/// waits beside the cutting instead of before it. Reads stay one at a time and in order.
+/// The source's slices read in staging slabs, in order, on a thread of its own, one slab ahead
+/// of the consumer: a reader that waits on the disk or on its sandboxed parser (TIFF, HDF5,
+/// DICOM, OpenVDB) then waits beside the cutting instead of before it. Two slabs: the one
+/// handed out and the one being read.
+class SlabReader {
+  public:
+    SlabReader(VolumeSource& source, std::uint64_t slabSlices)
+        : mSource(source), mSlabSlices(slabSlices), mSliceBytes(source.info().sliceBytes()) {
+        for (auto& slab : mSlabs)
+            slab.resize(slabSlices * mSliceBytes);
+        mThread = std::jthread([this] { run(); });
+    }
+    ~SlabReader() {
+        {
+            std::lock_guard lock(mMutex);
+            mStopping = true;
+        }
+        mChanged.notify_all();
+        // The jthread joins here, after the read in progress (which cannot be interrupted).
+    }
+    SlabReader(const SlabReader&) = delete;
+    SlabReader& operator=(const SlabReader&) = delete;
+
+    /// Slab `handedOut()`'s slices (the slab before it goes back to the reader); rethrows
+    /// the reader's error (the source's FormatError).
+    std::span<const std::byte> next() {
+        std::unique_lock lock(mMutex);
+        if (mHandedOut > 0) { // the consumer is done with the last slab
+            ++mFreed;
+            mChanged.notify_all();
+        }
+        mChanged.wait(lock, [&] { return mRead > mHandedOut || mError; });
+        if (mError && mRead == mHandedOut) std::rethrow_exception(mError);
+        const std::uint64_t k = mHandedOut++;
+        const std::uint64_t z = k * mSlabSlices;
+        const std::uint64_t n = std::min(mSlabSlices, mSource.info().dims[2] - z);
+        return std::span(mSlabs[k % 2]).first(n * mSliceBytes);
+    }
+
+  private:
+    void run() {
+        const std::uint64_t depth = mSource.info().dims[2];
+        for (std::uint64_t k = 0, z = 0; z < depth; ++k, z += mSlabSlices) {
+            {
+                std::unique_lock lock(mMutex);
+                // Slab k reuses the buffer of slab k - 2: wait until it is handed back.
+                mChanged.wait(lock, [&] { return mStopping || k < mFreed + 2; });
+                if (mStopping) return;
+            }
+            const std::uint64_t n = std::min(mSlabSlices, depth - z);
+            try {
+                mSource.readSlices(n, std::span(mSlabs[k % 2]).first(n * mSliceBytes));
+            } catch (...) {
+                std::lock_guard lock(mMutex);
+                mError = std::current_exception();
+                mChanged.notify_all();
+                return;
+            }
+            std::lock_guard lock(mMutex);
+            ++mRead;
+            mChanged.notify_all();
+        }
+    }
+
+    VolumeSource& mSource;
+    const std::uint64_t mSlabSlices, mSliceBytes;
+    std::array<std::vector<std::byte>, 2> mSlabs;
+    std::mutex mMutex;
+    std::condition_variable mChanged;
+    std::uint64_t mRead = 0, mHandedOut = 0, mFreed = 0; ///< slabs
+    bool mStopping = false;
+    std::exception_ptr mError;
+    std::jthread mThread; ///< last: it starts once the rest is built and joins first
+};
+
+/// Reads every slice of the source into the level chain (SlabReader), reporting progress.
 void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestState& s,
                   const IngestConfig& config,
                   const std::function<void(const IngestProgress&)>& progress,
                   Clock::time_point start) {
     const VolumeInfo& info = source.info();
     const std::uint64_t sliceBytes = info.sliceBytes();
-    const std::uint64_t chunk = stagingSlices(info);
-    std::array<std::vector<std::byte>, 2> staging;
-    for (auto& slab : staging)
-        slab.resize(chunk * sliceBytes);
-    auto readFrom = [&](std::uint64_t z, std::vector<std::byte>& slab) {
-        const std::uint64_t n = std::min(chunk, info.dims[2] - z);
-        return std::async(std::launch::async, [&source, &slab, n, sliceBytes] {
-            source.readSlices(n, std::span(slab).first(n * sliceBytes));
-        });
-    };
-    // A pending read is waited for by its future's destructor on every way out.
-    std::future<void> next = readFrom(0, staging[0]);
-    for (std::uint64_t z = 0, b = 0; z < info.dims[2]; b ^= 1) {
+    SlabReader reader(source, stagingSlices(info));
+    for (std::uint64_t z = 0; z < info.dims[2];) {
         throwIfCancelled(config);
-        const std::uint64_t n = std::min(chunk, info.dims[2] - z);
         const auto readStart = Clock::now();
-        next.get(); // the reader's FormatError comes out here
+        const std::span<const std::byte> slab = reader.next(); // the reader's FormatError
         const auto cutStart = Clock::now();
         s.readNs += std::uint64_t(
             std::chrono::duration_cast<std::chrono::nanoseconds>(cutStart - readStart).count());
-        if (z + n < info.dims[2]) next = readFrom(z + n, staging[b ^ 1]);
+        const std::uint64_t n = slab.size() / sliceBytes;
         for (std::uint64_t i = 0; i < n; ++i)
-            level0.pushSlice(staging[b].data() + i * sliceBytes);
+            level0.pushSlice(slab.data() + i * sliceBytes);
         s.cutNs += nsSince(cutStart); // the queue's waits included: ingest() takes them out
         z += n;
         {
@@ -318,9 +436,10 @@ std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& conf
     const double queue = config.queueBricks ? config.queueBricks : 4 * threads;
     const double brick = double(layout.storedVoxels()) * vb;
     const double bricks = (queue + 2 * threads + 1) * brick;
-    // The records and the index encoded from them.
+    // The records and the index encoded from them; the workers' counts per value.
     const double index = 2.0 * double(layout.brickCount()) * double(sizeof(BrickRecord));
-    const double total = slabs + bricks + index;
+    const double counts = threads * double(detail::valueCountSize(info.type)) * 8.0;
+    const double total = slabs + bricks + index + counts;
     return total >= 1.8e19 ? std::numeric_limits<std::uint64_t>::max() : std::uint64_t(total);
 }
 
@@ -343,9 +462,13 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     if (config.staleFileRemoved)
         for (const std::string& stale : file.removedStalePartials())
             config.staleFileRemoved(stale);
-    IngestState s{layout, info.type, config.zstdLevel, file, {}, {}, {}, {}, {}, 0, 0, 0, {}, {}};
+    IngestState s{layout, info.type, config.zstdLevel, file};
     s.records.resize(layout.brickCount());
-    JobQueue queue(config.queueBricks ? config.queueBricks : 4 * threads);
+    s.valueCounts.assign(threads, std::vector<std::uint64_t>(detail::valueCountSize(info.type)));
+    const std::size_t queueBricks = config.queueBricks ? config.queueBricks : 4 * threads;
+    JobQueue queue(queueBricks);
+    BufferPool buffers(queueBricks + threads + 1);
+    s.buffers = &buffers;
 
     // One builder per level, each feeding the next; jobs go to the shared queue.
     const auto nLevels = static_cast<std::uint32_t>(layout.levels().size());
@@ -358,11 +481,12 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     };
     for (std::uint32_t l = nLevels; l-- > 0;)
         levels[l] = std::make_unique<detail::LevelBuilder>(
-            layout, l, info.type, sink, l + 1 < nLevels ? levels[l + 1].get() : nullptr);
+            layout, l, info.type, sink, l + 1 < nLevels ? levels[l + 1].get() : nullptr,
+            [&buffers] { return buffers.take(); });
     {
         std::vector<std::jthread> workers;
         for (unsigned t = 0; t < threads; ++t)
-            workers.emplace_back([&] { workerLoop(s, queue); });
+            workers.emplace_back([&, t] { workerLoop(s, queue, s.valueCounts[t]); });
         try {
             streamSlices(source, *levels[0], s, config, progress, start);
             queue.finish();

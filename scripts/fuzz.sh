@@ -61,7 +61,7 @@ nrrd_header)
     harness=NrrdHeaderFuzz
     sources=(brickstore/readers/NrrdReader.cpp brickstore/readers/detail/FolderPath.cpp
         brickstore/readers/detail/RawStream.cpp brickstore/readers/detail/GzipStream.cpp
-        "${reader_common[@]}")
+        brickstore/readers/detail/ReadAhead.cpp "${reader_common[@]}")
     folders=(brickstore brickstore/readers brickstore/readers/detail)
     libs=(-lzstd -lz)
     max_len=65536
@@ -91,7 +91,7 @@ metaimage)
     harness=MetaImageFuzz
     sources=(brickstore/readers/MetaImageReader.cpp brickstore/readers/detail/FolderPath.cpp
         brickstore/readers/detail/RawStream.cpp brickstore/readers/detail/GzipStream.cpp
-        "${reader_common[@]}")
+        brickstore/readers/detail/ReadAhead.cpp "${reader_common[@]}")
     folders=(brickstore brickstore/readers brickstore/readers/detail)
     libs=(-lzstd -lz)
     max_len=65536
@@ -100,6 +100,7 @@ vti)
     harness=VtiFuzz
     sources=(brickstore/readers/VtiReader.cpp brickstore/readers/detail/VtiXml.cpp
         brickstore/readers/detail/VtiStreams.cpp brickstore/readers/detail/RawStream.cpp
+        brickstore/readers/detail/GzipStream.cpp brickstore/readers/detail/ReadAhead.cpp
         "${reader_common[@]}")
     folders=(brickstore brickstore/readers brickstore/readers/detail)
     libs=(-lexpat -lzstd -lz)

@@ -273,4 +273,51 @@ void HistogramBinner::add(std::span<const std::byte> brick, std::uint32_t edge,
     });
 }
 
+void HistogramBinner::addValueCounts(std::span<const std::uint64_t> valueCounts,
+                                     std::span<std::uint64_t> counts) const {
+    if (valueCounts.size() != mTable.size())
+        throw std::invalid_argument("histogram: " + std::to_string(valueCounts.size()) +
+                                    " value counts for a table of " +
+                                    std::to_string(mTable.size()));
+    for (std::size_t v = 0; v < valueCounts.size(); ++v)
+        counts[mTable[v]] += valueCounts[v];
+}
+
+std::size_t valueCountSize(VoxelType type) {
+    return dispatch(type, [](auto t) -> std::size_t {
+        using T = decltype(t);
+        if constexpr (sizeof(T) <= 2 && std::is_integral_v<T>)
+            return std::size_t(1) << (8 * sizeof(T));
+        else
+            return 0;
+    });
+}
+
+bool countsValues(VoxelType type) {
+    return valueCountSize(type) != 0;
+}
+
+void countValues(VoxelType type, std::span<const std::byte> brick, std::uint32_t edge,
+                 const std::array<std::uint32_t, 3>& o, const std::array<std::uint64_t, 3>& e,
+                 std::span<std::uint64_t> valueCounts) {
+    if (valueCounts.size() != valueCountSize(type) || valueCounts.empty())
+        throw std::invalid_argument("countValues: " + std::to_string(valueCounts.size()) +
+                                    " counters for " + std::string(voxelTypeName(type)));
+    dispatch(type, [&](auto t) {
+        using T = decltype(t);
+        if constexpr (sizeof(T) <= 2 && std::is_integral_v<T>) {
+            using U = std::make_unsigned_t<T>;
+            const U* v = reinterpret_cast<const U*>(brick.data());
+            std::uint64_t* c = valueCounts.data();
+            for (std::uint64_t z = 0; z < e[2]; ++z)
+                for (std::uint64_t y = 0; y < e[1]; ++y) {
+                    const U* row = v + ((z + o[2]) * edge + (y + o[1])) * edge + o[0];
+                    for (std::uint64_t x = 0; x < e[0]; ++x)
+                        ++c[row[x]];
+                }
+        }
+        return 0;
+    });
+}
+
 } // namespace bc::brickstore::detail

@@ -57,12 +57,29 @@ class HistogramBinner {
              const std::array<std::uint32_t, 3>& origin, const std::array<std::uint64_t, 3>& extent,
              std::span<std::uint64_t> counts) const;
 
+    /// Adds counts per raw value (countsValues types: `valueCounts[v]` voxels of the value
+    /// whose bits, read as unsigned, are v), exactly as add() would have binned them.
+    void addValueCounts(std::span<const std::uint64_t> valueCounts,
+                        std::span<std::uint64_t> counts) const;
+
   private:
     VoxelType mType;
     double mLo, mHi;
     std::size_t mBins;
     std::vector<std::uint32_t> mTable;
 };
+
+/// Whether voxels of `type` can be counted per value before the histogram's range is known
+/// (8- and 16-bit integers: 2^8 or 2^16 counters), which lets ingest count them as it
+/// compresses instead of decompressing every brick again.
+bool countsValues(VoxelType type);
+/// The number of counters countValues() takes for `type` (0 unless countsValues).
+std::size_t valueCountSize(VoxelType type);
+/// Counts the voxels of box [origin, origin+extent) of a stored brick of edge `edge` per raw
+/// value into `valueCounts` (valueCountSize(type) long).
+void countValues(VoxelType type, std::span<const std::byte> brick, std::uint32_t edge,
+                 const std::array<std::uint32_t, 3>& origin,
+                 const std::array<std::uint64_t, 3>& extent, std::span<std::uint64_t> valueCounts);
 
 /// The histogram bin of `value` (clamped into range).
 std::size_t histogramBin(double value, double lo, double hi, std::size_t binCount);

@@ -8,10 +8,10 @@
 namespace bc::brickstore::detail {
 
 LevelBuilder::LevelBuilder(const StoreLayout& layout, std::uint32_t level, VoxelType type,
-                           Sink sink, LevelBuilder* next)
+                           Sink sink, LevelBuilder* next, TakeBuffer takeBuffer)
     : mLayout(layout), mLevel(level), mType(type), mVoxelBytes(voxelBytes(type)),
       mDims(layout.levels().at(level).dims), mRingSlices(layout.storedEdge()),
-      mSink(std::move(sink)), mNext(next) {
+      mSink(std::move(sink)), mNext(next), mTakeBuffer(std::move(takeBuffer)) {
     mRing.resize(std::size_t(mRingSlices) * mDims[0] * mDims[1] * mVoxelBytes);
     if (mNext) mDown.resize(((mDims[0] + 1) / 2) * ((mDims[1] + 1) / 2) * mVoxelBytes);
 }
@@ -52,7 +52,8 @@ void LevelBuilder::cutRow(std::uint32_t bz) {
         for (std::uint32_t bx = 0; bx < level.bricks[0]; ++bx) {
             BrickJob job;
             job.index = mLayout.indexOf({mLevel, {bx, by, bz}});
-            job.voxels.resize(mLayout.storedVoxels() * mVoxelBytes);
+            if (mTakeBuffer) job.voxels = mTakeBuffer();
+            job.voxels.resize(mLayout.storedVoxels() * mVoxelBytes); // every byte is cut
             cutBrick(bx, by, bz, job.voxels.data());
             mSink(std::move(job));
         }

@@ -21,9 +21,12 @@ struct BrickJob {
 class LevelBuilder {
   public:
     using Sink = std::function<void(BrickJob&&)>;
+    /// A buffer for the next brick (one the sink's consumer is done with, or empty: one of
+    /// the right size is allocated).
+    using TakeBuffer = std::function<std::vector<std::byte>()>;
 
     LevelBuilder(const StoreLayout& layout, std::uint32_t level, VoxelType type, Sink sink,
-                 LevelBuilder* next);
+                 LevelBuilder* next, TakeBuffer takeBuffer = {});
     /// Takes slice number `received()` of this level (dims.x * dims.y voxels).
     void pushSlice(const std::byte* slice);
     std::uint64_t received() const { return mReceived; }
@@ -44,6 +47,7 @@ class LevelBuilder {
     std::vector<std::byte> mDown; ///< next level's slice under construction
     Sink mSink;
     LevelBuilder* mNext;
+    TakeBuffer mTakeBuffer;
     std::uint64_t mReceived = 0;
     std::uint32_t mNextRow = 0;
 };

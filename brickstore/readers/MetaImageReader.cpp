@@ -33,9 +33,6 @@ using detail::words;
 
 namespace fs = std::filesystem;
 
-/// A header longer than this is not a header (a binary file opened by mistake, say).
-constexpr std::uint64_t kMaxHeaderBytes = 1 << 20;
-
 /// The header's fields by key, as written, and where the data of a LOCAL file starts.
 struct HeaderText {
     std::map<std::string, std::string> fields;
@@ -53,23 +50,8 @@ struct MetaHeader {
     std::string dataFile;                         ///< "LOCAL": data after the header
 };
 
-/// Reads one line (without its end) into `line`; false at the end of the file.
 bool readLine(std::istream& in, std::string& line, std::uint64_t& offset, const std::string& path) {
-    line.clear();
-    int c;
-    while ((c = in.get()) != std::char_traits<char>::eof()) {
-        if (++offset > kMaxHeaderBytes)
-            throw FormatError(path, "header",
-                              "no ElementDataFile line within the first 1 MiB; "
-                              "not a MetaImage header");
-        if (c == '\n') return true;
-        if (c == 0)
-            throw FormatError(path, "header",
-                              "NUL byte at byte " + std::to_string(offset - 1) +
-                                  "; not a MetaImage header");
-        line.push_back(static_cast<char>(c));
-    }
-    return !line.empty();
+    return detail::readHeaderLine(in, line, offset, path, "MetaImage", "ElementDataFile line");
 }
 
 /// Whether anything but white space follows in the (header) file, within the header limit.

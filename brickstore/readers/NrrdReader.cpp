@@ -31,9 +31,6 @@ using detail::words;
 
 namespace fs = std::filesystem;
 
-/// A header longer than this is not a header (a binary file opened by mistake, say).
-constexpr std::uint64_t kMaxHeaderBytes = 1 << 20;
-
 /// The header's fields by name, aliases folded ("datafile" -> "data file").
 struct HeaderText {
     std::map<std::string, std::string> fields;
@@ -59,17 +56,8 @@ std::string canonicalKey(const std::string& key) {
     return it == kAliases.end() ? key : it->second;
 }
 
-/// Reads one line (without its end) into `line`; false at the end of the file.
 bool readLine(std::istream& in, std::string& line, std::uint64_t& offset, const std::string& path) {
-    line.clear();
-    int c;
-    while ((c = in.get()) != std::char_traits<char>::eof()) {
-        if (++offset > kMaxHeaderBytes)
-            throw FormatError(path, "header", "no end of header within the first 1 MiB");
-        if (c == '\n') return true;
-        line.push_back(static_cast<char>(c));
-    }
-    return !line.empty();
+    return detail::readHeaderLine(in, line, offset, path, "NRRD", "end of header (a blank line)");
 }
 
 void checkMagic(const std::string& line, const std::string& path) {

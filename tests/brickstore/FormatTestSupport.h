@@ -157,4 +157,35 @@ inline void expectIngestsToSameVoxels(const brickstore::SourceSpec& original,
     }
 }
 
+/// The round trip of a format VTK writes (MetaImage, .vti): `scan` dumped to raw and written
+/// by writers/write_vtk_formats.py in each of `variants`; each written file (`fileOf(variant)`
+/// in the scan's folder) opened with `open` must show the scan's dims and spacing and a
+/// description naming `format`, then ingest to exactly the scan's voxels.
+template <typename FileOf, typename Open>
+void expectVtkWrittenScanRoundTrips(const SharedScan& scan,
+                                    const std::vector<std::string>& variants, FileOf fileOf,
+                                    Open open, const std::string& format) {
+    if (!pythonHas("numpy, vtkmodules.vtkIOImage, vtkmodules.vtkIOXML")) return;
+    if (!haveData(scan.file)) return missingData(scan.file);
+    TempDir dir;
+    const brickstore::SourceSpec original = sharedSpec(scan);
+    const brickstore::VolumeInfo info = dumpRaw(original, dir.file("src.raw"));
+    if (!runPython("brickstore/writers/write_vtk_formats.py",
+                   writerArgs(dir.file("src.raw"), info, dir.path().string(), variants)))
+        return;
+    for (const std::string& v : variants) {
+        brickstore::SourceSpec written;
+        written.input = dir.file(fileOf(v));
+        {
+            auto source = open(written.input);
+            EXPECT_EQ(source->info().dims, info.dims) << v;
+            for (int a = 0; a < 3; ++a)
+                EXPECT_NEAR(source->info().spacingMm[a], info.spacingMm[a], 1e-5) << v;
+            EXPECT_NE(source->info().description.find(format), std::string::npos)
+                << v << ": " << source->info().description;
+        }
+        expectIngestsToSameVoxels(original, written, scan.name + " " + v);
+    }
+}
+
 } // namespace bc::test

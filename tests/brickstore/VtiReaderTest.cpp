@@ -455,29 +455,9 @@ std::vector<std::string> vtiVariants(const std::string& scan) {
 class VtiRoundTrip : public ::testing::TestWithParam<test::SharedScan> {};
 
 TEST_P(VtiRoundTrip, VtkWrittenScanIngestsToTheSameVoxels) {
-    if (!test::pythonHas("numpy, vtkmodules.vtkIOImage, vtkmodules.vtkIOXML")) return;
-    const test::SharedScan& scan = GetParam();
-    if (!test::haveData(scan.file)) return test::missingData(scan.file);
-    test::TempDir dir;
-    const SourceSpec original = test::sharedSpec(scan);
-    const VolumeInfo info = test::dumpRaw(original, dir.file("src.raw"));
-    const std::vector<std::string> variants = vtiVariants(scan.name);
-    if (!test::runPython(
-            "brickstore/writers/write_vtk_formats.py",
-            test::writerArgs(dir.file("src.raw"), info, dir.path().string(), variants)))
-        return;
-    for (const std::string& v : variants) {
-        SourceSpec written;
-        written.input = dir.file(v + ".vti");
-        {
-            auto source = openVti(written.input);
-            EXPECT_EQ(source->info().dims, info.dims) << v;
-            for (int a = 0; a < 3; ++a)
-                EXPECT_NEAR(source->info().spacingMm[a], info.spacingMm[a], 1e-5) << v;
-            EXPECT_NE(source->info().description.find("VTK image data"), std::string::npos);
-        }
-        test::expectIngestsToSameVoxels(original, written, scan.name + " " + v);
-    }
+    test::expectVtkWrittenScanRoundTrips(
+        GetParam(), vtiVariants(GetParam().name), [](const std::string& v) { return v + ".vti"; },
+        openVti, "VTK image data");
 }
 
 INSTANTIATE_TEST_SUITE_P(VtiSharedScans, VtiRoundTrip, ::testing::ValuesIn(test::sharedScans()),

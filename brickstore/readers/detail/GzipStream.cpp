@@ -26,19 +26,12 @@ namespace {
 /// Compressed bytes read from the file at a time.
 constexpr std::size_t kGzipInputBytes = std::size_t(1) << 16;
 
-/// The one place zlib return codes become exceptions; Z_BUF_ERROR (no progress) is not fatal.
-int zlibCheck(int code, const z_stream& z, const std::string& file) {
-    if (code == Z_OK || code == Z_STREAM_END || code == Z_BUF_ERROR) return code;
-    if (code == Z_MEM_ERROR) throw std::bad_alloc();
-    throw FormatError(file, "data", std::string("gzip: ") + (z.msg ? z.msg : zError(code)));
-}
-
 class GzipStream final : public ByteStream {
   public:
     GzipStream(std::unique_ptr<ByteStream> compressed, const std::string& file)
         : mCompressed(std::move(compressed)), mFile(file), mInput(kGzipInputBytes) {
         // 15 + 32: a 32 KiB window, gzip or zlib wrapper detected from the header.
-        zlibCheck(inflateInit2(&mZ, 15 + 32), mZ, mFile);
+        zlibCheck(inflateInit2(&mZ, 15 + 32), mZ.msg, mFile, "gzip");
     }
     ~GzipStream() override { inflateEnd(&mZ); }
     GzipStream(const GzipStream&) = delete;
@@ -50,13 +43,13 @@ class GzipStream final : public ByteStream {
             if (mZ.avail_in == 0 && !mInputEnded) refill();
             if (mMemberEnded) {
                 if (mZ.avail_in == 0 && mInputEnded) break;
-                zlibCheck(inflateReset(&mZ), mZ, mFile); // another gzip member follows
+                zlibCheck(inflateReset(&mZ), mZ.msg, mFile, "gzip"); // another gzip member follows
                 mMemberEnded = false;
             }
             std::size_t want = std::min<std::size_t>(out.size() - done, UINT_MAX);
             mZ.next_out = reinterpret_cast<Bytef*>(out.data() + done);
             mZ.avail_out = static_cast<uInt>(want);
-            int rc = zlibCheck(inflate(&mZ, Z_NO_FLUSH), mZ, mFile);
+            int rc = zlibCheck(inflate(&mZ, Z_NO_FLUSH), mZ.msg, mFile, "gzip");
             std::size_t produced = want - mZ.avail_out;
             done += produced;
             mMemberEnded = rc == Z_STREAM_END;
@@ -100,6 +93,12 @@ class GzipStream final : public ByteStream {
 std::unique_ptr<ByteStream> openGzipStream(std::unique_ptr<ByteStream> compressed,
                                            const std::string& file) {
     return std::make_unique<GzipStream>(std::move(compressed), file);
+}
+
+int zlibCheck(int code, const char* message, const std::string& file, const std::string& what) {
+    if (code == Z_OK || code == Z_STREAM_END || code == Z_BUF_ERROR) return code;
+    if (code == Z_MEM_ERROR) throw std::bad_alloc();
+    throw FormatError(file, "data", what + ": " + (message ? message : zError(code)));
 }
 
 } // namespace bc::brickstore::detail

@@ -6,10 +6,37 @@
 #include <algorithm>
 #include <charconv>
 #include <cstdint>
+#include <istream>
 #include <string>
 #include <vector>
 
 namespace bc::brickstore::detail {
+
+/// A header longer than this is not a header (a binary file opened by mistake, say).
+constexpr std::uint64_t kMaxHeaderBytes = 1 << 20;
+
+/// Reads one line of a text header (without its end) into `line`, counting its bytes into
+/// `offset`; false at the end of the file. `format` names the header ("NRRD") and `end` the
+/// line that ends it, for the refusals. @throw FormatError(path, "header") when the header
+/// runs past kMaxHeaderBytes or holds a NUL byte (both: not a text header).
+inline bool readHeaderLine(std::istream& in, std::string& line, std::uint64_t& offset,
+                           const std::string& path, const char* format, const char* end) {
+    line.clear();
+    int c;
+    while ((c = in.get()) != std::char_traits<char>::eof()) {
+        if (++offset > kMaxHeaderBytes)
+            throw FormatError(path, "header",
+                              std::string("no ") + end + " within the first 1 MiB; not a " +
+                                  format + " header");
+        if (c == '\n') return true;
+        if (c == 0)
+            throw FormatError(path, "header",
+                              "NUL byte at byte " + std::to_string(offset - 1) + "; not a " +
+                                  format + " header");
+        line.push_back(static_cast<char>(c));
+    }
+    return !line.empty();
+}
 
 /// `s` without leading and trailing blanks, tabs and line ends.
 inline std::string trim(const std::string& s) {

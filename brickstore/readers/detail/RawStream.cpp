@@ -4,6 +4,7 @@
 #include "brickstore/readers/detail/RawStream.h"
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/readers/detail/ReadAhead.h"
 
 #include <algorithm>
 #include <array>
@@ -18,6 +19,7 @@
 #include <new>
 #include <vector>
 
+#include <sys/stat.h>
 #include <sys/types.h>
 // ZSTD_getFrameHeader: exported by libzstd, declared only in the static section.
 #define ZSTD_STATIC_LINKING_ONLY
@@ -43,21 +45,33 @@ struct FileCloser {
     void operator()(std::FILE* f) const { std::fclose(f); }
 };
 
+/// Files at least this large are read ahead (ReadAhead); smaller ones are left to the
+/// kernel's own read-ahead.
+constexpr std::uint64_t kReadAheadMinBytes = 64ull << 20;
+
 class FileStream final : public ByteStream {
   public:
-    FileStream(const std::string& path, std::uint64_t offsetBytes)
-        : mPath(path), mFile(std::fopen(path.c_str(), "rb")) {
+    /// `readAhead`: a large file is read ahead of this stream on a thread of its own.
+    FileStream(const std::string& path, std::uint64_t offsetBytes, bool readAhead = false)
+        : mPath(path), mFile(std::fopen(path.c_str(), "rb")), mPosition(offsetBytes) {
         if (!mFile)
             throw FormatError(path, "path", std::string("cannot open: ") + std::strerror(errno));
         if (offsetBytes > std::uint64_t(std::numeric_limits<off_t>::max()) ||
             ::fseeko(mFile.get(), off_t(offsetBytes), SEEK_SET) != 0)
             throw FormatError(path, "path", "cannot seek to byte " + std::to_string(offsetBytes));
+        struct stat st {};
+        if (readAhead && ::fstat(::fileno(mFile.get()), &st) == 0 && S_ISREG(st.st_mode) &&
+            std::uint64_t(st.st_size) >= kReadAheadMinBytes)
+            mAhead = std::make_unique<ReadAhead>(::fileno(mFile.get()), offsetBytes,
+                                                 std::uint64_t(st.st_size));
     }
 
     std::size_t read(std::span<std::byte> out) override {
         std::size_t n = std::fread(out.data(), 1, out.size(), mFile.get());
         if (n < out.size() && std::ferror(mFile.get()))
             throw FormatError(mPath, "data", std::string("read error: ") + std::strerror(errno));
+        mPosition += n;
+        if (mAhead) mAhead->reached(mPosition);
         return n;
     }
 
@@ -72,6 +86,8 @@ class FileStream final : public ByteStream {
   private:
     std::string mPath;
     std::unique_ptr<std::FILE, FileCloser> mFile;
+    std::uint64_t mPosition;
+    std::unique_ptr<ReadAhead> mAhead; ///< after mFile: it stops before the file closes
 };
 
 struct DCtxDeleter {
@@ -211,7 +227,7 @@ class RawVoxelSource final : public VolumeSource {
 } // namespace
 
 std::unique_ptr<ByteStream> openFileStream(const std::string& path, std::uint64_t offsetBytes) {
-    return std::make_unique<FileStream>(path, offsetBytes);
+    return std::make_unique<FileStream>(path, offsetBytes, /*readAhead=*/true);
 }
 
 std::unique_ptr<ByteStream> openZstdStream(std::unique_ptr<ByteStream> compressed,

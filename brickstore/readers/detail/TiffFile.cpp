@@ -118,6 +118,7 @@ TiffFile::TiffFile(const std::string& path, bool namePages) : mPath(path), mName
 }
 
 TiffFile::~TiffFile() {
+    mAhead.reset(); // its thread reads the file's descriptor
     if (mTiff) TIFFClose(mTiff);
 }
 
@@ -254,10 +255,8 @@ std::uint64_t TiffFile::checkStrile(std::uint32_t index, bool tiled, const char*
 }
 
 void TiffFile::readAhead() {
-    if (mReadEnd + kReadAheadBytes / 2 <= mAdvisedEnd) return; // asked in half-window steps
-    const std::uint64_t from = std::max(mReadEnd, mAdvisedEnd);
-    mAdvisedEnd = mReadEnd + kReadAheadBytes;
-    ::posix_fadvise(TIFFFileno(mTiff), off_t(from), off_t(mAdvisedEnd - from), POSIX_FADV_WILLNEED);
+    if (!mAhead) mAhead = std::make_unique<ReadAhead>(TIFFFileno(mTiff), mReadEnd, mFileBytes);
+    mAhead->reached(mReadEnd);
 }
 
 void willNeed(const std::string& path) {

@@ -4,10 +4,12 @@
 // Defined in TiffFile.cpp, the one place libtiff's errors become FormatErrors: every open has
 // its own error handler, so libtiff's message ends the FormatError instead of reaching stderr.
 #include "brickstore/VoxelType.h"
+#include "brickstore/readers/detail/ReadAhead.h"
 
 #include <cstdarg>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -39,8 +41,8 @@ struct TiffResolution {
     std::uint16_t unit = 2;
 };
 
-/// How far ahead of its decoding a TIFF reader asks the kernel to read (TiffFile::readAhead,
-/// willNeed): the sandbox's slab.
+/// How far ahead of its decoding a TIFF folder's reader asks the kernel to read its next files
+/// (willNeed); one file is read ahead by ReadAhead's window (TiffFile::readAhead).
 constexpr std::uint64_t kReadAheadBytes = 64ull << 20;
 
 /// Asks the kernel to read the whole file at `path` into the page cache, without waiting (a
@@ -85,9 +87,10 @@ class TiffFile {
     /// @throw FormatError(path, "StripByteCounts"/"TileByteCounts", ...) for data past the
     /// file's end, FormatError(path, "data") when libtiff cannot decode it.
     void readPage(const TiffPage& page, std::span<std::byte> out);
-    /// Asks the kernel to read the kReadAheadBytes past the last strip or tile read: in the
-    /// parser sandbox the child decodes a slab and then waits while the pipe drains, so the
-    /// next pages come from the disk meanwhile instead of after (pages are written in order).
+    /// Moves the file's read-ahead window (ReadAhead, a thread of its own) past the last strip
+    /// or tile read: in the parser sandbox the child decodes a slab and then waits while the
+    /// pipe drains and the ingest cuts bricks, so the next pages come from the disk meanwhile
+    /// instead of after (pages are written in order).
     void readAhead();
 
     /// "page 3: " in a multi-page file, "" otherwise: how errors name the page.
@@ -110,9 +113,9 @@ class TiffFile {
     struct tiff* mTiff = nullptr;
     std::uint64_t mFileBytes = 0;
     std::uint64_t mPage = 0;
-    std::uint64_t mReadEnd = 0;    ///< the end of the furthest strip or tile read
-    std::uint64_t mAdvisedEnd = 0; ///< how far readAhead() has asked the kernel to read
-    mutable std::string mError;    ///< libtiff's first error since the last call that checks
+    std::uint64_t mReadEnd = 0;        ///< the end of the furthest strip or tile read
+    std::unique_ptr<ReadAhead> mAhead; ///< from the first readAhead(); ends before TIFFClose
+    mutable std::string mError;        ///< libtiff's first error since the last call that checks
     std::vector<std::byte> mTile;
 };
 

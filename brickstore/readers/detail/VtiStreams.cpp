@@ -3,6 +3,7 @@
 // says the block ends.
 #include "brickstore/readers/detail/VtiStreams.h"
 #include "brickstore/Error.h"
+#include "brickstore/readers/detail/GzipStream.h"
 
 #include <algorithm>
 #include <climits>
@@ -54,14 +55,8 @@ class WindowStream final : public ByteStream {
     std::uint64_t mLeft;
 };
 
-/// The one place zlib return codes become exceptions here; Z_BUF_ERROR (no progress) is not
-/// fatal.
-int zlibCheck(int code, const z_stream& z, const std::string& file, std::uint64_t block) {
-    if (code == Z_OK || code == Z_STREAM_END || code == Z_BUF_ERROR) return code;
-    if (code == Z_MEM_ERROR) throw std::bad_alloc();
-    throw FormatError(file, "data",
-                      "zlib block " + std::to_string(block) + ": " +
-                          (z.msg ? z.msg : zError(code)));
+std::string blockName(std::uint64_t block) {
+    return "zlib block " + std::to_string(block);
 }
 
 class ZlibBlockStream final : public ByteStream {
@@ -70,7 +65,7 @@ class ZlibBlockStream final : public ByteStream {
                     const VtiBlocks& blocks, const std::string& file)
         : mSizes(std::move(sizes)), mData(std::move(data)), mBlocks(blocks), mFile(file),
           mInput(kInputBytes) {
-        zlibCheck(inflateInit(&mZ), mZ, mFile, 0);
+        zlibCheck(inflateInit(&mZ), mZ.msg, mFile, blockName(0));
     }
     ~ZlibBlockStream() override { inflateEnd(&mZ); }
     ZlibBlockStream(const ZlibBlockStream&) = delete;
@@ -85,7 +80,7 @@ class ZlibBlockStream final : public ByteStream {
                 std::min<std::uint64_t>({out.size() - done, mOutLeft, std::uint64_t(UINT_MAX)}));
             mZ.next_out = reinterpret_cast<Bytef*>(out.data() + done);
             mZ.avail_out = static_cast<uInt>(want);
-            const int rc = zlibCheck(inflate(&mZ, Z_NO_FLUSH), mZ, mFile, mBlock);
+            const int rc = zlibCheck(inflate(&mZ, Z_NO_FLUSH), mZ.msg, mFile, blockName(mBlock));
             const std::size_t produced = want - mZ.avail_out;
             done += produced;
             mOutLeft -= produced;
@@ -129,7 +124,7 @@ class ZlibBlockStream final : public ByteStream {
                              "compressed size of block " + std::to_string(mBlock));
         mOutLeft = blockBytes(mBlock);
         mStreamEnded = false;
-        zlibCheck(inflateReset(&mZ), mZ, mFile, mBlock);
+        zlibCheck(inflateReset(&mZ), mZ.msg, mFile, blockName(mBlock));
         return true;
     }
 
@@ -163,7 +158,7 @@ class ZlibBlockStream final : public ByteStream {
             std::byte extra{};
             mZ.next_out = reinterpret_cast<Bytef*>(&extra);
             mZ.avail_out = 1;
-            const int rc = zlibCheck(inflate(&mZ, Z_NO_FLUSH), mZ, mFile, mBlock);
+            const int rc = zlibCheck(inflate(&mZ, Z_NO_FLUSH), mZ.msg, mFile, blockName(mBlock));
             if (mZ.avail_out == 0)
                 throw FormatError(mFile, "data",
                                   "zlib block " + std::to_string(mBlock) +
