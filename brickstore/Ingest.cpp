@@ -43,16 +43,16 @@ std::size_t zstdCheck(std::size_t code, const char* what) {
     return code;
 }
 
-/// Bounded queue of cut bricks between the reading thread and the compression workers.
+/// The bricks of finished rows, from the reading thread to the compression workers. Jobs are
+/// indices (a worker cuts its brick from the level's ring), so the queue holds a row or two's
+/// worth of them at most: the rings bound how far the reading thread runs ahead.
 class JobQueue {
   public:
-    explicit JobQueue(std::size_t capacity) : mCapacity(capacity) {}
-    /// Blocks while full. Returns false if the queue was aborted.
+    /// Returns false if the queue was aborted.
     bool push(detail::BrickJob&& job) {
-        std::unique_lock lock(mMutex);
-        mNotFull.wait(lock, [&] { return mJobs.size() < mCapacity || mClosed; });
+        std::lock_guard lock(mMutex);
         if (mClosed) return false;
-        mJobs.push_back(std::move(job));
+        mJobs.push_back(job);
         mNotEmpty.notify_one();
         return true;
     }
@@ -60,9 +60,8 @@ class JobQueue {
         std::unique_lock lock(mMutex);
         mNotEmpty.wait(lock, [&] { return !mJobs.empty() || mClosed || mDone; });
         if (mClosed || mJobs.empty()) return std::nullopt;
-        detail::BrickJob job = std::move(mJobs.front());
+        detail::BrickJob job = mJobs.front();
         mJobs.pop_front();
-        mNotFull.notify_one();
         return job;
     }
     /// No more jobs will come; workers drain what is queued.
@@ -77,39 +76,13 @@ class JobQueue {
         mClosed = true;
         mJobs.clear();
         mNotEmpty.notify_all();
-        mNotFull.notify_all();
     }
 
   private:
-    std::size_t mCapacity;
     std::mutex mMutex;
-    std::condition_variable mNotEmpty, mNotFull;
+    std::condition_variable mNotEmpty;
     std::deque<detail::BrickJob> mJobs;
     bool mDone = false, mClosed = false;
-};
-
-/// Brick buffers passed back from the workers to the cutting thread, so that a brick is not a
-/// fresh allocation (zeroed, and page-faulted in when it is mmapped) each time. Holds at most
-/// `capacity` idle buffers.
-class BufferPool {
-  public:
-    explicit BufferPool(std::size_t capacity) : mCapacity(capacity) {}
-    std::vector<std::byte> take() {
-        std::lock_guard lock(mMutex);
-        if (mIdle.empty()) return {};
-        std::vector<std::byte> b = std::move(mIdle.back());
-        mIdle.pop_back();
-        return b;
-    }
-    void give(std::vector<std::byte>&& b) {
-        std::lock_guard lock(mMutex);
-        if (mIdle.size() < mCapacity) mIdle.push_back(std::move(b));
-    }
-
-  private:
-    std::size_t mCapacity;
-    std::mutex mMutex;
-    std::vector<std::vector<std::byte>> mIdle;
 };
 
 /// Everything the workers share while an ingest runs.
@@ -126,51 +99,58 @@ struct IngestState {
     /// Per worker: level-0 voxels counted per raw value as they are compressed (8- and
     /// 16-bit integer types; empty otherwise), binned once the value range is known.
     std::vector<std::vector<std::uint64_t>> valueCounts;
-    BufferPool* buffers = nullptr;
+    /// Every level's builder: a failed worker aborts them, releasing a waiting reader.
+    std::vector<detail::LevelBuilder*> levels;
     std::atomic<std::uint64_t> bricksDone{0};
     std::atomic<std::uint64_t> uncompressedBytes{0};
-    std::atomic<std::uint64_t> compressNs{0}, writeNs{0};
-    std::uint64_t readNs = 0, cutNs = 0, queueWaitNs = 0; ///< the reading thread's
+    std::atomic<std::uint64_t> brickCutNs{0}, compressNs{0}, writeNs{0};
+    std::uint64_t readNs = 0, cutNs = 0; ///< the reading thread's
     std::mutex errorMutex;
     std::exception_ptr error;
 
     void fail(std::exception_ptr e) {
-        std::lock_guard lock(errorMutex);
-        if (!error) error = e;
+        {
+            std::lock_guard lock(errorMutex);
+            if (!error) error = e;
+        }
+        for (detail::LevelBuilder* level : levels)
+            level->abort();
     }
 };
 
 /// Counts a level-0 brick's own voxels (its payload, no apron) per value.
-void countBrick(IngestState& s, const detail::BrickJob& job, bool constant,
-                std::vector<std::uint64_t>& counts) {
+void countBrick(IngestState& s, const detail::BrickJob& job, std::span<const std::byte> voxels,
+                bool constant, std::vector<std::uint64_t>& counts) {
     if (counts.empty() || job.index >= s.layout.levels()[0].brickCount()) return;
     const auto extent = s.layout.payloadExtent(s.layout.keyOf(job.index));
     if (constant) {
         std::uint16_t raw = 0; // the value's bits, read as unsigned (little-endian host)
-        std::memcpy(&raw, job.voxels.data(), voxelBytes(s.type));
+        std::memcpy(&raw, voxels.data(), voxelBytes(s.type));
         counts[raw] += extent[0] * extent[1] * extent[2];
         return;
     }
     const std::uint32_t a = s.layout.geometry().apronVoxels;
-    detail::countValues(s.type, job.voxels, s.layout.storedEdge(), {a, a, a}, extent, counts);
+    detail::countValues(s.type, voxels, s.layout.storedEdge(), {a, a, a}, extent, counts);
 }
 
-void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
-                   std::vector<std::byte>& buf, std::vector<std::uint64_t>& counts) {
+/// Compresses `job`'s brick, cut into `voxels`, and appends it to the store file.
+void compressBrick(IngestState& s, ZSTD_CCtx* cctx, const detail::BrickJob& job,
+                   std::span<const std::byte> voxels, std::vector<std::byte>& buf,
+                   std::vector<std::uint64_t>& counts) {
     const auto start = Clock::now();
     BrickRecord& rec = s.records[job.index];
     const std::size_t vb = voxelBytes(s.type);
-    if (detail::isConstant(job.voxels, vb)) {
-        rec.range = detail::brickRange(s.type, std::span(job.voxels).first(vb));
-        countBrick(s, job, true, counts);
+    if (detail::isConstant(voxels, vb)) {
+        rec.range = detail::brickRange(s.type, voxels.first(vb));
+        countBrick(s, job, voxels, true, counts);
         s.compressNs += nsSince(start);
         return;
     }
-    countBrick(s, job, false, counts);
+    countBrick(s, job, voxels, false, counts);
     // Only the leaves inside the volume are kept (FORMAT.md "Leaf table"). Their windows
     // still reach every value of the stored brick (what lies past the volume's far border is
     // clamped copies of the voxels at it): the brick's range is theirs; verify checks it.
-    auto leafRanges = detail::leafRanges(s.type, job.voxels, s.layout.geometry(),
+    auto leafRanges = detail::leafRanges(s.type, voxels, s.layout.geometry(),
                                          s.layout.leavesInside(s.layout.keyOf(job.index)));
     rec.range = leafRanges.front();
     for (const auto& r : leafRanges) {
@@ -178,10 +158,10 @@ void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
         rec.range.max = std::max(rec.range.max, r.max);
     }
     auto leaves = detail::encodeLeafTable(leafRanges);
-    buf.resize(ZSTD_compressBound(job.voxels.size()) + leaves.size());
-    std::size_t n = zstdCheck(ZSTD_compress2(cctx, buf.data(), buf.size() - leaves.size(),
-                                             job.voxels.data(), job.voxels.size()),
-                              "compress");
+    buf.resize(ZSTD_compressBound(voxels.size()) + leaves.size());
+    std::size_t n = zstdCheck(
+        ZSTD_compress2(cctx, buf.data(), buf.size() - leaves.size(), voxels.data(), voxels.size()),
+        "compress");
     std::copy(leaves.begin(), leaves.end(), buf.begin() + std::ptrdiff_t(n));
     rec.flags = kBrickStored;
     rec.compressedBytes = static_cast<std::uint32_t>(n);
@@ -193,19 +173,22 @@ void compressBrick(IngestState& s, ZSTD_CCtx* cctx, detail::BrickJob& job,
         std::chrono::duration_cast<std::chrono::nanoseconds>(writeStart - start).count());
     rec.offset = s.file.append(std::span(buf).first(n + leaves.size()));
     s.writeNs += nsSince(writeStart);
-    s.uncompressedBytes += job.voxels.size();
+    s.uncompressedBytes += voxels.size();
 }
 
 void workerLoop(IngestState& s, JobQueue& queue, std::vector<std::uint64_t>& counts) {
     std::unique_ptr<ZSTD_CCtx, CCtxDeleter> cctx(ZSTD_createCCtx());
     std::vector<std::byte> buf;
+    std::vector<std::byte> voxels(s.layout.storedVoxels() * voxelBytes(s.type));
     try {
         zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, s.zstdLevel),
                   "level");
         zstdCheck(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_checksumFlag, 1), "checksum flag");
         while (auto job = queue.pop()) {
-            compressBrick(s, cctx.get(), *job, buf, counts);
-            s.buffers->give(std::move(job->voxels));
+            const auto cutStart = Clock::now();
+            job->level->cut(*job, voxels.data());
+            s.brickCutNs += nsSince(cutStart);
+            compressBrick(s, cctx.get(), *job, voxels, buf, counts);
             ++s.bricksDone;
         }
     } catch (...) {
@@ -368,7 +351,7 @@ void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestStat
         const std::uint64_t n = slab.size() / sliceBytes;
         for (std::uint64_t i = 0; i < n; ++i)
             level0.pushSlice(slab.data() + i * sliceBytes);
-        s.cutNs += nsSince(cutStart); // the queue's waits included: ingest() takes them out
+        s.cutNs += nsSince(cutStart); // the rings' waits included: ingest() takes them out
         z += n;
         {
             std::lock_guard lock(s.errorMutex);
@@ -386,14 +369,21 @@ void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestStat
     }
 }
 
-/// Refuses an ingest whose buffers would exceed the memory budget, before any is allocated;
-/// returns the estimate and the budget.
-std::array<std::uint64_t, 2> checkMemoryBudget(const VolumeInfo& info, const IngestConfig& config,
-                                               const std::string& inputName) {
+struct MemoryPlan {
+    std::uint64_t bytes = 0, budget = 0;
+    bool pipelined = true; ///< rings of 2B + 2A slices (else B + 2A)
+};
+
+/// The rings pipelined when that fits the memory budget, else the least; refuses an ingest
+/// whose buffers would exceed the budget either way, before any is allocated.
+MemoryPlan planMemory(const VolumeInfo& info, const IngestConfig& config,
+                      const std::string& inputName) {
     const std::uint64_t budget =
         config.memoryBudgetBytes ? config.memoryBudgetBytes : defaultIngestMemoryBudgetBytes();
-    const std::uint64_t need = ingestMemoryBytes(info, config);
-    if (need <= budget) return {need, budget};
+    const std::uint64_t pipelined = ingestMemoryBytes(info, config, true);
+    if (pipelined <= budget) return {pipelined, budget, true};
+    const std::uint64_t need = ingestMemoryBytes(info, config, false);
+    if (need <= budget) return {need, budget, false};
     throw FormatError(inputName, "dims",
                       dimsText(info.dims) + " " + std::string(voxelTypeName(info.type)) +
                           " needs " + bytesText(double(need)) +
@@ -415,27 +405,29 @@ std::uint64_t defaultIngestMemoryBudgetBytes() {
     return std::max<std::uint64_t>(budget, std::uint64_t(64) << 20);
 }
 
-std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& config) {
+std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& config,
+                                bool pipelined) {
     const StoreLayout layout(info.dims, config.geometry);
-    const double vb = double(voxelBytes(info.type)), edge = layout.storedEdge();
+    const double vb = double(voxelBytes(info.type));
     const double slice = double(info.dims[0]) * double(info.dims[1]) * vb;
-    // Slab rings of every level, the half-resolution slice each feeds the next, the two
-    // staging slabs (one cut while the next is read), and one slice for the reader's own
-    // decoding (DICOM, mosaic).
+    // Slab rings of every level (2B + 2A slices, or the level's depth), the half-resolution
+    // slice each feeds the next, the two staging slabs (one cut while the next is read), and
+    // one slice for the reader's own decoding (DICOM, mosaic).
     double slabs = 2.0 * double(stagingSlices(info)) * slice + slice;
     const auto& levels = layout.levels();
     for (std::size_t l = 0; l < levels.size(); ++l) {
         const double dx = double(levels[l].dims[0]), dy = double(levels[l].dims[1]);
-        slabs += edge * dx * dy * vb;
+        const std::uint64_t extra = pipelined ? layout.geometry().brickVoxels : 0;
+        slabs += double(detail::LevelBuilder::ringSlices(layout, std::uint32_t(l), extra)) * dx *
+                 dy * vb;
         if (l + 1 < levels.size()) slabs += std::ceil(dx / 2) * std::ceil(dy / 2) * vb;
     }
-    // Bricks queued, being compressed (with a compression buffer each) and being cut; the
-    // histogram pass holds a brick and a frame per worker.
+    // Per worker a brick cut from a ring and a compression buffer (the histogram pass of f32
+    // holds a brick and a frame per worker, after them); the queued jobs are indices.
     const double threads =
         config.threads ? config.threads : std::max(1u, std::thread::hardware_concurrency());
-    const double queue = config.queueBricks ? config.queueBricks : 4 * threads;
     const double brick = double(layout.storedVoxels()) * vb;
-    const double bricks = (queue + 2 * threads + 1) * brick;
+    const double bricks = 2 * threads * brick;
     // The records and the index encoded from them; the workers' counts per value.
     const double index = 2.0 * double(layout.brickCount()) * double(sizeof(BrickRecord));
     const double counts = threads * double(detail::valueCountSize(info.type)) * 8.0;
@@ -452,7 +444,7 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
                                                              : info.description;
     validateVolumeInfo(info, inputName);
     StoreLayout layout(info.dims, config.geometry); // throws std::invalid_argument
-    const auto [memoryBytes, memoryBudgetBytes] = checkMemoryBudget(info, config, inputName);
+    const MemoryPlan memory = planMemory(info, config, inputName);
     const std::uint32_t bins =
         std::clamp<std::uint32_t>(config.histogramBins, 1, detail::kMaxHistogramBins);
     const unsigned threads =
@@ -465,24 +457,21 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     IngestState s{layout, info.type, config.zstdLevel, file};
     s.records.resize(layout.brickCount());
     s.valueCounts.assign(threads, std::vector<std::uint64_t>(detail::valueCountSize(info.type)));
-    const std::size_t queueBricks = config.queueBricks ? config.queueBricks : 4 * threads;
-    JobQueue queue(queueBricks);
-    BufferPool buffers(queueBricks + threads + 1);
-    s.buffers = &buffers;
+    JobQueue queue;
 
     // One builder per level, each feeding the next; jobs go to the shared queue.
     const auto nLevels = static_cast<std::uint32_t>(layout.levels().size());
     std::vector<std::unique_ptr<detail::LevelBuilder>> levels(nLevels);
     auto sink = [&](detail::BrickJob&& job) {
         throwIfCancelled(config); // between bricks too: a row of wide bricks takes a while
-        const auto waitStart = Clock::now();
         queue.push(std::move(job));
-        s.queueWaitNs += nsSince(waitStart);
     };
     for (std::uint32_t l = nLevels; l-- > 0;)
         levels[l] = std::make_unique<detail::LevelBuilder>(
             layout, l, info.type, sink, l + 1 < nLevels ? levels[l + 1].get() : nullptr,
-            [&buffers] { return buffers.take(); });
+            memory.pipelined ? layout.geometry().brickVoxels : 0);
+    for (const auto& level : levels)
+        s.levels.push_back(level.get());
     {
         std::vector<std::jthread> workers;
         for (unsigned t = 0; t < threads; ++t)
@@ -542,13 +531,15 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     report.uncompressedBrickBytes = s.uncompressedBytes;
     report.constantBrickBytes = report.constantBricks * brickBytes;
     report.fileBytes = h.fileBytes;
-    report.memoryBytes = memoryBytes;
-    report.memoryBudgetBytes = memoryBudgetBytes;
+    report.memoryBytes = memory.bytes;
+    report.memoryBudgetBytes = memory.budget;
     report.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     report.times.finish = std::chrono::duration<double>(Clock::now() - finishStart).count();
     report.times.read = 1e-9 * double(s.readNs);
-    report.times.queueWait = 1e-9 * double(s.queueWaitNs);
-    report.times.cut = 1e-9 * double(s.cutNs - std::min(s.cutNs, s.queueWaitNs));
+    for (const auto& level : levels)
+        report.times.ringWait += level->waitedSeconds();
+    report.times.cut = std::max(0.0, 1e-9 * double(s.cutNs) - report.times.ringWait);
+    report.times.brickCut = 1e-9 * double(s.brickCutNs.load());
     report.times.compress = 1e-9 * double(s.compressNs.load());
     report.times.write = 1e-9 * double(s.writeNs.load());
     return report;

@@ -18,7 +18,6 @@ struct IngestConfig {
     unsigned threads = 0; ///< compression workers; 0 = hardware concurrency
     int zstdLevel = 3;
     std::uint32_t histogramBins = 256;
-    std::uint32_t queueBricks = 0; ///< bricks in flight; 0 = 4 per worker
     /// Most bytes ingest may allocate (slab buffers of every level, bricks in flight, the
     /// brick index); checked before anything is allocated. 0 = defaultIngestMemoryBudgetBytes().
     std::uint64_t memoryBudgetBytes = 0;
@@ -44,10 +43,14 @@ class IngestCancelled : public std::runtime_error {
 std::uint64_t defaultIngestMemoryBudgetBytes();
 
 /// What an ingest of `info` with `config` will allocate at its peak, in bytes: the slab ring
-/// of B + 2A slices and the half-resolution slice of every pyramid level, the staging slabs,
-/// the reader's slice, the bricks queued and being compressed, and the brick index.
-/// @throw std::invalid_argument on a geometry outside the accepted ranges.
-std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& config);
+/// of every pyramid level and its half-resolution slice, the staging slabs, the reader's
+/// slice, the workers' bricks and compression buffers, and the brick index. `pipelined`: rings
+/// of 2B + 2A slices, so that the reading thread fills a row while the workers cut the last
+/// (what ingest uses when it fits the budget); else B + 2A (the least it needs: the reader
+/// waits for each row to be cut). @throw std::invalid_argument on a geometry outside the
+/// accepted ranges.
+std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& config,
+                                bool pipelined = true);
 
 struct IngestProgress {
     std::uint64_t bricksDone = 0;
@@ -61,9 +64,10 @@ struct IngestProgress {
 /// the workers' are seconds summed over the workers (they run side by side).
 struct IngestTimes {
     double read = 0.0;      ///< waiting for the source's next slab (read on its own thread)
-    double cut = 0.0;       ///< cutting slices into bricks and the coarser levels
-    double queueWait = 0.0; ///< the reading thread waiting for a worker to take a brick
-    double compress = 0.0;  ///< workers: leaf ranges and zstd, summed
+    double cut = 0.0;       ///< slices into the levels' rings, and the coarser levels' averaging
+    double ringWait = 0.0;  ///< the reading thread waiting for workers to cut a ring slot free
+    double brickCut = 0.0;  ///< workers: cutting bricks from the rings, summed
+    double compress = 0.0;  ///< workers: leaf ranges, value counts and zstd, summed
     double write = 0.0;     ///< workers: appending frames to the store file, summed
     double histogram = 0.0; ///< the histogram pass over the stored bricks (wall)
     double finish = 0.0;    ///< the index, the header and the commit (wall)

@@ -233,16 +233,17 @@ def main():
         print(f"| {k} | {v:.0f} |")
     zstd = ceilings["zstd -T2 -3 (read, compress, write)"]
     print("\n| format | input GB | s | input MB/s | voxel MB/s | ÷ zstd -T2 | bricks/s "
-          "| peak RSS MiB | read+decode s | cut s | wait s | compress s (sum) "
-          "| write s (sum) | histogram s |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| peak RSS MiB | read+decode s | slices s | ring wait s | cut s (sum) "
+          "| compress s (sum) | write s (sum) | histogram s |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         t = r["times"]
         voxel = r["sourceBytes"] / 1e6 / r["wallS"]
         print(f"| {r['format']} | {r['inputBytes'] / 1e9:.2f} | {r['wallS']:.1f} "
               f"| {r['inputBytes'] / 1e6 / r['wallS']:.0f} | {voxel:.0f} | {voxel / zstd:.2f} "
               f"| {r['bricks'] / r['wallS']:.0f} | {r['peakRssMiB']:.0f} | {t['read']:.1f} "
-              f"| {t['cut']:.1f} | {t['queueWait']:.1f} | {t['compress']:.1f} "
+              f"| {t['cut']:.1f} | {t['ringWait']:.1f} | {t['brickCut']:.1f} "
+              f"| {t['compress']:.1f} "
               f"| {t['write']:.1f} | {t['histogram']:.1f} |")
     if args.json:
         with open(args.json, "w") as f:

@@ -3,15 +3,23 @@
 #include "brickstore/detail/BrickSummary.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstring>
 
 namespace bc::brickstore::detail {
 
+std::uint64_t LevelBuilder::ringSlices(const StoreLayout& layout, std::uint32_t level,
+                                       std::uint64_t extra) {
+    const std::uint64_t depth = layout.levels().at(level).dims[2];
+    return std::max<std::uint64_t>(1, std::min(layout.storedEdge() + extra, depth));
+}
+
 LevelBuilder::LevelBuilder(const StoreLayout& layout, std::uint32_t level, VoxelType type,
-                           Sink sink, LevelBuilder* next, TakeBuffer takeBuffer)
+                           Sink sink, LevelBuilder* next, std::uint64_t extraSlices)
     : mLayout(layout), mLevel(level), mType(type), mVoxelBytes(voxelBytes(type)),
-      mDims(layout.levels().at(level).dims), mRingSlices(layout.storedEdge()),
-      mSink(std::move(sink)), mNext(next), mTakeBuffer(std::move(takeBuffer)) {
+      mDims(layout.levels().at(level).dims), mRingSlices(ringSlices(layout, level, extraSlices)),
+      mSink(std::move(sink)), mNext(next),
+      mUncut(layout.levels().at(level).bricks[2], kNotHandedOut) {
     mRing.resize(std::size_t(mRingSlices) * mDims[0] * mDims[1] * mVoxelBytes);
     if (mNext) mDown.resize(((mDims[0] + 1) / 2) * ((mDims[1] + 1) / 2) * mVoxelBytes);
 }
@@ -23,11 +31,21 @@ bool LevelBuilder::finished() const {
 const std::byte* LevelBuilder::slice(std::int64_t z) const {
     z = std::clamp<std::int64_t>(z, 0, std::int64_t(mDims[2]) - 1);
     std::size_t sliceBytes = mDims[0] * mDims[1] * mVoxelBytes;
-    return mRing.data() + std::size_t(z % mRingSlices) * sliceBytes;
+    return mRing.data() + std::size_t(std::uint64_t(z) % mRingSlices) * sliceBytes;
 }
 
 void LevelBuilder::pushSlice(const std::byte* data) {
-    const std::uint64_t z = mReceived++;
+    const std::uint64_t z = mReceived;
+    const std::uint32_t b = mLayout.geometry().brickVoxels, a = mLayout.geometry().apronVoxels;
+    if (z >= mRingSlices) {
+        // Slice z takes the slot of slice z - ring, which rows up to (z - ring + A) / B read
+        // (all handed out already: the ring holds B slices more than a row reads).
+        const std::uint64_t old = z - mRingSlices;
+        const auto last = std::uint32_t(
+            std::min<std::uint64_t>((old + a) / b, mLayout.levels()[mLevel].bricks[2] - 1));
+        if (!waitForRowsCut(last)) return;
+    }
+    ++mReceived;
     const std::size_t sliceBytes = mDims[0] * mDims[1] * mVoxelBytes;
     std::memcpy(mRing.data() + std::size_t(z % mRingSlices) * sliceBytes, data, sliceBytes);
 
@@ -39,24 +57,47 @@ void LevelBuilder::pushSlice(const std::byte* data) {
         mNext->pushSlice(mDown.data());
     }
     // A row of bricks is ready once every slice its aprons read has arrived.
-    const std::uint32_t b = mLayout.geometry().brickVoxels, a = mLayout.geometry().apronVoxels;
     const auto& level = mLayout.levels()[mLevel];
     while (mNextRow < level.bricks[2] &&
            std::min<std::uint64_t>(std::uint64_t(mNextRow + 1) * b + a, mDims[2]) <= z + 1)
-        cutRow(mNextRow++);
+        emitRow(mNextRow++);
 }
 
-void LevelBuilder::cutRow(std::uint32_t bz) {
+void LevelBuilder::emitRow(std::uint32_t bz) {
     const auto& level = mLayout.levels()[mLevel];
+    {
+        std::lock_guard lock(mMutex);
+        mUncut[bz] = level.bricks[0] * level.bricks[1];
+    }
     for (std::uint32_t by = 0; by < level.bricks[1]; ++by)
-        for (std::uint32_t bx = 0; bx < level.bricks[0]; ++bx) {
-            BrickJob job;
-            job.index = mLayout.indexOf({mLevel, {bx, by, bz}});
-            if (mTakeBuffer) job.voxels = mTakeBuffer();
-            job.voxels.resize(mLayout.storedVoxels() * mVoxelBytes); // every byte is cut
-            cutBrick(bx, by, bz, job.voxels.data());
-            mSink(std::move(job));
-        }
+        for (std::uint32_t bx = 0; bx < level.bricks[0]; ++bx)
+            mSink(BrickJob{this, mLayout.indexOf({mLevel, {bx, by, bz}}), bx, by, bz});
+}
+
+void LevelBuilder::cut(const BrickJob& job, std::byte* out) {
+    cutBrick(job.bx, job.by, job.bz, out);
+    std::lock_guard lock(mMutex);
+    if (--mUncut[job.bz] != 0) return;
+    while (mRowsCut < mUncut.size() && mUncut[mRowsCut] == 0)
+        ++mRowsCut;
+    mRowCut.notify_all();
+}
+
+bool LevelBuilder::waitForRowsCut(std::uint32_t row) {
+    std::unique_lock lock(mMutex);
+    if (mRowsCut > row) return !mAborted;
+    const auto start = std::chrono::steady_clock::now();
+    mRowCut.wait(lock, [&] { return mAborted || mRowsCut > row; });
+    mWaitedNs += std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                   std::chrono::steady_clock::now() - start)
+                                   .count());
+    return !mAborted;
+}
+
+void LevelBuilder::abort() {
+    std::lock_guard lock(mMutex);
+    mAborted = true;
+    mRowCut.notify_all();
 }
 
 namespace {

@@ -164,6 +164,46 @@ INSTANTIATE_TEST_SUITE_P(TypesAndBrickSizes, StoreRoundTrip,
                                     std::to_string(c.geometry.apronVoxels);
                          });
 
+TEST(StoreTest, PipelinedAndLeanRingsWriteTheSameStoreAndATightBudgetGetsTheLean) {
+    // Deep enough that level 0's ring wraps many times (B = 8: rings of 20 and 12 slices).
+    const std::array<std::uint64_t, 3> dims{40, 36, 150};
+    const BrickGeometry g{8, 2, 4};
+    const auto v = randomVolume<std::uint16_t>(dims, 7, 0, 3000);
+    const VolumeInfo info = makeInfo(dims, VoxelType::U16);
+    IngestConfig config;
+    config.geometry = g;
+    config.threads = 2;
+    const std::uint64_t pipelined = ingestMemoryBytes(info, config, true);
+    const std::uint64_t lean = ingestMemoryBytes(info, config, false);
+    ASSERT_LT(lean, pipelined);
+    test::TempDir dir;
+    std::vector<std::unique_ptr<BrickStore>> stores;
+    for (const std::uint64_t budget : {std::uint64_t(0), lean}) {
+        IngestConfig c = config;
+        c.memoryBudgetBytes = budget; // 0: the default, which the pipelined rings fit
+        VectorSource src(info, v);
+        const std::string path = dir.file(budget ? "lean.bcs" : "pipelined.bcs");
+        const IngestReport report = ingest(src, path, c);
+        EXPECT_EQ(report.memoryBytes, budget ? lean : pipelined);
+        stores.push_back(BrickStore::open(path));
+    }
+    EXPECT_THROW(
+        {
+            IngestConfig c = config;
+            c.memoryBudgetBytes = lean - 1;
+            VectorSource src(info, v);
+            ingest(src, dir.file("refused.bcs"), c);
+        },
+        FormatError);
+    ASSERT_EQ(stores[0]->layout().levels().size(), stores[1]->layout().levels().size());
+    EXPECT_TRUE(readLevel(*stores[0], 0) == v);
+    for (std::uint32_t l = 0; l < stores[0]->layout().levels().size(); ++l)
+        EXPECT_TRUE(readLevel(*stores[0], l) == readLevel(*stores[1], l)) << "level " << l;
+    EXPECT_EQ(stores[0]->info().histogram, stores[1]->info().histogram);
+    EXPECT_TRUE(stores[0]->verify(2).empty());
+    EXPECT_TRUE(stores[1]->verify(2).empty());
+}
+
 TEST(StoreTest, ApronsHoldNeighbourVoxelsAndClampedCopiesAtTheBorder) {
     std::array<std::uint64_t, 3> d{37, 29, 23};
     auto v = randomVolume<std::uint16_t>(d, 7, 100, 4000);

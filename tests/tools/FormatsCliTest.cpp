@@ -111,7 +111,8 @@ TEST_F(FormatsCli, SpacingOverridesTheTiffsAndStatsSayWhereTheTimeWent) {
     std::ifstream in(stats);
     const auto s = nlohmann::json::parse(in);
     EXPECT_EQ(s["sourceBytes"], 40u * 30 * 20 * 2);
-    for (const char* stage : {"read", "cut", "compress", "write", "histogram", "finish"})
+    for (const char* stage :
+         {"read", "cut", "ringWait", "brickCut", "compress", "write", "histogram", "finish"})
         EXPECT_GE(s["times"][stage].get<double>(), 0.0) << stage;
     EXPECT_GT(s["seconds"].get<double>(), 0.0);
 }

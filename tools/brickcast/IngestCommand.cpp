@@ -87,9 +87,10 @@ constexpr const char* kLimitsHelp =
     "  the declared bytes, a gzip payload at least 1/1032 and a zstd one 1/32768 of them (the\n"
     "  codecs' largest ratios; zstd frames that declare their size must declare exactly them);\n"
     "  every DICOM slice's PixelData must hold Rows x Columns x bytes per pixel; and the\n"
-    "  memory ingest needs (B+2A slices of every pyramid level, bricks in flight, the brick\n"
-    "  index) must fit --memory-budget-mb (default: half of physical memory, at most half of\n"
-    "  the address-space limit). SIGINT/SIGTERM remove the partial store before exiting.";
+    "  memory ingest needs (2B+2A slices of every pyramid level, or B+2A if only that fits,\n"
+    "  the workers' bricks, the brick index) must fit --memory-budget-mb (default: half of\n"
+    "  physical memory, at most half of the address-space limit). SIGINT/SIGTERM remove the\n"
+    "  partial store before exiting.";
 
 brickstore::SourceSpec toSpec(const IngestOptions& o) {
     brickstore::SourceSpec spec;
@@ -180,7 +181,8 @@ void writeStats(const std::string& path, const brickstore::VolumeInfo& info,
         {"times",
          {{"read", t.read},
           {"cut", t.cut},
-          {"queueWait", t.queueWait},
+          {"ringWait", t.ringWait},
+          {"brickCut", t.brickCut},
           {"compress", t.compress},
           {"write", t.write},
           {"histogram", t.histogram},
@@ -212,9 +214,10 @@ void runIngest(const IngestOptions& o) {
                     : 0.0,
                 tools::formatBytes(double(report.constantBrickBytes)).c_str());
     const brickstore::IngestTimes& t = report.times;
-    std::printf("  time: read+decode %.2f s, cut %.2f s, waiting on workers %.2f s; workers "
-                "(summed): compress %.2f s, write %.2f s; histogram %.2f s, index %.2f s\n",
-                t.read, t.cut, t.queueWait, t.compress, t.write, t.histogram, t.finish);
+    std::printf("  time: read+decode %.2f s, slices and pyramid %.2f s, waiting on workers %.2f s; "
+                "workers (summed): cut %.2f s, compress %.2f s, write %.2f s; histogram %.2f s, "
+                "index %.2f s\n",
+                t.read, t.cut, t.ringWait, t.brickCut, t.compress, t.write, t.histogram, t.finish);
     std::printf("  memory: %s estimated for the buffers, budget %s\n",
                 tools::formatBytes(double(report.memoryBytes)).c_str(),
                 tools::formatBytes(double(report.memoryBudgetBytes)).c_str());

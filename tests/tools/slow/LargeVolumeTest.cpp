@@ -41,15 +41,16 @@ RunResult run(const std::vector<std::string>& args) {
 TEST(LargeVolumeTest, FourGiBPhantomIngestsInMemoryThatDoesNotGrowWithDepthAndVerifies) {
     bc::test::TempDir dir;
     const std::string exe = BC_BRICKCAST_EXE;
-    // Same slice area, 8x the depth: 512 MiB and 4 GiB of u16.
-    auto small = run({exe, "ingest", "synth:phantom", "--dims", "2048,2048,64", "-q", "-o",
+    // Same slice area, 3.2x the depth: 1.25 GiB and 4 GiB of u16 (both deeper than the ring of
+    // 2B + 2A = 132 slices a level keeps, which a thinner volume does not fill).
+    auto small = run({exe, "ingest", "synth:phantom", "--dims", "2048,2048,160", "-q", "-o",
                       dir.file("small.bcs")});
     ASSERT_EQ(small.exitCode, 0);
     std::filesystem::remove(dir.file("small.bcs"));
     auto large = run({exe, "ingest", "synth:phantom", "--dims", "2048,2048,512", "-q", "-o",
                       dir.file("large.bcs")});
     ASSERT_EQ(large.exitCode, 0);
-    std::printf("ingest 2048x2048x64 u16 (0.5 GiB): %.1f s, peak RSS %.0f MiB\n", small.seconds,
+    std::printf("ingest 2048x2048x160 u16 (1.25 GiB): %.1f s, peak RSS %.0f MiB\n", small.seconds,
                 small.peakRssKiB / 1024.0);
     std::printf("ingest 2048x2048x512 u16 (4 GiB): %.1f s, peak RSS %.0f MiB\n", large.seconds,
                 large.peakRssKiB / 1024.0);
