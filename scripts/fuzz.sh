@@ -78,6 +78,7 @@ dicom)
     harness=DicomFuzz
     sources=(brickstore/readers/DicomReader.cpp brickstore/readers/detail/DicomHeaders.cpp
         brickstore/readers/detail/DicomLengths.cpp brickstore/readers/detail/SandboxedSource.cpp
+        brickstore/readers/detail/ReadAhead.cpp
         "${reader_common[@]}")
     folders=(brickstore brickstore/readers brickstore/readers/detail)
     cflags=(-isystem "$(ls -d /usr/include/gdcm-* | tail -1)")

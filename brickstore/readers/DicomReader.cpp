@@ -212,7 +212,7 @@ std::unique_ptr<VolumeSource> openDicomSeriesInProcess(const std::string& folder
 } // namespace detail
 
 std::unique_ptr<VolumeSource> openDicomSeries(const std::string& folder) {
-    return detail::openSandboxed({folder, "DICOM", "per file"}, parserSandboxLimits(),
+    return detail::openSandboxed({folder, "DICOM", "per file", {}}, parserSandboxLimits(),
                                  [folder](const detail::ReadingFile& reading) {
                                      return detail::openDicomSeriesInProcess(folder, reading);
                                  });

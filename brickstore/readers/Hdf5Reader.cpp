@@ -410,7 +410,7 @@ std::unique_ptr<VolumeSource> openInProcess(const std::string& path, const std::
 
 std::unique_ptr<VolumeSource> openHdf5(const std::string& path, const std::string& dataset) {
     return detail::openSandboxed(
-        {path, "HDF5", "to parse"}, parserSandboxLimits(),
+        {path, "HDF5", "to parse", {}}, parserSandboxLimits(),
         [path, dataset](const detail::ReadingFile&) { return openInProcess(path, dataset); });
 }
 

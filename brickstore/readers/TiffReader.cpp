@@ -188,15 +188,15 @@ std::array<double, 3> spacingOf(const TiffFile& file, const ImageJ& ij, const st
     return spacing;
 }
 
-class TiffVolume final : public VolumeSource {
+/// In the sandbox's child; `files` are the folder's slices (listed by the parent, which reads
+/// the located ones itself) or the one multi-page file.
+class TiffVolume final : public VolumeSource, public detail::SliceLocator {
   public:
-    TiffVolume(const std::string& path, const std::optional<std::array<double, 3>>& spacingMm,
+    TiffVolume(const std::string& path, bool folder, std::vector<std::string> files,
+               const std::optional<std::array<double, 3>>& spacingMm,
                const detail::ReadingFile& reading)
-        : mPath(path), mReading(reading) {
-        std::error_code ec;
-        mFolder = fs::is_directory(path, ec);
-        if (mFolder) mFiles = listSlices(path);
-        const std::string first = mFolder ? mFiles.front() : path;
+        : mPath(path), mReading(reading), mFolder(folder), mFiles(std::move(files)) {
+        const std::string first = mFiles.front();
         mFirstName = mFolder ? "the first slice's (" + fs::path(first).filename().string() + ")"
                              : "the first page's";
         report(first);
@@ -211,19 +211,33 @@ class TiffVolume final : public VolumeSource {
         mInfo.dims[2] = mFolder ? walkFiles() : walkPages(ij);
         validateVolumeInfo(mInfo, path, mFolder ? "files" : "pages");
         mInfo.description = describe();
-        if (mFolder)
+        if (mFolder) {
             mFile.reset();
-        else
+        } else {
             mFile->rewind();
+            mAt = 0;
+        }
     }
 
     const VolumeInfo& info() const override { return mInfo; }
+
+    bool locateSlice(std::uint64_t z, std::vector<detail::FileExtent>& out) override {
+        const TiffPage page = moveTo(z);
+        return mFile->locateStrips(page, std::uint32_t(mFolder ? z : 0), out);
+    }
+
+    void decodeSlice(std::uint64_t z, std::span<std::byte> out) override {
+        const TiffPage page = moveTo(z);
+        mFile->readPage(page, out);
+        readAhead(z);
+        if (mInfo.type == VoxelType::F32) checkFinite(out, *mFile);
+    }
 
   private:
     void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         const std::uint64_t bytes = mInfo.sliceBytes();
         for (std::uint64_t i = 0; i < count; ++i)
-            readSlice(nextSlice() + i, out.subspan(i * bytes, bytes));
+            decodeSlice(nextSlice() + i, out.subspan(i * bytes, bytes));
     }
 
     void report(const std::string& file) const {
@@ -280,23 +294,26 @@ class TiffVolume final : public VolumeSource {
         same("SampleFormat", page.sampleFormat, mFirst.sampleFormat);
     }
 
-    void readSlice(std::uint64_t z, std::span<std::byte> out) {
-        if (mFolder) {
-            report(mFiles[z]);
-            mFile.reset(); // one file open at a time
-            mFile = std::make_unique<TiffFile>(mFiles[z], false);
-        } else {
-            report(mPath);
-            if (z > 0 && !mFile->nextPage())
-                throw FormatError(mPath, "pages",
-                                  "ends after " + std::to_string(z) + " pages, not the " +
-                                      std::to_string(mInfo.dims[2]) + " it had when opened");
+    /// Opens slice `z`'s file or page (once: locateSlice and then decodeSlice ask for the
+    /// same z) and returns its layout, checked against the first page's.
+    TiffPage moveTo(std::uint64_t z) {
+        if (mAt != z) {
+            if (mFolder) {
+                report(mFiles[z]);
+                mFile.reset(); // one file open at a time
+                mFile = std::make_unique<TiffFile>(mFiles[z], false);
+            } else {
+                report(mPath);
+                if (z != mAt + 1 || !mFile->nextPage())
+                    throw FormatError(mPath, "pages",
+                                      "ends after " + std::to_string(z) + " pages, not the " +
+                                          std::to_string(mInfo.dims[2]) + " it had when opened");
+            }
+            mAt = z;
         }
         const TiffPage page = mFile->layout();
         checkSameLayout(page, *mFile);
-        mFile->readPage(page, out);
-        readAhead(z);
-        if (mInfo.type == VoxelType::F32) checkFinite(out, *mFile);
+        return page;
     }
 
     /// The next slices' bytes asked of the kernel while this one is decoded and sent (see
@@ -304,7 +321,7 @@ class TiffVolume final : public VolumeSource {
     void readAhead(std::uint64_t z) {
         if (!mFolder) return mFile->readAhead();
         const std::uint64_t window =
-            std::max<std::uint64_t>(1, detail::kReadAheadBytes / mInfo.sliceBytes());
+            std::max<std::uint64_t>(1, detail::kFilesReadAheadBytes / mInfo.sliceBytes());
         for (mAdvised = std::max(mAdvised, z + 1);
              mAdvised < std::min(mFiles.size(), z + 1 + window); ++mAdvised)
             detail::willNeed(mFiles[mAdvised]);
@@ -342,22 +359,30 @@ class TiffVolume final : public VolumeSource {
     std::string mPath;
     detail::ReadingFile mReading;
     bool mFolder = false;
-    std::vector<std::string> mFiles; ///< a folder's slices, in natural order
+    std::vector<std::string> mFiles; ///< a folder's slices, in natural order, or the one file
     std::string mFirstName;          ///< "the first page's", as mismatch errors say it
     std::unique_ptr<TiffFile> mFile; ///< the multi-page file, or the folder's current slice
     TiffPage mFirst;
     VolumeInfo mInfo;
-    std::uint64_t mAdvised = 0; ///< a folder's files before this one were asked for (readAhead)
+    std::uint64_t mAdvised = 0;     ///< a folder's files before this one were asked for (readAhead)
+    std::uint64_t mAt = UINT64_MAX; ///< the slice mFile is on (UINT64_MAX: none yet)
 };
 
 } // namespace
 
 std::unique_ptr<VolumeSource> openTiff(const std::string& path,
                                        const std::optional<std::array<double, 3>>& spacingMm) {
-    return detail::openSandboxed({path, "TIFF", "per file or page"}, parserSandboxLimits(),
-                                 [path, spacingMm](const detail::ReadingFile& reading) {
-                                     return std::make_unique<TiffVolume>(path, spacingMm, reading);
-                                 });
+    // The folder is listed here, before the fork: the parent reads located slices itself and
+    // takes a file only from this list, never a path the parser names.
+    std::error_code ec;
+    const bool folder = fs::is_directory(path, ec);
+    std::vector<std::string> files = folder ? listSlices(path) : std::vector<std::string>{path};
+    detail::SandboxedParser parser{path, "TIFF", "per file or page", files};
+    return detail::openSandboxed(
+        parser, parserSandboxLimits(),
+        [path, folder, files = std::move(files), spacingMm](const detail::ReadingFile& reading) {
+            return std::make_unique<TiffVolume>(path, folder, files, spacingMm, reading);
+        });
 }
 
 } // namespace bc::brickstore

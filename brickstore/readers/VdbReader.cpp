@@ -257,7 +257,7 @@ std::unique_ptr<VolumeSource> openInProcess(const std::string& path, const std::
 
 std::unique_ptr<VolumeSource> openVdb(const std::string& path, const std::string& gridName) {
     return detail::openSandboxed(
-        {path, "OpenVDB", "to parse"}, parserSandboxLimits(),
+        {path, "OpenVDB", "to parse", {}}, parserSandboxLimits(),
         [path, gridName](const detail::ReadingFile&) { return openInProcess(path, gridName); });
 }
 

@@ -2,10 +2,14 @@
 // a volume crosses the pipe byte for byte, in every voxel type; and each way a child can end
 // early (an exception, an abort while opening or while streaming, the alarm, the address-space
 // limit) is one FormatError under 1 kB naming the file the parser was reading, and quoting the
-// end of what the child printed to its stderr instead of letting it reach ours.
+// end of what the child printed to its stderr instead of letting it reach ours. A SliceLocator's
+// slices (located in files the parent reads itself, or decoded through the pipe) arrive in
+// order, and extents that lie (outside the files, past the volume or a file's end) and NaN in a
+// located float slice are errors naming the file.
 #include "brickstore/readers/detail/SandboxedSource.h"
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "tests/TestSupport.h"
 #include "tests/brickstore/VolumeTestSupport.h"
 
 #include <gtest/gtest.h>
@@ -16,6 +20,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <functional>
+#include <limits>
 #include <thread>
 #include <vector>
 
@@ -25,7 +31,7 @@ namespace {
 using detail::ParserDied;
 using detail::ReadingFile;
 
-const detail::SandboxedParser kParser{"/data/series", "test", "per file"};
+const detail::SandboxedParser kParser{"/data/series", "test", "per file", {}};
 
 ParserSandboxLimits limits(std::uint32_t parseSeconds = 10) {
     ParserSandboxLimits l;
@@ -85,6 +91,156 @@ TEST(SandboxedSource, VolumesCrossThePipeByteForByteInEveryType) {
         EXPECT_EQ(sandboxed->info().type, direct->info().type);
         EXPECT_EQ(sandboxed->info().description, direct->info().description);
         EXPECT_EQ(test::readAllSlices(*sandboxed, {1, 5, 40}), test::readAllSlices(*direct, 40));
+    }
+}
+
+/// A volume whose slices lie in files the test wrote: `locate` says where (or refuses, and the
+/// slice is then sent through the pipe from `voxels`).
+class LocatedVolume final : public VolumeSource, public detail::SliceLocator {
+  public:
+    using Locate = std::function<bool(std::uint64_t z, std::vector<detail::FileExtent>&)>;
+    LocatedVolume(const VolumeInfo& info, std::vector<std::byte> voxels, Locate locate)
+        : mInfo(info), mVoxels(std::move(voxels)), mLocate(std::move(locate)) {}
+    const VolumeInfo& info() const override { return mInfo; }
+    bool locateSlice(std::uint64_t z, std::vector<detail::FileExtent>& out) override {
+        return mLocate(z, out);
+    }
+    void decodeSlice(std::uint64_t z, std::span<std::byte> out) override {
+        std::memcpy(out.data(), mVoxels.data() + z * mInfo.sliceBytes(), out.size());
+    }
+
+  private:
+    void readNextSlices(std::uint64_t, std::span<std::byte>) override {
+        std::abort(); // the sandbox must use locateSlice and decodeSlice
+    }
+    VolumeInfo mInfo;
+    std::vector<std::byte> mVoxels;
+    Locate mLocate;
+};
+
+/// A u16 volume of 33x17x12 and two files holding its slices out of order: slice z at
+/// kGap + z * (slice + kGap) of a.bin, except that slice 5's first 100 bytes are in b.bin.
+struct LocatedFiles {
+    static constexpr std::uint64_t kGap = 7;
+    test::TempDir dir;
+    VolumeInfo info;
+    std::vector<std::byte> voxels;
+    detail::SandboxedParser parser{
+        dir.file("a.bin"), "test", "per file", {dir.file("a.bin"), dir.file("b.bin")}};
+
+    LocatedFiles() {
+        auto synthetic = makeSynthetic(SynthKind::Phantom, {33, 17, 12}, 3);
+        info = synthetic->info();
+        voxels = test::readAllSlices(*synthetic, 12);
+        const std::uint64_t slice = info.sliceBytes();
+        std::vector<std::byte> a(kGap + 12 * (slice + kGap), std::byte{0xee});
+        for (std::uint64_t z = 0; z < 12; ++z)
+            std::memcpy(a.data() + kGap + z * (slice + kGap), voxels.data() + z * slice, slice);
+        test::writeFile(dir.file("a.bin"), a.data(), a.size());
+        test::writeFile(dir.file("b.bin"), voxels.data() + 5 * slice, 100);
+    }
+    /// Where slice z lies: the truthful map.
+    void locate(std::uint64_t z, std::vector<detail::FileExtent>& out) const {
+        const std::uint64_t slice = info.sliceBytes(), at = kGap + z * (slice + kGap);
+        if (z == 5) {
+            out.push_back({1, 0, 100});
+            out.push_back({0, at + 100, slice - 100});
+        } else {
+            out.push_back({0, at, slice});
+        }
+    }
+};
+
+TEST(SandboxedSource, LocatedAndDecodedSlicesArriveInOrder) {
+    LocatedFiles files;
+    for (const std::uint64_t decodedEvery : {1, 3, 1000}) {
+        auto source = detail::openSandboxed(files.parser, limits(), [&](const ReadingFile&) {
+            return std::make_unique<LocatedVolume>(
+                files.info, files.voxels,
+                [&files, decodedEvery](std::uint64_t z, std::vector<detail::FileExtent>& out) {
+                    if (decodedEvery != 1000 && z % decodedEvery == 1) return false;
+                    files.locate(z, out);
+                    return true;
+                });
+        });
+        EXPECT_EQ(test::readAllSlices(*source, {1, 5, 2}), files.voxels)
+            << "every " << decodedEvery << " slices decoded";
+    }
+}
+
+/// The error a located volume whose map `lie` rewrites ends with.
+std::string lyingLocatorError(LocatedFiles& files,
+                              std::function<void(std::uint64_t, detail::FileExtent&)> lie) {
+    try {
+        auto source = detail::openSandboxed(files.parser, limits(), [&](const ReadingFile&) {
+            return std::make_unique<LocatedVolume>(
+                files.info, files.voxels,
+                [&files, lie](std::uint64_t z, std::vector<detail::FileExtent>& out) {
+                    files.locate(z, out);
+                    lie(z, out.back());
+                    return true;
+                });
+        });
+        test::readAllSlices(*source, 4);
+    } catch (const FormatError& e) {
+        EXPECT_LT(std::strlen(e.what()), 1024u) << e.what();
+        return e.what();
+    }
+    ADD_FAILURE() << "the lying locator's volume read without an error";
+    return {};
+}
+
+TEST(SandboxedSource, ExtentsOutsideTheFilesOrTheVolumeAreRefused) {
+    LocatedFiles files;
+    const std::string notAFile = lyingLocatorError(files, [](std::uint64_t z, auto& e) {
+        if (z == 6) e.file = 2; // only a.bin and b.bin are listed
+    });
+    EXPECT_TRUE(contains(notAFile, "an extent outside the volume's files or bytes")) << notAFile;
+    const std::string tooMany = lyingLocatorError(files, [](std::uint64_t z, auto& e) {
+        if (z == 11) e.bytes += 2; // more bytes than the volume holds
+    });
+    EXPECT_TRUE(contains(tooMany, "an extent outside the volume's files or bytes")) << tooMany;
+    const std::string wraps = lyingLocatorError(files, [](std::uint64_t z, auto& e) {
+        if (z == 3) e.offset = UINT64_MAX - 10;
+    });
+    EXPECT_TRUE(contains(wraps, "an extent outside the volume's files or bytes")) << wraps;
+}
+
+TEST(SandboxedSource, AnExtentPastItsFilesEndNamesTheFile) {
+    LocatedFiles files;
+    const std::string what = lyingLocatorError(files, [&files](std::uint64_t z, auto& e) {
+        if (z == 2) e.offset = 1ull << 40;
+    });
+    EXPECT_EQ(what.rfind(files.dir.file("a.bin") + ": data: ends at byte 1099511627776", 0), 0u)
+        << what;
+}
+
+TEST(SandboxedSource, NaNInALocatedFloatSliceNamesItsFileAndVoxel) {
+    test::TempDir dir;
+    VolumeInfo info;
+    info.dims = {4, 3, 2};
+    info.type = VoxelType::F32;
+    std::vector<float> values(24, 1.5f);
+    values[12 + 2 * 4 + 1] = std::numeric_limits<float>::quiet_NaN(); // slice 1, voxel (1,2)
+    test::writeFile(dir.file("s0.raw"), values.data(), 48);
+    test::writeFile(dir.file("s1.raw"), values.data() + 12, 48);
+    const detail::SandboxedParser parser{
+        dir.path().string(), "test", "per file", {dir.file("s0.raw"), dir.file("s1.raw")}};
+    std::vector<std::byte> none(96);
+    try {
+        auto source = detail::openSandboxed(parser, limits(), [&](const ReadingFile&) {
+            return std::make_unique<LocatedVolume>(
+                info, none, [](std::uint64_t z, std::vector<detail::FileExtent>& out) {
+                    out.push_back({std::uint32_t(z), 0, 48});
+                    return true;
+                });
+        });
+        test::readAllSlices(*source, 2);
+        FAIL() << "a NaN voxel was read";
+    } catch (const FormatError& e) {
+        EXPECT_EQ(e.file(), dir.file("s1.raw")) << e.what();
+        EXPECT_EQ(e.field(), "data") << e.what();
+        EXPECT_TRUE(contains(e.what(), "voxel (1,2) is NaN")) << e.what();
     }
 }
 

@@ -82,7 +82,9 @@ INSTANTIATE_TEST_SUITE_P(TiffScans, TiffRoundTripTest,
                                            RoundTrip{"iguana", "zstd_tiles", true},
                                            RoundTrip{"pancreas", "legacy_deflate_be"},
                                            RoundTrip{"hydrogen", "zstd_strips", true},
-                                           RoundTrip{"gaffer", "folder_lzw_tiles", true}),
+                                           RoundTrip{"gaffer", "folder_lzw_tiles", true},
+                                           RoundTrip{"cthead", "bigtiff_strips"},
+                                           RoundTrip{"frog", "folder_mixed"}),
                          [](const ::testing::TestParamInfo<RoundTrip>& info) {
                              return info.param.scan + "_" + info.param.variant;
                          });

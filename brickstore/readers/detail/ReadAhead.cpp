@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include <fcntl.h>
+#include <unistd.h>
 
 namespace bc::brickstore::detail {
 
@@ -13,6 +14,13 @@ namespace {
 constexpr std::uint64_t kStepBytes = 8ull << 20;
 
 } // namespace
+
+void willNeed(const std::string& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return;
+    ::posix_fadvise(fd, 0, 0, POSIX_FADV_WILLNEED);
+    ::close(fd);
+}
 
 ReadAhead::ReadAhead(int fd, std::uint64_t position, std::uint64_t fileEnd,
                      std::uint64_t windowBytes)

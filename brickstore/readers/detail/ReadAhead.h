@@ -9,12 +9,21 @@
 #include <condition_variable>
 #include <cstdint>
 #include <mutex>
+#include <string>
 #include <thread>
 
 namespace bc::brickstore::detail {
 
 /// Bytes kept read ahead of the reader: a brick row of 2048² u16 slices (64 + 2 of them).
 constexpr std::uint64_t kReadAheadWindowBytes = 512ull << 20;
+
+/// How far ahead of its reads a reader of a folder of one-slice files (a TIFF folder) asks the
+/// kernel for its next files (willNeed).
+constexpr std::uint64_t kFilesReadAheadBytes = 64ull << 20;
+
+/// Asks the kernel to read the whole file at `path` into the page cache, without waiting (a
+/// folder's next slices); a file that cannot be opened is left to the reader to report.
+void willNeed(const std::string& path);
 
 class ReadAhead {
   public:

@@ -2,18 +2,23 @@
 // and streams it over a pipe, and the parent's VolumeSource that reads that stream.
 #include "brickstore/readers/detail/SandboxedSource.h"
 
+#include "brickstore/readers/detail/ReadAhead.h"
+
 #include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <cerrno>
+#include <cmath>
 #include <csignal>
 #include <cstring>
+#include <initializer_list>
 #include <new>
 #include <vector>
 
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -31,9 +36,13 @@ namespace bc::brickstore {
 namespace {
 
 /// Messages on the pipe, child to parent: 'F' (path) before each file the parser reads, 'I'
-/// info, then 'S' slab (u64 slices, bytes) ...; 'E' (file, field, why) ends the stream with an
-/// error. Integers in host order (same machine).
-constexpr char kReading = 'F', kInfo = 'I', kSlab = 'S', kError = 'E';
+/// info, then the voxels as 'S' slabs (u64 slices, bytes) and 'X' extents (u32 count, then
+/// count times u32 file, u64 offset, u64 bytes: where the next bytes lie in directFiles), in
+/// slice order; 'E' (file, field, why) ends the stream with an error. Integers in host order
+/// (same machine).
+constexpr char kReading = 'F', kInfo = 'I', kSlab = 'S', kExtents = 'X', kError = 'E';
+/// Extents per 'X' message: what the parent holds at a time (24 bytes each).
+constexpr std::uint32_t kMaxExtentsPerMessage = 1u << 16;
 constexpr std::size_t kMaxErrorText = 400; ///< per string: the parent's error stays < 1 kB
 constexpr std::size_t kMaxPathText = 300;
 constexpr std::size_t kMaxFieldText = 100;
@@ -180,8 +189,54 @@ std::string stderrTail(int fd) {
     return line.empty() ? std::string() : (cut ? "..." : "") + line;
 }
 
+/// Streams a SliceLocator's volume: runs of located slices as 'X' messages, runs of slices it
+/// must decode as 'S' slabs, in slice order.
+void streamLocated(ChildWriter& w, const VolumeInfo& info, detail::SliceLocator& locator) {
+    const std::uint64_t sliceBytes = info.sliceBytes();
+    const std::uint64_t perSlab = std::max<std::uint64_t>(1, kSlabBytes / sliceBytes);
+    std::vector<detail::FileExtent> extents;
+    std::vector<std::byte> slab;
+    std::uint64_t decoded = 0; // slices waiting in `slab`
+    const auto sendExtents = [&] {
+        for (std::size_t at = 0; at < extents.size(); at += kMaxExtentsPerMessage) {
+            const std::size_t n = std::min<std::size_t>(kMaxExtentsPerMessage, extents.size() - at);
+            w.value(kExtents);
+            w.value(std::uint32_t(n));
+            for (std::size_t i = at; i < at + n; ++i) {
+                w.value(extents[i].file);
+                w.value(extents[i].offset);
+                w.value(extents[i].bytes);
+            }
+        }
+        extents.clear();
+    };
+    const auto sendSlab = [&] {
+        if (decoded == 0) return;
+        w.value(kSlab);
+        w.value(decoded);
+        w.bytes(slab.data(), decoded * sliceBytes);
+        decoded = 0;
+    };
+    for (std::uint64_t z = 0; z < info.dims[2]; ++z) {
+        if (locator.locateSlice(z, extents)) {
+            ::alarm(0); // a file read armed it; waiting on the parent is not parsing
+            sendSlab(); // slices decoded before this one go first (extents was empty)
+            if (extents.size() >= kMaxExtentsPerMessage) sendExtents();
+            continue;
+        }
+        sendExtents();
+        slab.resize(perSlab * sliceBytes);
+        locator.decodeSlice(z, std::span(slab).subspan(decoded * sliceBytes, sliceBytes));
+        ::alarm(0);
+        if (++decoded == perSlab) sendSlab();
+    }
+    sendExtents();
+    sendSlab();
+}
+
 /// Opens the volume, streams it and ends the child; returns only by throwing.
-void streamVolume(ChildWriter& w, const ParserSandboxLimits& limits, std::string& readingFile,
+void streamVolume(ChildWriter& w, const detail::SandboxedParser& parser,
+                  const ParserSandboxLimits& limits, std::string& readingFile,
                   const detail::SandboxedOpener& open) {
     const detail::ReadingFile reading = [&](const std::string& path) {
         ::alarm(limits.parseSeconds);
@@ -194,6 +249,11 @@ void streamVolume(ChildWriter& w, const ParserSandboxLimits& limits, std::string
     ::alarm(0); // parsed: from here the parent's pace sets the time, RLIMIT_CPU the bound
     const VolumeInfo& info = source->info();
     sendInfo(w, info);
+    auto* locator = dynamic_cast<detail::SliceLocator*>(source.get());
+    if (locator && !parser.directFiles.empty()) {
+        streamLocated(w, info, *locator);
+        ::_exit(0);
+    }
     const std::uint64_t sliceBytes = info.sliceBytes();
     const std::uint64_t perSlab = std::max<std::uint64_t>(1, kSlabBytes / sliceBytes);
     std::vector<std::byte> slab;
@@ -218,7 +278,7 @@ void streamVolume(ChildWriter& w, const ParserSandboxLimits& limits, std::string
     ChildWriter w(fd);
     std::string readingFile; // the file the parser read last, for errors that do not say
     try {
-        streamVolume(w, limits, readingFile, open);
+        streamVolume(w, parser, limits, readingFile, open);
     } catch (const FormatError& e) {
         // what() is "FILE: FIELD: why"; only the why crosses, bounded (never copied whole).
         const char* what = e.what();
@@ -281,20 +341,35 @@ class SandboxedSource final : public VolumeSource {
     const VolumeInfo& info() const override { return mInfo; }
 
   private:
+    /// The voxels are one stream of bytes, from the pipe ('S') or from the files ('X').
     void readNextSlices(std::uint64_t count, std::span<std::byte> out) override {
         const std::uint64_t sliceBytes = mInfo.sliceBytes();
-        std::uint64_t done = 0;
-        while (done < count) {
-            if (mPendingSlices == 0) nextSlab();
-            const std::uint64_t n = std::min(count - done, mPendingSlices);
-            read(out.data() + done * sliceBytes, n * sliceBytes);
-            mPendingSlices -= n;
+        // The file each slice starts in, where it came from the files (for a NaN's error).
+        std::vector<std::uint32_t> sliceFiles;
+        if (mInfo.type == VoxelType::F32) sliceFiles.assign(count, UINT32_MAX);
+        for (std::uint64_t done = 0; done < out.size();) {
+            if (mPipeBytes == 0 && mExtentAt == mExtents.size()) nextVoxels();
+            std::uint64_t n = 0;
+            if (mPipeBytes > 0) {
+                n = std::min(out.size() - done, mPipeBytes);
+                read(out.data() + done, n);
+                mPipeBytes -= n;
+            } else {
+                if (!sliceFiles.empty() && done % sliceBytes == 0)
+                    sliceFiles[done / sliceBytes] = mExtents[mExtentAt].file;
+                n = readExtent(out.data() + done, out.size() - done);
+            }
             done += n;
         }
+        // The child checked the floats it sent; those read from the files passed no parser.
+        for (std::uint64_t k = 0; k < sliceFiles.size(); ++k)
+            if (sliceFiles[k] != UINT32_MAX)
+                checkFinite(out.subspan(k * sliceBytes, sliceBytes), nextSlice() + k,
+                            sliceFiles[k]);
     }
 
     void readInfo() {
-        expectTag(kInfo);
+        nextTag({kInfo});
         for (int a = 0; a < 3; ++a)
             mInfo.dims[a] = value<std::uint64_t>();
         const auto type = value<std::uint8_t>();
@@ -311,21 +386,122 @@ class SandboxedSource final : public VolumeSource {
         validateVolumeInfo(mInfo, mParser.path);
     }
 
-    void nextSlab() {
-        expectTag(kSlab);
-        const auto n = value<std::uint64_t>();
-        if (n == 0 || n > mInfo.dims[2] - nextSlice())
-            fail("the parser sent a slab of " + std::to_string(n) + " slices");
-        mPendingSlices = n;
+    /// The next 'S' slab or 'X' extents; the bytes they announce may not pass the volume's.
+    void nextVoxels() {
+        const std::uint64_t left = mInfo.voxelCount() * voxelBytes(mInfo.type) - mAnnounced;
+        if (nextTag({kSlab, kExtents}) == kSlab) {
+            const auto n = value<std::uint64_t>();
+            if (n == 0 || n > left / mInfo.sliceBytes())
+                fail("the parser sent a slab of " + std::to_string(n) + " slices");
+            mPipeBytes = n * mInfo.sliceBytes();
+            mAnnounced += mPipeBytes;
+            return;
+        }
+        const auto count = value<std::uint32_t>();
+        if (count == 0 || count > kMaxExtentsPerMessage || mParser.directFiles.empty())
+            fail("the parser sent " + std::to_string(count) + " extents");
+        mExtents.resize(count);
+        mExtentAt = mExtentDone = 0;
+        std::uint64_t announced = 0;
+        for (detail::FileExtent& e : mExtents) {
+            e.file = value<std::uint32_t>();
+            e.offset = value<std::uint64_t>();
+            e.bytes = value<std::uint64_t>();
+            if (e.file >= mParser.directFiles.size() || e.bytes == 0 ||
+                e.bytes > left - announced || e.offset > UINT64_MAX - e.bytes)
+                fail("the parser sent an extent outside the volume's files or bytes");
+            announced += e.bytes;
+        }
+        mAnnounced += announced;
     }
 
-    /// Reads the next tag, past the files the parser reports; an 'E' from the child becomes
-    /// its FormatError.
-    void expectTag(char want) {
+    /// Reads at most `need` bytes of the current extent into `p`; returns how many.
+    std::uint64_t readExtent(std::byte* p, std::uint64_t need) {
+        const detail::FileExtent& e = mExtents[mExtentAt];
+        const int fd = openDirect(e.file);
+        const std::string& path = mParser.directFiles[e.file];
+        const std::uint64_t n = std::min(need, e.bytes - mExtentDone);
+        for (std::uint64_t got = 0; got < n;) {
+            const std::uint64_t at = e.offset + mExtentDone + got;
+            const ssize_t r =
+                ::pread(fd, p + got, std::min<std::uint64_t>(n - got, 1ull << 30), off_t(at));
+            if (r < 0 && errno == EINTR) continue;
+            if (r < 0)
+                throw FormatError(path, "path",
+                                  std::string("cannot read: ") + std::strerror(errno));
+            if (r == 0)
+                throw FormatError(
+                    path, "data",
+                    "ends at byte " + std::to_string(at) + ", inside the " +
+                        std::to_string(e.bytes) + " voxel bytes its header places at " +
+                        std::to_string(e.offset) + "; was it truncated while it was read?");
+            got += std::uint64_t(r);
+        }
+        mExtentDone += n;
+        if (mAhead) mAhead->reached(e.offset + mExtentDone);
+        if (mExtentDone == e.bytes) ++mExtentAt, mExtentDone = 0;
+        return n;
+    }
+
+    /// The descriptor of directFiles[file], opened on first use (one file open at a time),
+    /// with the page cache kept ahead of the reads: ReadAhead within one file, the next files
+    /// of a folder asked for whole.
+    int openDirect(std::uint32_t file) {
+        if (file == mDirectFile) return mDirectFd;
+        closeDirect();
+        const std::string& path = mParser.directFiles[file];
+        mDirectFd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+        if (mDirectFd < 0)
+            throw FormatError(path, "path", std::string("cannot open: ") + std::strerror(errno));
+        mDirectFile = file;
+        const std::vector<std::string>& files = mParser.directFiles;
+        if (files.size() == 1) {
+            struct stat st {};
+            if (::fstat(mDirectFd, &st) == 0)
+                mAhead =
+                    std::make_unique<detail::ReadAhead>(mDirectFd, 0, std::uint64_t(st.st_size));
+            return mDirectFd;
+        }
+        const std::uint64_t window =
+            std::max<std::uint64_t>(1, detail::kFilesReadAheadBytes / mInfo.sliceBytes());
+        for (mAdvised = std::max<std::uint64_t>(mAdvised, file + 1);
+             mAdvised < std::min<std::uint64_t>(files.size(), file + 1 + window); ++mAdvised)
+            detail::willNeed(files[mAdvised]);
+        return mDirectFd;
+    }
+
+    void closeDirect() {
+        mAhead.reset(); // its thread reads the descriptor
+        if (mDirectFd >= 0) ::close(mDirectFd);
+        mDirectFd = -1;
+        mDirectFile = UINT32_MAX;
+    }
+
+    /// NaN or infinity would poison every min/max and average the store keeps. The error
+    /// names the file slice `z` came from, and its page when that file holds every slice.
+    void checkFinite(std::span<const std::byte> slice, std::uint64_t z, std::uint32_t file) const {
+        for (std::size_t i = 0; i < slice.size(); i += 4) {
+            float v;
+            std::memcpy(&v, slice.data() + i, 4);
+            if (std::isfinite(v)) continue;
+            const std::uint64_t voxel = i / 4;
+            const bool pages = mParser.directFiles.size() == 1;
+            throw FormatError(mParser.directFiles[file], "data",
+                              (pages ? "page " + std::to_string(z + 1) + ": " : std::string()) +
+                                  "voxel (" + std::to_string(voxel % mInfo.dims[0]) + "," +
+                                  std::to_string(voxel / mInfo.dims[0]) + ") is " +
+                                  (std::isnan(v) ? "NaN" : "infinite") +
+                                  "; float volumes must be finite");
+        }
+    }
+
+    /// Reads the next tag, past the files the parser reports, and checks it is one of `want`;
+    /// an 'E' from the child becomes its FormatError.
+    char nextTag(std::initializer_list<char> want) {
         char tag = value<char>();
         for (; tag == kReading; tag = value<char>())
             mReadingFile = text();
-        if (tag == want) return;
+        if (std::find(want.begin(), want.end(), tag) != want.end()) return tag;
         if (tag == kError) {
             const std::string file = text(), field = text(), why = text();
             reap(false);
@@ -392,8 +568,9 @@ class SandboxedSource final : public VolumeSource {
                           "sandboxed " + mParser.parserName + " parser: " + clip(why));
     }
 
-    /// Closes the pipe and the stderr file and ends the child (killed and waited for).
+    /// Closes the pipe, the files and the stderr file and ends the child (killed and waited for).
     void release() {
+        closeDirect();
         if (mFd >= 0) ::close(mFd);
         mFd = -1;
         reap(true);
@@ -417,8 +594,16 @@ class SandboxedSource final : public VolumeSource {
     VolumeInfo mInfo;
     pid_t mPid = -1;
     int mFd = -1, mStatus = 0;
-    int mStderrFd = -1; ///< the child's stderr file (memfd); -1 when it shares ours
-    std::uint64_t mPendingSlices = 0;
+    int mStderrFd = -1;           ///< the child's stderr file (memfd); -1 when it shares ours
+    std::uint64_t mAnnounced = 0; ///< voxel bytes the child's 'S' and 'X' messages announced
+    std::uint64_t mPipeBytes = 0; ///< of the last 'S', still in the pipe
+    std::vector<detail::FileExtent> mExtents; ///< of the last 'X'
+    std::size_t mExtentAt = 0;                ///< the extent read next
+    std::uint64_t mExtentDone = 0;            ///< its bytes already read
+    std::uint32_t mDirectFile = UINT32_MAX;   ///< the directFiles entry open in mDirectFd
+    int mDirectFd = -1;
+    std::uint64_t mAdvised = 0; ///< a folder's files before this one were asked for (willNeed)
+    std::unique_ptr<detail::ReadAhead> mAhead; ///< over mDirectFd, for one file
 };
 
 } // namespace

@@ -18,9 +18,12 @@
 #include "brickstore/Readers.h"
 #include "brickstore/VolumeSource.h"
 
+#include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
 #include <string>
+#include <vector>
 
 namespace bc::brickstore::detail {
 
@@ -31,11 +34,41 @@ using ReadingFile = std::function<void(const std::string& path)>;
 /// Opens the volume in the child; `reading` stays valid for the source's whole life there.
 using SandboxedOpener = std::function<std::unique_ptr<VolumeSource>(const ReadingFile& reading)>;
 
-/// How the sandbox names the parser in its errors.
+/// How the sandbox names the parser in its errors, and the files the parent may read itself.
 struct SandboxedParser {
     std::string path;       ///< the file or folder the errors name when no file was reported
     std::string parserName; ///< "OpenVDB", "DICOM"
     std::string alarmWords; ///< what parseSeconds bounds, as errors say it: "to parse"
+    /// The files a SliceLocator's extents may name, by index, listed by the parent before the
+    /// fork (a TIFF, or a TIFF folder's slices). Empty: the child must send every byte.
+    std::vector<std::string> directFiles;
+};
+
+/// A run of a slice's bytes as they lie in one of SandboxedParser::directFiles, already as
+/// ingest stores them (uncompressed, host byte order, x fastest).
+struct FileExtent {
+    std::uint32_t file = 0; ///< index into directFiles
+    std::uint64_t offset = 0;
+    std::uint64_t bytes = 0;
+};
+
+/// What a sandboxed source may also be (the TIFF reader): one that can say where a slice's
+/// bytes lie instead of reading them. Then the child sends the parent a map of the slice
+/// (a few bytes) and the parent reads its voxels itself, straight into the ingest's buffer:
+/// no copy through the child and the pipe. The parser still parses every header in the child;
+/// the parent trusts none of it beyond "read these bytes of a file the user named", checks
+/// every extent against that file and the volume's size, and checks float voxels are finite.
+/// The child uses this interface in place of VolumeSource::readSlices once it finds it.
+class SliceLocator {
+  public:
+    virtual ~SliceLocator() = default;
+    /// Appends the extents that hold slice `z` (z counts up from 0, each once; the last extent
+    /// in `out` grows where the slice's bytes continue it) and returns true; false when the slice
+    /// must be decoded (compressed, tiled, byte-swapped), which decodeSlice(z) then does. @throw
+    /// FormatError as readSlices would.
+    virtual bool locateSlice(std::uint64_t z, std::vector<FileExtent>& out) = 0;
+    /// Decodes slice `z`, which locateSlice has just refused, into `out` (one slice).
+    virtual void decodeSlice(std::uint64_t z, std::span<std::byte> out) = 0;
 };
 
 /// Forks a child that runs `open` under `limits` and returns the parent's side, with the

@@ -259,13 +259,6 @@ void TiffFile::readAhead() {
     mAhead->reached(mReadEnd);
 }
 
-void willNeed(const std::string& path) {
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) return;
-    ::posix_fadvise(fd, 0, 0, POSIX_FADV_WILLNEED);
-    ::close(fd);
-}
-
 void TiffFile::readPage(const TiffPage& page, std::span<std::byte> out) {
     if (page.tiled)
         readTiles(page, out);
@@ -276,10 +269,7 @@ void TiffFile::readPage(const TiffPage& page, std::span<std::byte> out) {
 void TiffFile::readStrips(const TiffPage& page, std::span<std::byte> out) {
     const std::uint64_t rowBytes = std::uint64_t(page.width) * voxelBytes(page.type);
     const std::uint64_t rows = std::min<std::uint64_t>(page.rowsPerStrip, page.length);
-    const std::uint64_t strips = (page.length + rows - 1) / rows;
-    if (TIFFNumberOfStrips(mTiff) < strips)
-        fail("StripOffsets", "holds " + count(TIFFNumberOfStrips(mTiff), "strip") + ", not the " +
-                                 std::to_string(strips) + " ImageLength and RowsPerStrip need");
+    const std::uint64_t strips = checkStrips(page);
     for (std::uint32_t s = 0; s < strips; ++s) {
         const std::uint64_t first = s * rows, n = std::min(rows, page.length - first);
         mReadEnd = std::max(mReadEnd, checkStrile(s, false, "strip"));
@@ -289,6 +279,46 @@ void TiffFile::readStrips(const TiffPage& page, std::span<std::byte> out) {
             fail("data", "strip " + std::to_string(s) + " (" + compressionName(page.compression) +
                              ") cannot be read or decoded");
     }
+}
+
+std::uint64_t TiffFile::checkStrips(const TiffPage& page) const {
+    const std::uint64_t rows = std::min<std::uint64_t>(page.rowsPerStrip, page.length);
+    const std::uint64_t strips = (page.length + rows - 1) / rows;
+    if (TIFFNumberOfStrips(mTiff) < strips)
+        fail("StripOffsets", "holds " + count(TIFFNumberOfStrips(mTiff), "strip") + ", not the " +
+                                 std::to_string(strips) + " ImageLength and RowsPerStrip need");
+    return strips;
+}
+
+bool TiffFile::locateStrips(const TiffPage& page, std::uint32_t file,
+                            std::vector<FileExtent>& out) {
+    std::uint16_t fillOrder = FILLORDER_MSB2LSB;
+    TIFFGetFieldDefaulted(mTiff, TIFFTAG_FILLORDER, &fillOrder);
+    // libtiff reverses the bits of LSB-first bytes and swaps the bytes of a file in the other
+    // byte order: such pages are decoded, as are compressed and tiled ones.
+    if (page.tiled || page.compression != COMPRESSION_NONE || fillOrder != FILLORDER_MSB2LSB ||
+        (TIFFIsByteSwapped(mTiff) && voxelBytes(page.type) > 1))
+        return false;
+    const std::uint64_t rowBytes = std::uint64_t(page.width) * voxelBytes(page.type);
+    const std::uint64_t rows = std::min<std::uint64_t>(page.rowsPerStrip, page.length);
+    const std::uint64_t strips = checkStrips(page);
+    for (std::uint32_t s = 0; s < strips; ++s) {
+        const std::uint64_t want = std::min(rows, page.length - s * rows) * rowBytes;
+        const std::uint64_t end = checkStrile(s, false, "strip");
+        const std::uint64_t offset = TIFFGetStrileOffset(mTiff, s);
+        // libtiff refuses an uncompressed strip shorter than its rows ("Not enough data").
+        if (end - offset < want)
+            fail("StripByteCounts", "strip " + std::to_string(s) + " holds " +
+                                        std::to_string(end - offset) + " bytes; its rows need " +
+                                        std::to_string(want) + " uncompressed");
+        mReadEnd = std::max(mReadEnd, end);
+        if (!out.empty() && out.back().file == file &&
+            out.back().offset + out.back().bytes == offset)
+            out.back().bytes += want;
+        else
+            out.push_back({file, offset, want});
+    }
+    return true;
 }
 
 void TiffFile::readTiles(const TiffPage& page, std::span<std::byte> out) {

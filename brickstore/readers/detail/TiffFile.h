@@ -5,6 +5,7 @@
 // its own error handler, so libtiff's message ends the FormatError instead of reaching stderr.
 #include "brickstore/VoxelType.h"
 #include "brickstore/readers/detail/ReadAhead.h"
+#include "brickstore/readers/detail/SandboxedSource.h"
 
 #include <cstdarg>
 #include <cstddef>
@@ -40,14 +41,6 @@ struct TiffResolution {
     double x = 0, y = 0;
     std::uint16_t unit = 2;
 };
-
-/// How far ahead of its decoding a TIFF folder's reader asks the kernel to read its next files
-/// (willNeed); one file is read ahead by ReadAhead's window (TiffFile::readAhead).
-constexpr std::uint64_t kReadAheadBytes = 64ull << 20;
-
-/// Asks the kernel to read the whole file at `path` into the page cache, without waiting (a
-/// TIFF folder's next slices); a file that cannot be opened is left to the reader to report.
-void willNeed(const std::string& path);
 
 /// "LZW", "deflate": a supported Compression value as descriptions write it.
 const char* compressionName(std::uint16_t compression);
@@ -87,6 +80,13 @@ class TiffFile {
     /// @throw FormatError(path, "StripByteCounts"/"TileByteCounts", ...) for data past the
     /// file's end, FormatError(path, "data") when libtiff cannot decode it.
     void readPage(const TiffPage& page, std::span<std::byte> out);
+    /// Where the current page's voxels lie when they need no decoding (uncompressed strips in
+    /// host byte order, most significant bit first): appends them to `out` as extents of
+    /// `file` (growing the last extent where they continue it) and returns true; false, with
+    /// `out` untouched, for a page readPage must decode. Each strip is checked as readPage
+    /// checks it. @throw FormatError(path, "StripByteCounts"/"StripOffsets", ...) for a strip
+    /// past the file's end or one too short for its rows.
+    bool locateStrips(const TiffPage& page, std::uint32_t file, std::vector<FileExtent>& out);
     /// Moves the file's read-ahead window (ReadAhead, a thread of its own) past the last strip
     /// or tile read: in the parser sandbox the child decodes a slab and then waits while the
     /// pipe drains and the ingest cuts bricks, so the next pages come from the disk meanwhile
@@ -105,6 +105,8 @@ class TiffFile {
                         std::uint16_t photometric) const;
     /// Checks that strip or tile `index` lies inside the file; returns where it ends.
     std::uint64_t checkStrile(std::uint32_t index, bool tiled, const char* kind) const;
+    /// The strips the page's ImageLength and RowsPerStrip need, checked against those it holds.
+    std::uint64_t checkStrips(const TiffPage& page) const;
     void readStrips(const TiffPage& page, std::span<std::byte> out);
     void readTiles(const TiffPage& page, std::span<std::byte> out);
 

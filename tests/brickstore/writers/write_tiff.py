@@ -72,6 +72,25 @@ def write_variant(volume, out, variant):
                              compression="zlib", predictor=True, **plain)
         with open(os.path.join(folder, "notes.txt"), "w") as f:
             f.write("not a slice\n")
+    elif variant == "bigtiff_strips":
+        # The benchmark's layout: BigTIFF, little endian, uncompressed, a page at a time, so
+        # the pages' strips lie apart (the parent reads them itself, located by the parser).
+        with tifffile.TiffWriter(path, bigtiff=True) as w:
+            for plane in volume:
+                w.write(plane, contiguous=False, **plain)
+    elif variant == "folder_mixed":
+        # Slices the parent reads itself (uncompressed little endian, 5-row strips) between
+        # slices the parser decodes (deflate; uncompressed big endian), in one folder.
+        folder = os.path.join(out, variant)
+        os.makedirs(folder)
+        for z, plane in enumerate(volume):
+            name = os.path.join(folder, "p%03d.tif" % z)
+            if z % 4 == 1:
+                tifffile.imwrite(name, plane, compression="zlib", **plain)
+            elif z % 4 == 3:
+                tifffile.imwrite(name, plane, byteorder=">", **plain)
+            else:
+                tifffile.imwrite(name, plane, rowsperstrip=5, **plain)
     elif variant == "folder_lzw_tiles":
         folder = os.path.join(out, variant)
         os.makedirs(folder)
