@@ -43,17 +43,18 @@ double BenchReport::plainMs(const BenchRow& row) const {
 
 void BenchReport::printMarkdown() const {
     std::printf("\n| dataset / TF | path | size | technique | ms/frame | speed-up | samples/px | "
-                "samples/oracle | PSNR dB | SSIM | octree ms | frustum ms | triangles | frustum "
-                "frames |\n|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+                "samples/oracle | PSNR dB | SSIM | octree ms | cell maps ms | frustum ms | "
+                "triangles | frustum frames |\n"
+                "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for (const auto& r : mRows) {
         if (r.kind != "path") continue;
         const double plain = plainMs(r);
         std::printf("| %s / %s | %s | %u | %s | %.1f | %.2fx | %.1f | %.2f | %s | %s | %.2f | "
-                    "%.2f | %.0f | %d |\n",
+                    "%.2f | %.2f | %.0f | %d |\n",
                     r.dataset.c_str(), r.tf.c_str(), r.path.c_str(), r.size, r.technique.c_str(),
                     r.ms, plain > 0 ? plain / r.ms : 0.0, r.spp, r.overOracle,
                     psnrText(r.psnr).c_str(), ssimText(r.ssim).c_str(), r.octreeRebuildMs,
-                    r.frustumBuildMs, r.frustumTriangles, r.frustumFrames);
+                    r.cellBuildMs, r.frustumBuildMs, r.frustumTriangles, r.frustumFrames);
     }
     std::printf("\nRun time against error (all techniques, orbit; error against the CPU reference "
                 "at the finest step)\n\n| dataset / TF | size | step | ms/frame | samples/px | "
@@ -69,14 +70,15 @@ void BenchReport::writeCsv(const std::string& path) const {
     std::ofstream f(path);
     f << "kind,dataset,tf,path,size,technique,step,ms,speedup,samples_per_pixel,samples_over_"
          "oracle,"
-         "psnr_db,ssim,octree_rebuild_ms,frustum_build_ms,frustum_triangles,frustum_frames\n";
+         "psnr_db,ssim,octree_rebuild_ms,cell_build_ms,frustum_build_ms,frustum_triangles,"
+         "frustum_frames\n";
     for (const auto& r : mRows) {
         const double plain = r.kind == "path" ? plainMs(r) : 0.0;
         f << r.kind << ',' << r.dataset << ',' << r.tf << ',' << r.path << ',' << r.size << ','
           << r.technique << ',' << r.step << ',' << r.ms << ',' << (plain > 0 ? plain / r.ms : 0)
           << ',' << r.spp << ',' << r.overOracle << ',' << psnrText(r.psnr) << ','
-          << ssimText(r.ssim) << ',' << r.octreeRebuildMs << ',' << r.frustumBuildMs << ','
-          << r.frustumTriangles << ',' << r.frustumFrames << '\n';
+          << ssimText(r.ssim) << ',' << r.octreeRebuildMs << ',' << r.cellBuildMs << ','
+          << r.frustumBuildMs << ',' << r.frustumTriangles << ',' << r.frustumFrames << '\n';
     }
     if (!f) throw std::runtime_error(path + ": cannot write the CSV");
 }

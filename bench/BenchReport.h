@@ -17,6 +17,7 @@ struct BenchRow {
     double overOracle = std::nan(""), psnr = std::nan(""),
            ssim = std::nan(""); ///< NaN: no reference
     double octreeRebuildMs = 0, frustumBuildMs = 0, frustumTriangles = 0;
+    double cellBuildMs = 0; ///< distance maps built by the path's first frame (summed over threads)
     int frustumFrames = 0;
 };
 

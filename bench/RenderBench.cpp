@@ -68,15 +68,19 @@ struct TechniqueSet {
     const char* name;
     render::SkipMode skip;
     bool ert, frustums;
+    std::uint32_t cells = 0; ///< RenderOptions::cellVoxels (CPU raycaster: distance maps)
 };
+constexpr std::uint32_t kCells = render::RenderOptions{}.cellVoxels; // the default
 constexpr TechniqueSet kSets[] = {
     {"plain", render::SkipMode::None, false, false},
     {"+ERT", render::SkipMode::None, true, false},
     {"+bricks", render::SkipMode::Bricks, false, false},
     {"+octree", render::SkipMode::All, false, false},
     {"+octree +ERT", render::SkipMode::All, true, false},
+    {"+octree +cells 2 +ERT", render::SkipMode::All, true, false, 2},
+    {"+octree +cells 1 +ERT", render::SkipMode::All, true, false, 1},
     {"+occlusion frustums", render::SkipMode::Bricks, false, true},
-    {"all", render::SkipMode::All, true, true},
+    {"all", render::SkipMode::All, true, true, kCells},
 };
 
 std::vector<render::Camera> cameraPath(const std::string& path, const render::Box& box,
@@ -119,6 +123,7 @@ BenchRow measure(Scene& s, const TechniqueSet& t, const std::string& renderer,
     o.skip = t.skip;
     o.earlyTermination = t.ert;
     o.occlusionFrustums = t.frustums;
+    o.cellVoxels = t.cells;
     BenchRow row;
     row.technique = cpu ? std::string(t.name) + " (CPU)" : std::string(t.name);
     std::vector<double> ms, ofMs;
@@ -130,6 +135,7 @@ BenchRow measure(Scene& s, const TechniqueSet& t, const std::string& renderer,
                 : gpu->render(*s.store, *s.cache, *s.tf, cams[f], o, st);
         if (f == 0) {
             row.octreeRebuildMs = st.octreeRebuildMs;
+            row.cellBuildMs = st.cellBuildMs;
             continue;
         }
         if (f == 1 && reference) {

@@ -3,6 +3,7 @@
 #include "brickstore/BrickStore.h"
 
 #include <atomic>
+#include <bit>
 #include <chrono>
 
 namespace bc::render {
@@ -70,8 +71,30 @@ std::shared_ptr<const PreintegratedTable> Classification::preintegrated() const 
     return mPreintegrated;
 }
 
+FineOccupancy* Classification::fine(std::uint32_t cellVoxels) const {
+    // Only under the exact octree: a node drawn whole (ratio threshold or level limit) must
+    // keep its samples, which a map would leap.
+    if (!mOccupancy || mOccupancy->depth() == 0 || cellVoxels == 0 ||
+        mKey.octree.ratioThreshold < 1.0 || mKey.octree.levelLimit < mOccupancy->depth())
+        return nullptr;
+    const std::uint32_t leaf = mOccupancy->leafVoxels();
+    if (!std::has_single_bit(leaf) || !std::has_single_bit(cellVoxels) || cellVoxels >= leaf)
+        return nullptr;
+    std::lock_guard lock(mFineMutex);
+    for (const auto& f : mFine)
+        if (f->cellVoxels() == cellVoxels) return f.get();
+    const TransferFunctionTable table = mTf.table(1.0, kClassificationTableEntries);
+    mFine.push_back(std::make_unique<FineOccupancy>(*mOccupancy, table, cellVoxels));
+    return mFine.back().get();
+}
+
 std::uint64_t Classification::bytes() const {
     std::uint64_t n = sizeof(*this) + (mOccupancy ? mOccupancy->bytes() : 0);
+    {
+        std::lock_guard lock(mFineMutex);
+        for (const auto& f : mFine)
+            n += f->bytes();
+    }
     std::lock_guard lock(mTablesMutex);
     if (mPreintegrated) n += mPreintegrated->table.size() * sizeof(PreintegratedTable::Entry);
     for (const auto& [step, table] : mTables)

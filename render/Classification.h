@@ -9,6 +9,7 @@
 // same store and level (copied, then brought up to the new function), so only bricks whose
 // value range meets the table entries whose emptiness changed are rebuilt, and leaf tables
 // are read from the store once.
+#include "render/FineOccupancy.h"
 #include "render/Occupancy.h"
 #include "render/TransferFunction.h"
 
@@ -67,7 +68,12 @@ class Classification {
     /// The pre-integration table (kClassificationTableEntries entries; one serves every
     /// step), made on first use.
     std::shared_ptr<const PreintegratedTable> preintegrated() const;
-    /// Host memory held: octrees and tables.
+    /// The per-brick distance maps over cells of `cellVoxels` (FineOccupancy.h), made on first
+    /// use and filled brick by brick as frames draw them; null without octrees (or with a
+    /// depth of 0), under an octree that draws nodes whole (ratio threshold below 1, a level
+    /// limit), for 0, or for a cell size they cannot take (not a power of two below the leaf).
+    FineOccupancy* fine(std::uint32_t cellVoxels) const;
+    /// Host memory held: octrees, distance maps and tables.
     std::uint64_t bytes() const;
 
   private:
@@ -79,6 +85,8 @@ class Classification {
     mutable std::mutex mTablesMutex;
     mutable std::list<std::pair<double, std::shared_ptr<const TransferFunctionTable>>> mTables;
     mutable std::shared_ptr<const PreintegratedTable> mPreintegrated;
+    mutable std::mutex mFineMutex;
+    mutable std::vector<std::unique_ptr<FineOccupancy>> mFine; ///< one per cell size asked for
 };
 
 struct ClassificationCacheConfig {

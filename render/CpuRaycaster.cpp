@@ -3,7 +3,9 @@
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "render/BrickPlan.h"
+#include "render/Classification.h"
 #include "render/Composite.h"
+#include "render/FineOccupancy.h"
 #include "render/Occupancy.h"
 #include "render/Partition.h"
 #include "render/TransferFunction.h"
@@ -93,6 +95,8 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayR
         if (b.slot == Slot::Sampled) {
             const std::uint32_t* words =
                 f.occ ? f.occ + std::size_t(w.index) * f.occWords : nullptr;
+            const auto* map =
+                f.fine && b.fine ? reinterpret_cast<const std::uint8_t*>(f.fine + b.fine) : nullptr;
             const glm::vec3 local = w.local(f);
             const T* voxels = static_cast<const T*>(b.voxels);
             // Pre-integration walks the whole range itself: a segment may begin at a sample
@@ -106,8 +110,8 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayR
                                                      w.invStep, w.t0, kFirst, kLast))
                 more = f.simd ? detail::marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words, local,
                                                        w.dv, w.d, w.t0, kFirst, kLast, acc, n)
-                              : detail::marchBrick(f, voxels, words, local, w.dv, w.d, w.t0, kFirst,
-                                                   kLast, acc, n);
+                              : detail::marchBrick(f, voxels, words, map, local, w.dv, w.d, w.t0,
+                                                   kFirst, kLast, acc, n);
             if (!more) return;
         } else if (f.pre) {
             // One value throughout: the first segment runs from the last sample's value to it,
@@ -305,6 +309,29 @@ std::vector<brickstore::BrickPin> pinBatch(const BrickPlan& plan, std::size_t fi
     return pins;
 }
 
+/// The distance maps (FineOccupancy) of the batch's sampled bricks, built from their pinned
+/// voxels where a frame has not yet; their offsets into the pool go to their refs.
+void cellsOfBatch(const BrickPlan& plan, std::size_t first, std::size_t end, FineOccupancy& fine,
+                  brickstore::VoxelType type, const Frame& f, std::vector<BrickRef>& bricks,
+                  FrameStats& stats) {
+    const FineOccupancyStats before = fine.stats();
+    std::atomic<std::uint64_t> withCells{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(first, end, 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                              const PlannedBrick& b = plan.drawn[i];
+                              if (b.draw != BrickDraw::Sampled) continue;
+                              BrickRef& ref = bricks[b.index];
+                              ref.fine = fine.offsetOf(b.index, ref.voxels, type, f.brick, f.apron);
+                              if (ref.fine != 0) ++withCells;
+                          }
+                      });
+    const FineOccupancyStats after = fine.stats();
+    stats.cellBricksBuilt += after.bricksBuilt - before.bricksBuilt;
+    stats.cellBuildMs += after.buildMs - before.buildMs;
+    stats.cellBricks += withCells;
+}
+
 } // namespace
 
 CpuRaycaster::CpuRaycaster() = default;
@@ -362,6 +389,14 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         f.leaf = float(occupancy->leafVoxels());
         f.boxes = occupancy->sampledBoxes().data();
     }
+    FineOccupancy* fine = f.occ && classified.classification
+                              ? classified.classification->fine(options.cellVoxels)
+                              : nullptr;
+    if (fine) {
+        f.fine = fine->pool();
+        f.cell = float(fine->cellVoxels());
+        f.cellAxis = int(fine->cellsPerAxis());
+    }
     const PixelRect region = options.drawn();
     // Only the rays that may meet a drawn brick are marched (the others stay transparent
     // black); without skipping every ray is, the reference of the skipping invariant.
@@ -375,6 +410,9 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         const auto loadStart = Clock::now();
         std::vector<brickstore::BrickPin> pins = pinBatch(plan, first, ends[batch], cache, bricks);
         stats.uploadMs += msSince(loadStart);
+        if (fine)
+            cellsOfBatch(plan, first, ends[batch], *fine, store.info().volume.type, f, bricks,
+                         stats);
         const auto renderStart = Clock::now();
         f.batch = std::uint32_t(batch);
         if (marched.visible)

@@ -225,7 +225,8 @@ void OccupancyTrees::rebuildBrick(std::uint64_t brick, const std::vector<std::ui
 }
 
 bool OccupancyTrees::leafNonEmpty(std::uint64_t brick, std::uint32_t leaf) const {
-    return mNonEmpty[brick * std::uint64_t(mLeaves) * mLeaves * mLeaves + leaf] != 0;
+    return mStored[brick] &&
+           mNonEmpty[brick * std::uint64_t(mLeaves) * mLeaves * mLeaves + leaf] != 0;
 }
 
 double OccupancyTrees::ratio(std::uint64_t brick, std::uint32_t octLevel,

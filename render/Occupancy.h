@@ -90,6 +90,10 @@ class OccupancyTrees {
     /// Whether the raycaster samples inside that node (its bit, or true for the root).
     bool occupied(std::uint64_t brick, std::uint32_t octLevel,
                   const std::array<std::uint32_t, 3>& node) const;
+    /// Whether leaf `leaf` ((z * leavesPerAxis() + y) * leavesPerAxis() + x) of `brick` is
+    /// non-empty under the last update (its value range meets a visible table entry, or its
+    /// leaf table is corrupt); false for a brick that is not stored.
+    bool leafNonEmpty(std::uint64_t brick, std::uint32_t leaf) const;
     /// Host memory this object holds (its tables and bits).
     std::uint64_t bytes() const;
     /// Leaf tables that failed their checksum, one line each naming the brick.
@@ -97,7 +101,6 @@ class OccupancyTrees {
 
   private:
     void rebuildBrick(std::uint64_t brick, const std::vector<std::uint32_t>& prefix);
-    bool leafNonEmpty(std::uint64_t brick, std::uint32_t leaf) const;
 
     std::uint32_t mLevel = 0, mLeaves = 0, mLeafVoxels = 0, mDepth = 0, mWordsPerBrick = 0;
     std::uint64_t mBricks = 0;

@@ -52,6 +52,9 @@ void RenderOptions::validate() const {
                                     std::to_string(parts) +
                                     " (parts must lie in 1..4096, part "
                                     "below parts)");
+    if (cellVoxels != 0 && (cellVoxels > 64 || (cellVoxels & (cellVoxels - 1)) != 0))
+        throw std::invalid_argument("cells: " + std::to_string(cellVoxels) +
+                                    " voxels; 0 (none) or a power of two up to 64");
     octree.validate();
     occlusion.validate();
 }

@@ -78,6 +78,11 @@ struct RenderOptions {
     /// raycaster and the reference honour it; other renderers refuse it.
     bool preintegrate = false;
     OccupancyConfig octree; ///< second-stage traversal (SkipMode::All)
+    /// CPU raycaster with the octrees (SkipMode::All): leap by per-brick distance maps over
+    /// cells of this many voxels (a power of two below the leaf: 1, 2 or 4 for 8-voxel leaves),
+    /// built from the drawn bricks' voxels (render/FineOccupancy.h), so rays leap the empty
+    /// space inside non-empty leaves. The same image, bit for bit; 0 leaps by the octree alone.
+    std::uint32_t cellVoxels = 2;
     /// Start rays at the previous frame's occlusion frustums (same raycaster, same scene).
     bool occlusionFrustums = true;
     OcclusionConfig occlusion;
@@ -148,6 +153,12 @@ struct FrameStats {
     std::uint64_t octreeLeaps = 0;         ///< empty octree nodes leapt by rays
     std::uint64_t octreeBricksRebuilt = 0; ///< octrees rebuilt for this frame's TF (0: reused)
     double octreeRebuildMs = 0.0;
+    /// CPU raycaster, RenderOptions::cellVoxels: drawn bricks whose cells below the leaves this
+    /// frame built from their voxels (FineOccupancy; 0 once every drawn brick has them), the
+    /// time that took (summed over threads), and the drawn bricks that leap by cells.
+    std::uint64_t cellBricksBuilt = 0;
+    double cellBuildMs = 0.0;
+    std::uint64_t cellBricks = 0;
     bool occlusionUsed = false;           ///< ray starts came from occlusion frustums
     const char* occlusionReason = "off";  ///< why not, when not used ("" when used)
     std::uint64_t occlusionFrustums = 0;  ///< non-empty blocks extruded

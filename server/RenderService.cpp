@@ -819,6 +819,9 @@ void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool
     total.octreeLeaps += slice.octreeLeaps;
     total.octreeBricksRebuilt += slice.octreeBricksRebuilt;
     total.octreeRebuildMs += slice.octreeRebuildMs;
+    total.cellBricksBuilt += slice.cellBricksBuilt;
+    total.cellBuildMs += slice.cellBuildMs;
+    total.cellBricks = std::max(total.cellBricks, slice.cellBricks);
     total.bricksUploaded += slice.bricksUploaded;
     total.bytesUploaded += slice.bytesUploaded;
     total.batches += slice.batches;

@@ -612,6 +612,17 @@ HWY_INLINE hn::Mask<DI> nodeSampled(const Frame& f, const std::uint32_t* words, 
                   hn::Zero(di));
 }
 
+/// Cells of the distance maps (cellOf() of CpuRay.h) of the rays' positions per lane: f.cell is
+/// a power of two, so multiplying by its reciprocal is the scalar division's float.
+HWY_INLINE VI mapCellOf(const Frame& f, VF local, VF dv, VF t) {
+    const DF df;
+    const DI di;
+    const VF p = hn::Add(hn::Add(local, hn::Mul(dv, t)), hn::Set(df, f.cell - 0.5f));
+    return hn::Min(
+        hn::Max(hn::ConvertTo(di, hn::Floor(hn::Mul(p, hn::Set(df, 1.0f / f.cell)))), hn::Zero(di)),
+        hn::Set(di, f.cellAxis - 1));
+}
+
 /// RayWalk::begin() for rays [0, count) of `rays` at once, all Fresh: ok[i] says whether ray
 /// i has anything to draw, walks[i] is its walk. The scalar code's float operations in its
 /// order (glm::normalize is v * (1 / sqrt(dot(v, v))); std::min and std::max by their own
@@ -730,6 +741,7 @@ struct Lanes {
     HWY_ALIGN std::int32_t k[kMax], end[kMax];
     HWY_ALIGN std::int32_t base[kMax];  ///< the brick's first voxel, in voxels from the packet's
     HWY_ALIGN std::int32_t words[kMax]; ///< the brick's first octree word in f.occ
+    HWY_ALIGN std::int32_t fine[kMax];  ///< the brick's distance map in f.fine (0: none)
     HWY_ALIGN float t0[kMax], lx[kMax], ly[kMax], lz[kMax], dx[kMax], dy[kMax], dz[kMax];
     HWY_ALIGN float ix[kMax], iy[kMax], iz[kMax]; ///< 1 / (dx, dy, dz)
     HWY_ALIGN float wx[kMax], wy[kMax], wz[kMax]; ///< the rays' world directions (shading)
@@ -761,7 +773,7 @@ template <class T> class Packet {
     void idle(int j) {
         mRay[j] = nullptr;
         L.k[j] = L.end[j] = 0;
-        L.base[j] = L.words[j] = 0;
+        L.base[j] = L.words[j] = L.fine[j] = 0;
         L.t0[j] = L.lx[j] = L.ly[j] = L.lz[j] = L.dx[j] = L.dy[j] = L.dz[j] = 0.0f;
         L.ix[j] = L.iy[j] = L.iz[j] = L.wx[j] = L.wy[j] = L.wz[j] = 0.0f;
         L.ray[j] = 0;
@@ -809,6 +821,7 @@ template <class T> class Packet {
             L.end[j] = last;
             L.base[j] = std::int32_t(offset);
             L.words[j] = w.index * f.occWords;
+            L.fine[j] = std::int32_t(b.fine);
             L.t0[j] = w.t0;
             L.lx[j] = local.x;
             L.ly[j] = local.y;
@@ -842,7 +855,10 @@ template <class T> class Packet {
     /// A brick too far from the packet's for its gathers: the scalar loop, samples [k, kEnd).
     bool marchAlone(const T* voxels, const RayWalk& w, int k, int kEnd, Accum& acc) {
         const std::uint32_t* words = f.occ ? f.occ + std::size_t(w.index) * f.occWords : nullptr;
-        return marchBrick(f, voxels, words, w.local(f), w.dv, w.d, w.t0, k, kEnd, acc, mN);
+        const std::uint32_t map = f.fine ? f.bricks[w.index].fine : 0;
+        return marchBrick(f, voxels, words,
+                          map ? reinterpret_cast<const std::uint8_t*>(f.fine + map) : nullptr,
+                          w.local(f), w.dv, w.d, w.t0, k, kEnd, acc, mN);
     }
 
     /// Lane j, whose ray has no samples left to take (or that has no ray): its ray's next
@@ -891,6 +907,11 @@ template <class T> class Packet {
         const VF apron = hn::Set(df, float(f.apron) - 0.5f), ertT = hn::Set(df, f.ertT);
         const VI one = hn::Set(di, 1);
         const auto* words = f.occ;
+        // Distance maps (f.fine): a lane whose brick has one (L.fine != 0) leaps by it, the
+        // others walk the octree.
+        const bool maps = f.fine != nullptr;
+        const VF cellSize = hn::Set(df, f.cell);
+        const VI axis = hn::Set(di, f.cellAxis);
         for (;;) {
             const VF t0 = hn::Load(df, L.t0);
             const VF lx = hn::Load(df, L.lx), ly = hn::Load(df, L.ly), lz = hn::Load(df, L.lz);
@@ -899,6 +920,7 @@ template <class T> class Packet {
             const VF wx = hn::Load(df, L.wx), wy = hn::Load(df, L.wy), wz = hn::Load(df, L.wz);
             const VF rx = hn::Add(lx, apron), ry = hn::Add(ly, apron), rz = hn::Add(lz, apron);
             const VI base = hn::Load(di, L.base), wordBase = hn::Load(di, L.words);
+            const VI fineBase = hn::Load(di, L.fine);
             VI k = hn::Load(di, L.k), end = hn::Load(di, L.end);
             VF Tr = hn::Load(df, L.t);
             MI stopped = hn::FirstN(di, 0);
@@ -921,33 +943,82 @@ template <class T> class Packet {
                 if (words) {
                     const VI ax = leafOf(f, lx, dx, t), ay = leafOf(f, ly, dy, t),
                              az = leafOf(f, lz, dz, t);
-                    const MI sampled = nodeSampled(f, words, wordBase, ax, ay, az, f.octDepth);
+                    MI sampled = nodeSampled(f, words, wordBase, ax, ay, az, f.octDepth);
+                    // Lanes with a map: its distance d at the sample's cell (sample where 0).
+                    MI mapped = hn::FirstN(di, 0);
+                    VI cx = hn::Zero(di), cy = cx, cz = cx, d = cx;
+                    if (maps) {
+                        mapped = hn::Ne(fineBase, hn::Zero(di));
+                        if (!hn::AllFalse(di, mapped)) {
+                            cx = mapCellOf(f, lx, dx, t);
+                            cy = mapCellOf(f, ly, dy, t);
+                            cz = mapCellOf(f, lz, dz, t);
+                            const VI cell =
+                                hn::Add(hn::Mul(hn::Add(hn::Mul(cz, axis), cy), axis), cx);
+                            const VI word =
+                                hn::GatherIndex(di, reinterpret_cast<const std::int32_t*>(f.fine),
+                                                hn::Add(hn::ShiftRight<2>(cell), fineBase));
+                            d = hn::And(
+                                hn::Shr(word, hn::ShiftLeft<3>(hn::And(cell, hn::Set(di, 3)))),
+                                hn::Set(di, 255));
+                            sampled = hn::Or(hn::And(mapped, hn::Eq(d, hn::Zero(di))),
+                                             hn::AndNot(mapped, sampled));
+                        }
+                    }
                     const MI empty = hn::AndNot(sampled, active);
                     if (!hn::AllFalse(di, empty)) {
-                        // The coarsest empty level per lane, walked up from the leaf
-                        // (coarsestEmpty()).
-                        VI level = hn::Set(di, 1);
-                        MI found = hn::Not(empty);
-                        for (int l = f.octDepth - 1; l >= 1 && !hn::AllTrue(di, found); --l) {
-                            const MI set =
-                                hn::AndNot(found, nodeSampled(f, words, wordBase, ax, ay, az, l));
-                            level = hn::IfThenElse(set, hn::Set(di, l + 1), level);
-                            found = hn::Or(found, set);
-                        }
-                        const VI shift = hn::Sub(hn::Set(di, f.octDepth), level);
-                        const VF size =
-                            hn::Mul(hn::Set(df, f.leaf), hn::ConvertTo(df, hn::Shl(one, shift)));
-                        // BrickRay::exitOf() on one axis.
-                        auto exitOn = [&](VI leaf, VF local, VF dir, VF inv) {
-                            const VF lo = hn::Mul(hn::ConvertTo(df, hn::Shr(leaf, shift)), size);
+                        // BrickRay::exitOf() on one axis, for a cube at lo of edge size.
+                        auto exitOn = [&](VF lo, VF size, VF local, VF dir, VF inv) {
                             const VF face =
                                 hn::Add(lo, hn::IfThenElseZero(hn::Gt(dir, hn::Zero(df)), size));
                             return hn::IfThenElse(hn::Eq(dir, hn::Zero(df)), far,
                                                   hn::Mul(hn::Sub(face, local), inv));
                         };
-                        const VF tExit = hn::Min(
-                            hn::Min(hn::Min(far, exitOn(ax, lx, dx, ix)), exitOn(ay, ly, dy, iy)),
-                            exitOn(az, lz, dz, iz));
+                        auto exitOfCube = [&](VI nx, VI ny, VI nz, VF size) {
+                            return hn::Min(
+                                hn::Min(
+                                    hn::Min(far, exitOn(hn::Mul(hn::ConvertTo(df, nx), size), size,
+                                                        lx, dx, ix)),
+                                    exitOn(hn::Mul(hn::ConvertTo(df, ny), size), size, ly, dy, iy)),
+                                exitOn(hn::Mul(hn::ConvertTo(df, nz), size), size, lz, dz, iz));
+                        };
+                        VF tExit = far;
+                        const MI tree = hn::AndNot(mapped, empty);
+                        if (!hn::AllFalse(di, tree)) {
+                            // The coarsest empty level per lane, walked up from the leaf
+                            // (coarsestEmpty()).
+                            VI level = hn::Set(di, 1);
+                            MI found = hn::Not(tree);
+                            for (int l = f.octDepth - 1; l >= 1 && !hn::AllTrue(di, found); --l) {
+                                const MI set = hn::AndNot(
+                                    found, nodeSampled(f, words, wordBase, ax, ay, az, l));
+                                level = hn::IfThenElse(set, hn::Set(di, l + 1), level);
+                                found = hn::Or(found, set);
+                            }
+                            const VI shift = hn::Sub(hn::Set(di, f.octDepth), level);
+                            const VF size = hn::Mul(hn::Set(df, f.leaf),
+                                                    hn::ConvertTo(df, hn::Shl(one, shift)));
+                            tExit = exitOfCube(hn::Shr(ax, shift), hn::Shr(ay, shift),
+                                               hn::Shr(az, shift), size);
+                        }
+                        const MI cube = hn::And(mapped, empty);
+                        if (!hn::AllFalse(di, cube)) {
+                            // sampleAfterCube(): the cells within d - 1 of the sample's are
+                            // empty. Its corner at (c - d) cell + 1/2, its edge 2d - 1 cells.
+                            const VI back = hn::Sub(d, one);
+                            const VF size = hn::Mul(
+                                hn::ConvertTo(df, hn::Add(hn::Add(back, back), one)), cellSize);
+                            auto lo = [&](VI c, VF local, VF dir, VF inv) {
+                                return exitOn(
+                                    hn::Add(hn::Mul(hn::ConvertTo(df, hn::Sub(c, d)), cellSize),
+                                            half),
+                                    size, local, dir, inv);
+                            };
+                            const VF tCube = hn::Min(
+                                hn::Min(hn::Min(far, lo(cx, lx, dx, ix)), lo(cy, ly, dy, iy)),
+                                lo(cz, lz, dz, iz));
+                            tExit = hn::IfThenElse(hn::RebindMask(df, cube), tCube, tExit);
+                        }
                         const VF after =
                             hn::Ceil(hn::Sub(hn::Mul(hn::Sub(tExit, t0), invStep), half));
                         const VF to = hn::Max(hn::Min(after, hn::ConvertTo(df, end)),

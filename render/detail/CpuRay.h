@@ -27,6 +27,8 @@ struct BrickRef {
     float constant = 0.0f;
     std::uint32_t batch = 0; ///< the front-to-back batch that draws it
     Slot slot = Slot::Absent;
+    /// Its distance map's first word in Frame::fine (FineOccupancy::offsetOf; 0: none).
+    std::uint32_t fine = 0;
 };
 
 /// Everything a ray needs, in float, as the shader's uniforms.
@@ -61,6 +63,12 @@ struct Frame {
     const SampledBox* boxes = nullptr; ///< per brick, with occ (OccupancyTrees::sampledBoxes)
     int octDepth = 0, occWords = 0, leafAxis = 1;
     float leaf = 1;
+    /// With occ: per-brick distance maps over cells of `cell` voxels, `cellAxis` of them along
+    /// a brick (FineOccupancy), a brick's at BrickRef::fine words into `fine` (0: it has
+    /// none and walks the octree). Null: no maps.
+    const std::uint32_t* fine = nullptr;
+    int cellAxis = 1;
+    float cell = 1;
     const BrickRef* bricks = nullptr;
     std::uint32_t batch = 0; ///< the batch being drawn
 };
@@ -228,15 +236,57 @@ inline int sampleAfterNode(const Frame& f, glm::vec3 local, glm::vec3 dv, float 
     return int(std::ceil((tExit - t0) / f.stepMm - 0.5f));
 }
 
-/// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque.
+/// The cell of brick-local position p in a brick's distance map: f.cell voxels a cell, on the
+/// sampler's voxel lattice (cell c holds p in [(c - 1) cell + 1/2, c cell + 1/2)), clamped
+/// into the map. f.cell is a power of two: its reciprocal is exact.
+inline glm::ivec3 cellOf(const Frame& f, glm::vec3 p) {
+    return glm::clamp(glm::ivec3(glm::floor((p + (f.cell - 0.5f)) * (1.0f / f.cell))),
+                      glm::ivec3(0), glm::ivec3(f.cellAxis - 1));
+}
+
+/// A cell's distance in a brick's map (FineOccupancy): 0 where samples are taken, else d: the
+/// cells within d - 1 of it along every axis are empty.
+inline int cellDistance(const Frame& f, const std::uint8_t* map, glm::ivec3 c) {
+    return map[(std::size_t(c.z) * std::size_t(f.cellAxis) + std::size_t(c.y)) *
+                   std::size_t(f.cellAxis) +
+               std::size_t(c.x)];
+}
+
+/// The first sample past the empty cube of cells within d - 1 of cell c (cellDistance() d).
+/// By reciprocals, as the march across rays computes it, so that both leap to the same sample.
+inline int sampleAfterCube(const Frame& f, glm::vec3 local, glm::vec3 dv, float t0, glm::ivec3 c,
+                           int d) {
+    const glm::vec3 lo = glm::vec3(c - d) * f.cell + 0.5f;
+    const float size = float(2 * d - 1) * f.cell;
+    float tExit = 3.0e38f;
+    for (int a = 0; a < 3; ++a) {
+        if (dv[a] == 0.0f) continue;
+        const float face = dv[a] > 0.0f ? lo[a] + size : lo[a];
+        tExit = std::min(tExit, (face - local[a]) * (1.0f / dv[a]));
+    }
+    return int(std::ceil((tExit - t0) * (1.0f / f.stepMm) - 0.5f));
+}
+
+/// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque. `map`: the
+/// brick's distance map (f.fine + its BrickRef::fine, as bytes), which then decides in place
+/// of the octree; null to walk the octree.
 template <class T>
-bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, glm::vec3 local,
-                glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd, Accum& acc, RayCount& n) {
+bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, const std::uint8_t* map,
+                glm::vec3 local, glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd,
+                Accum& acc, RayCount& n) {
     const glm::vec3 rel = local + (float(f.apron) - 0.5f);
     glm::ivec3 checked(-1);
     for (; k < kEnd; ++k) {
         const float t = t0 + (float(k) + 0.5f) * f.stepMm;
-        if (words) {
+        if (map) {
+            const glm::ivec3 cell = cellOf(f, local + dv * t);
+            const int d = cellDistance(f, map, cell);
+            if (d > 0) {
+                ++n.leaps;
+                k = std::max(k, std::min(sampleAfterCube(f, local, dv, t0, cell, d), kEnd) - 1);
+                continue;
+            }
+        } else if (words) {
             const glm::ivec3 leaf = glm::clamp(glm::ivec3(glm::floor((local + dv * t) / f.leaf)),
                                                glm::ivec3(0), glm::ivec3(f.leafAxis - 1));
             if (leaf != checked) {

@@ -97,6 +97,23 @@ inline std::optional<brickstore::SourceSpec> realScan(const std::string& name) {
     return s;
 }
 
+/// A real scan and one of its presets.
+struct ScanPreset {
+    std::string scan, preset;
+};
+
+inline void PrintTo(const ScanPreset& c, std::ostream* os) {
+    *os << c.scan << " " << c.preset;
+}
+
+/// Every real scan with the presets the skipping invariants run on (GPU and CPU raycasters).
+inline std::vector<ScanPreset> invariantScans() {
+    return {{"cthead", "ct-skin"}, {"cthead", "ct-bone"},   {"CT_AVM", "vessels"},
+            {"frog", "mr"},        {"pancreas", "ct-bone"}, {"pancreas", "ct-skin"},
+            {"Iguana", "ct-bone"}, {"Iguana", "ct-skin"},   {"gaffer_smoke", "smoke"},
+            {"hydrogen", "smoke"}, {"headsq", "mr"},        {"headsq", "ct-bone"}};
+}
+
 /// A real scan ingested in bricks of 32 (apron 2, octree leaves of 8); nullptr when its data
 /// is missing.
 inline std::unique_ptr<TestStore> ingestRealScan(const std::string& name) {

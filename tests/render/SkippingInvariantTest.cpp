@@ -133,13 +133,14 @@ TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver50RandomJumps) {
     checkPath(*t, tf, path, c.scan + " " + c.preset + " jumps");
 }
 
-INSTANTIATE_TEST_SUITE_P(RealScans, SkippingInvariant,
-                         ::testing::Values(Case{"cthead", "ct-skin"}, Case{"cthead", "ct-bone"},
-                                           Case{"CT_AVM", "vessels"}, Case{"frog", "mr"},
-                                           Case{"pancreas", "ct-bone"}, Case{"pancreas", "ct-skin"},
-                                           Case{"Iguana", "ct-bone"}, Case{"Iguana", "ct-skin"},
-                                           Case{"gaffer_smoke", "smoke"}, Case{"hydrogen", "smoke"},
-                                           Case{"headsq", "mr"}, Case{"headsq", "ct-bone"}),
+std::vector<Case> invariantCases() {
+    std::vector<Case> cases;
+    for (const test::ScanPreset& s : test::invariantScans())
+        cases.push_back(Case{s.scan, s.preset});
+    return cases;
+}
+
+INSTANTIATE_TEST_SUITE_P(RealScans, SkippingInvariant, ::testing::ValuesIn(invariantCases()),
                          caseName);
 
 // Octrees leap over the empty space inside non-empty bricks of sparse angiography: fewer

@@ -50,7 +50,7 @@ struct RenderCliOptions {
     std::string store, output, size = "256,256", tf = "ct-skin", orbit, eye, target, up,
                                ert = "0.99", skip = "all", statsPath, renderer = "auto";
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
-    std::uint32_t octreeLevelLimit = 32;
+    std::uint32_t octreeLevelLimit = 32, cells = render::RenderOptions{}.cellVoxels;
     bool ortho = false, noShading = false, noSimd = false, noPackets = false, jitter = false,
          preintegrate = false, reference = false, interactive = false, mpi = false,
          mpiBarrier = false;
@@ -110,6 +110,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.interactive = o.interactive;
     r.octree.ratioThreshold = o.octreeRatio;
     r.octree.levelLimit = o.octreeLevelLimit;
+    r.cellVoxels = o.cells;
     r.validate();
     return r;
 }
@@ -141,6 +142,9 @@ nlohmann::json statsJson(const render::FrameStats& s, const std::string& rendere
             {"octreeLeaps", s.octreeLeaps},
             {"octreeBricksRebuilt", s.octreeBricksRebuilt},
             {"octreeRebuildMs", s.octreeRebuildMs},
+            {"cellBricksBuilt", s.cellBricksBuilt},
+            {"cellBuildMs", s.cellBuildMs},
+            {"cellBricks", s.cellBricks},
             {"occlusionUsed", s.occlusionUsed},
             {"occlusionReason", s.occlusionReason},
             {"occlusionFrustums", s.occlusionFrustums},
@@ -598,6 +602,10 @@ void addRenderCommand(CLI::App& app) {
         ->capture_default_str();
     cmd->add_option("--octree-level-limit", o->octreeLevelLimit,
                     "Deepest octree level descended (0 = the brick)")
+        ->capture_default_str();
+    cmd->add_option("--cells", o->cells,
+                    "CPU raycaster: leap by distance maps over cells of this many voxels, built "
+                    "from the drawn bricks (1, 2, 4; 0: the octree alone; same image)")
         ->capture_default_str();
     cmd->add_flag("--no-shading", o->noShading, "No gradient shading");
     cmd->add_flag("--no-simd", o->noSimd,

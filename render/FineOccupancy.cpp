@@ -1,0 +1,261 @@
+#include "render/FineOccupancy.h"
+
+#include "render/Occupancy.h"
+#include "render/TransferFunction.h"
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+#include <thread>
+
+namespace bc::render {
+namespace {
+
+constexpr std::int64_t kUnbuilt = -1, kBuilding = -2;
+
+/// First bit of octree level l (>= 1) in a brick's OccupancyTrees words.
+constexpr std::uint64_t bitOffset(std::uint32_t l) {
+    return ((std::uint64_t(1) << (3 * l)) - 8) / 7;
+}
+
+bool bitSet(const std::uint32_t* words, std::uint64_t bit) {
+    return ((words[bit >> 5] >> (bit & 31)) & 1u) != 0u;
+}
+
+/// The chessboard (L-infinity) distance, in cells, from each cell of an n^3 grid (x fastest)
+/// to the nearest cell holding 0, capped at 255 (cells outside the grid count as far): two
+/// raster passes over the 13 neighbours before and after a cell, each one step away, which
+/// is exact for this metric.
+void chessboardDistances(std::vector<std::uint8_t>& d, int n) {
+    auto at = [n](int x, int y, int z) { return (std::size_t(z) * n + std::size_t(y)) * n + x; };
+    auto relax = [&](int x, int y, int z, int dz, int dyFrom, int dyTo) {
+        std::uint8_t& here = d[at(x, y, z)];
+        if (here == 0) return;
+        for (int oz = dz; oz <= 0; ++oz)
+            for (int oy = (oz == 0 ? dyFrom : -1); oy <= (oz == 0 ? dyTo : 1); ++oy)
+                for (int ox = -1; ox <= 1; ++ox) {
+                    if (oz == 0 && oy == 0 && ox >= 0) continue;
+                    const int X = x + ox, Y = y + oy, Z = z + oz;
+                    if (X < 0 || Y < 0 || Z < 0 || X >= n || Y >= n || Z >= n) continue;
+                    here = std::uint8_t(std::min<int>(here, d[at(X, Y, Z)] + 1));
+                }
+    };
+    // Forward: neighbours at lower z, lower y at this z, lower x in this row.
+    for (int z = 0; z < n; ++z)
+        for (int y = 0; y < n; ++y)
+            for (int x = 0; x < n; ++x)
+                relax(x, y, z, -1, -1, 0);
+    // Backward: the mirror image.
+    auto mirrored = [&](int x, int y, int z) {
+        std::uint8_t& here = d[at(x, y, z)];
+        if (here == 0) return;
+        for (int oz = 0; oz <= 1; ++oz)
+            for (int oy = (oz == 0 ? 0 : -1); oy <= 1; ++oy)
+                for (int ox = -1; ox <= 1; ++ox) {
+                    if (oz == 0 && oy == 0 && ox <= 0) continue;
+                    const int X = x + ox, Y = y + oy, Z = z + oz;
+                    if (X < 0 || Y < 0 || Z < 0 || X >= n || Y >= n || Z >= n) continue;
+                    here = std::uint8_t(std::min<int>(here, d[at(X, Y, Z)] + 1));
+                }
+    };
+    for (int z = n; z-- > 0;)
+        for (int y = n; y-- > 0;)
+            for (int x = n; x-- > 0;)
+                mirrored(x, y, z);
+}
+
+} // namespace
+
+FineOccupancy::FineOccupancy(const OccupancyTrees& trees, const TransferFunctionTable& table,
+                             std::uint32_t cellVoxels, std::uint64_t budgetBytes)
+    : mTrees(trees), mCell(cellVoxels) {
+    const std::uint32_t leaf = trees.leafVoxels();
+    if (!std::has_single_bit(leaf) || !std::has_single_bit(cellVoxels) || cellVoxels >= leaf)
+        throw std::invalid_argument("fine occupancy cells of " + std::to_string(cellVoxels) +
+                                    " voxels: a power of two below the leaf's " +
+                                    std::to_string(leaf) + " is needed");
+    mLevels = std::uint32_t(std::countr_zero(leaf / cellVoxels));
+    // Cells sit on the sampler's voxel lattice, half a voxel off the leaves': one more than
+    // the leaves hold, so that positions 0 .. leaves * leaf all have one.
+    mCellsPerAxis = (trees.leavesPerAxis() << mLevels) + 1;
+    const std::uint64_t cells = std::uint64_t(mCellsPerAxis) * mCellsPerAxis * mCellsPerAxis;
+    mWordsPerBrick = std::uint32_t((cells + 3) / 4);
+    mSlots = std::max<std::uint64_t>(2, budgetBytes / (4ull * mWordsPerBrick));
+    mSlots = std::min<std::uint64_t>(mSlots, (std::uint64_t(1) << 31) / mWordsPerBrick);
+    // Not zeroed: a slot's pages are touched only when a brick is given it. Slot 0 is all
+    // zeros: "take every sample" (a brick without a map is never asked for it).
+    mPool.reset(new std::uint32_t[mSlots * mWordsPerBrick]);
+    std::fill_n(mPool.get(), mWordsPerBrick, 0u);
+    mBricks = trees.sampledBoxes().size();
+    mOffsets.reset(new std::atomic<std::int64_t>[std::max<std::uint64_t>(mBricks, 1)]);
+    for (std::uint64_t b = 0; b < mBricks; ++b)
+        mOffsets[b].store(kUnbuilt, std::memory_order_relaxed);
+    mEntries = table.entries;
+    mDomainMin = table.domainMin;
+    mDomainMax = table.domainMax;
+    mPrefix.assign(table.entries + 1, 0);
+    for (std::uint32_t i = 0; i < table.entries; ++i)
+        mPrefix[i + 1] = mPrefix[i] + (table.rgba[4 * std::size_t(i) + 3] > 0.0f ? 1 : 0);
+}
+
+FineOccupancy::~FineOccupancy() = default;
+
+std::uint32_t FineOccupancy::offsetOf(std::uint64_t brick, const void* voxels,
+                                      brickstore::VoxelType type, int brickVoxels,
+                                      int apronVoxels) {
+    if (brick >= mBricks) return 0;
+    std::atomic<std::int64_t>& slot = mOffsets[brick];
+    for (;;) {
+        std::int64_t state = slot.load(std::memory_order_acquire);
+        if (state >= 0) return std::uint32_t(state);
+        if (state == kUnbuilt &&
+            slot.compare_exchange_strong(state, kBuilding, std::memory_order_acquire))
+            break;
+        std::this_thread::yield(); // another thread builds it
+    }
+    const auto start = std::chrono::steady_clock::now();
+    std::vector<std::uint32_t> bits(mWordsPerBrick, 0u); // the map's bytes, 4 to a word
+    bool keep = false;
+    switch (type) {
+    case brickstore::VoxelType::U8:
+        keep = build(brick, static_cast<const std::uint8_t*>(voxels), brickVoxels, apronVoxels,
+                     bits.data());
+        break;
+    case brickstore::VoxelType::U16:
+        keep = build(brick, static_cast<const std::uint16_t*>(voxels), brickVoxels, apronVoxels,
+                     bits.data());
+        break;
+    case brickstore::VoxelType::I16:
+        keep = build(brick, static_cast<const std::int16_t*>(voxels), brickVoxels, apronVoxels,
+                     bits.data());
+        break;
+    case brickstore::VoxelType::F32:
+        keep =
+            build(brick, static_cast<const float*>(voxels), brickVoxels, apronVoxels, bits.data());
+        break;
+    }
+    std::int64_t offset = 0;
+    if (keep) {
+        const std::uint64_t s = mNextSlot.fetch_add(1, std::memory_order_relaxed);
+        if (s < mSlots) {
+            offset = std::int64_t(s * mWordsPerBrick);
+            std::memcpy(mPool.get() + offset, bits.data(), bits.size() * sizeof(std::uint32_t));
+            ++mKept;
+        }
+    }
+    ++mBuilt;
+    mBuildNs += std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                  std::chrono::steady_clock::now() - start)
+                                  .count());
+    slot.store(offset, std::memory_order_release);
+    return std::uint32_t(offset);
+}
+
+template <class T>
+bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int apron,
+                          std::uint32_t* bits) const {
+    const std::uint32_t depth = mTrees.depth(), leaves = mTrees.leavesPerAxis();
+    const std::uint32_t* words = mTrees.words().data() + brick * mTrees.wordsPerBrick();
+    const int edge = brickVoxels + 2 * apron, s = int(mCell), n = int(mCellsPerAxis);
+    // Cell c (per axis) holds the samples at brick-local p in [(c - 1) s + 1/2, c s + 1/2): at
+    // stored texel q = p + apron - 1/2 in [(c - 1) s + apron, c s + apron), they read voxels
+    // floor(q) and the next, so the cell's reads are voxels [(c - 1) s + apron, c s + apron]
+    // (clamped, as fetch() clamps). A position rounded across the cell's face by an ulp reads
+    // a voxel beyond them with a weight of about an ulp: its value stays within the table
+    // entry of margin that the range test adds on each side.
+    auto lo = [&](int c) { return std::clamp((c - 1) * s + apron, 0, edge - 1); };
+    auto hi = [&](int c) { return std::clamp(c * s + apron, 0, edge - 1); };
+    // Min and max over each cell's reads, one axis at a time.
+    const std::size_t e = std::size_t(edge), nc = std::size_t(n);
+    std::vector<float> minX(e * e * nc), maxX(e * e * nc);
+    for (std::size_t row = 0; row < e * e; ++row) {
+        const T* r = v + row * e;
+        for (int c = 0; c < n; ++c) {
+            float mn = float(r[lo(c)]), mx = mn;
+            for (int x = lo(c) + 1; x <= hi(c); ++x) {
+                mn = std::min(mn, float(r[x]));
+                mx = std::max(mx, float(r[x]));
+            }
+            minX[row * nc + std::size_t(c)] = mn;
+            maxX[row * nc + std::size_t(c)] = mx;
+        }
+    }
+    std::vector<float> minY(e * nc * nc), maxY(e * nc * nc);
+    for (std::size_t z = 0; z < e; ++z)
+        for (int c = 0; c < n; ++c) {
+            float* mn = &minY[(z * nc + std::size_t(c)) * nc];
+            float* mx = &maxY[(z * nc + std::size_t(c)) * nc];
+            std::copy_n(&minX[(z * e + std::size_t(lo(c))) * nc], nc, mn);
+            std::copy_n(&maxX[(z * e + std::size_t(lo(c))) * nc], nc, mx);
+            for (int y = lo(c) + 1; y <= hi(c); ++y)
+                for (std::size_t x = 0; x < nc; ++x) {
+                    mn[x] = std::min(mn[x], minX[(z * e + std::size_t(y)) * nc + x]);
+                    mx[x] = std::max(mx[x], maxX[(z * e + std::size_t(y)) * nc + x]);
+                }
+        }
+    std::vector<float> mn(nc * nc), mx(nc * nc);
+    const double last = double(mEntries - 1), scale = last / (mDomainMax - mDomainMin);
+    const std::uint32_t side = 1u << depth, leaf = mTrees.leafVoxels();
+    // The leaf of a cell's centre, for the share of empty cells among those the octree samples.
+    auto leafOf = [&](int c) {
+        const int centre = (2 * c - 1) * s + 1; // twice the centre, (c - 1/2) s + 1/2
+        return std::uint32_t(std::clamp(centre / int(2 * leaf), 0, int(leaves) - 1));
+    };
+    // Per cell: 0 where a sample must be taken, else (below) its distance to the nearest such.
+    std::vector<std::uint8_t> dist(nc * nc * nc, 0);
+    std::uint64_t sampledCells = 0, emptyCells = 0;
+    for (int cz = 0; cz < n; ++cz) {
+        for (std::size_t i = 0; i < nc * nc; ++i) {
+            mn[i] = minY[std::size_t(lo(cz)) * nc * nc + i];
+            mx[i] = maxY[std::size_t(lo(cz)) * nc * nc + i];
+        }
+        for (int z = lo(cz) + 1; z <= hi(cz); ++z)
+            for (std::size_t i = 0; i < nc * nc; ++i) {
+                mn[i] = std::min(mn[i], minY[std::size_t(z) * nc * nc + i]);
+                mx[i] = std::max(mx[i], maxY[std::size_t(z) * nc * nc + i]);
+            }
+        for (int cy = 0; cy < n; ++cy)
+            for (int cx = 0; cx < n; ++cx) {
+                // OccupancyTrees' entrySpan(): the entries interpolation can reach, one of
+                // margin each side.
+                const std::size_t i = std::size_t(cy) * nc + std::size_t(cx);
+                const double u0 = std::clamp((double(mn[i]) - mDomainMin) * scale, 0.0, last);
+                const double u1 = std::clamp((double(mx[i]) - mDomainMin) * scale, 0.0, last);
+                const auto e0 = std::uint32_t(std::max(0.0, std::floor(u0) - 1.0));
+                const auto e1 = std::uint32_t(std::min(last, std::ceil(u1) + 1.0));
+                const bool take = mPrefix[e1 + 1] != mPrefix[e0];
+                dist[(std::size_t(cz) * nc + std::size_t(cy)) * nc + std::size_t(cx)] =
+                    take ? 0 : 255;
+                const std::uint64_t leafBit =
+                    bitOffset(depth) + (leafOf(cz) * side + leafOf(cy)) * side + leafOf(cx);
+                if (!bitSet(words, leafBit)) continue;
+                ++sampledCells;
+                emptyCells += take ? 0 : 1;
+            }
+    }
+    if (sampledCells == 0 || double(emptyCells) < kMinEmptyShare * double(sampledCells))
+        return false;
+    chessboardDistances(dist, n);
+    std::memcpy(bits, dist.data(), dist.size());
+    return true;
+}
+
+FineOccupancyStats FineOccupancy::stats() const {
+    FineOccupancyStats s;
+    s.bricksBuilt = mBuilt.load();
+    s.bricksKept = mKept.load();
+    s.bytes = std::min(mNextSlot.load(), mSlots) * mWordsPerBrick * 4ull;
+    s.buildMs = double(mBuildNs.load()) * 1e-6;
+    return s;
+}
+
+std::uint64_t FineOccupancy::bytes() const {
+    return stats().bytes + mBricks * sizeof(std::atomic<std::int64_t>) +
+           mPrefix.size() * sizeof(std::uint32_t) + sizeof(*this);
+}
+
+} // namespace bc::render
