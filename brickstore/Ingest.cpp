@@ -371,7 +371,7 @@ void streamSlices(VolumeSource& source, detail::LevelBuilder& level0, IngestStat
 
 struct MemoryPlan {
     std::uint64_t bytes = 0, budget = 0;
-    bool pipelined = true; ///< rings of 2B + 2A slices (else B + 2A)
+    bool pipelined = true; ///< rings of LevelBuilder::pipelinedExtra() more than B + 2A slices
 };
 
 /// The rings pipelined when that fits the memory budget, else the least; refuses an ingest
@@ -410,14 +410,15 @@ std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& conf
     const StoreLayout layout(info.dims, config.geometry);
     const double vb = double(voxelBytes(info.type));
     const double slice = double(info.dims[0]) * double(info.dims[1]) * vb;
-    // Slab rings of every level (2B + 2A slices, or the level's depth), the half-resolution
-    // slice each feeds the next, the two staging slabs (one cut while the next is read), and
-    // one slice for the reader's own decoding (DICOM, mosaic).
+    // Slab rings of every level (B + 2A slices and the pipelined extra, or the level's depth), the
+    // half-resolution slice each feeds the next, the two staging slabs (one cut while the next is
+    // read), and one slice for the reader's own decoding (DICOM, mosaic).
     double slabs = 2.0 * double(stagingSlices(info)) * slice + slice;
     const auto& levels = layout.levels();
     for (std::size_t l = 0; l < levels.size(); ++l) {
         const double dx = double(levels[l].dims[0]), dy = double(levels[l].dims[1]);
-        const std::uint64_t extra = pipelined ? layout.geometry().brickVoxels : 0;
+        const std::uint64_t extra =
+            pipelined ? detail::LevelBuilder::pipelinedExtra(layout, std::uint32_t(l)) : 0;
         slabs += double(detail::LevelBuilder::ringSlices(layout, std::uint32_t(l), extra)) * dx *
                  dy * vb;
         if (l + 1 < levels.size()) slabs += std::ceil(dx / 2) * std::ceil(dy / 2) * vb;
@@ -469,7 +470,7 @@ IngestReport ingest(VolumeSource& source, const std::string& storePath, const In
     for (std::uint32_t l = nLevels; l-- > 0;)
         levels[l] = std::make_unique<detail::LevelBuilder>(
             layout, l, info.type, sink, l + 1 < nLevels ? levels[l + 1].get() : nullptr,
-            memory.pipelined ? layout.geometry().brickVoxels : 0);
+            memory.pipelined ? detail::LevelBuilder::pipelinedExtra(layout, l) : 0);
     for (const auto& level : levels)
         s.levels.push_back(level.get());
     {

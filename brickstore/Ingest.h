@@ -45,10 +45,10 @@ std::uint64_t defaultIngestMemoryBudgetBytes();
 /// What an ingest of `info` with `config` will allocate at its peak, in bytes: the slab ring
 /// of every pyramid level and its half-resolution slice, the staging slabs, the reader's
 /// slice, the workers' bricks and compression buffers, and the brick index. `pipelined`: rings
-/// of 2B + 2A slices, so that the reading thread fills a row while the workers cut the last
-/// (what ingest uses when it fits the budget); else B + 2A (the least it needs: the reader
-/// waits for each row to be cut). @throw std::invalid_argument on a geometry outside the
-/// accepted ranges.
+/// of 2B + 2A slices at level 0 and 1.5B + 2A below, so that the reading thread fills a row
+/// while the workers cut the last (what ingest uses when it fits the budget); else B + 2A (the
+/// least it needs: the reader waits for each row to be cut). @throw std::invalid_argument on a
+/// geometry outside the accepted ranges.
 std::uint64_t ingestMemoryBytes(const VolumeInfo& info, const IngestConfig& config,
                                 bool pipelined = true);
 

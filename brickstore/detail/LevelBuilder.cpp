@@ -14,6 +14,11 @@ std::uint64_t LevelBuilder::ringSlices(const StoreLayout& layout, std::uint32_t 
     return std::max<std::uint64_t>(1, std::min(layout.storedEdge() + extra, depth));
 }
 
+std::uint64_t LevelBuilder::pipelinedExtra(const StoreLayout& layout, std::uint32_t level) {
+    const std::uint64_t b = layout.geometry().brickVoxels;
+    return level == 0 ? b : (b + 1) / 2;
+}
+
 LevelBuilder::LevelBuilder(const StoreLayout& layout, std::uint32_t level, VoxelType type,
                            Sink sink, LevelBuilder* next, std::uint64_t extraSlices)
     : mLayout(layout), mLevel(level), mType(type), mVoxelBytes(voxelBytes(type)),

@@ -3,10 +3,10 @@
 // row of bricks to the compression workers as cut jobs, and feeds 2x2x2-downsampled slices to
 // the next level. The workers cut their bricks (apron-padded) straight from the ring while the
 // reading thread fills the next row: the ring holds the B + 2A slices a row reads and `extra`
-// more (B by default), so that filling a row never waits for the row before it, only for the
-// one before that (pushSlice blocks until the slices it would overwrite have been cut; with no
-// extra slices the reader waits for each row to be cut before it fills the next).
-// Memory: min(B + 2A + extra, depth) slices per level.
+// more (pipelinedExtra(): B at level 0, B/2 below), so that filling a row never waits for the row
+// before it, only for the one before that (pushSlice blocks until the slices it would overwrite
+// have been cut; with no extra slices the reader waits for each row to be cut before it fills the
+// next). Memory: min(B + 2A + extra, depth) slices per level.
 #include "brickstore/StoreLayout.h"
 #include "brickstore/VoxelType.h"
 
@@ -35,6 +35,11 @@ class LevelBuilder {
     /// The ring's slices for `layout`'s level `level` with `extra` slices past a row's.
     static std::uint64_t ringSlices(const StoreLayout& layout, std::uint32_t level,
                                     std::uint64_t extra);
+    /// The extra slices that keep level `level`'s reader from waiting on the row before: B at
+    /// level 0; B/2 further down, where a row's slices arrive at half the rate (two of the
+    /// level above per slice) and its small row of jobs is queued ahead of the level above's
+    /// next row, so it is cut by the time the reader needs its slots.
+    static std::uint64_t pipelinedExtra(const StoreLayout& layout, std::uint32_t level);
 
     LevelBuilder(const StoreLayout& layout, std::uint32_t level, VoxelType type, Sink sink,
                  LevelBuilder* next, std::uint64_t extraSlices);
