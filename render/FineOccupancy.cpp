@@ -17,15 +17,6 @@ namespace {
 
 constexpr std::int64_t kUnbuilt = -1, kBuilding = -2;
 
-/// First bit of octree level l (>= 1) in a brick's OccupancyTrees words.
-constexpr std::uint64_t bitOffset(std::uint32_t l) {
-    return ((std::uint64_t(1) << (3 * l)) - 8) / 7;
-}
-
-bool bitSet(const std::uint32_t* words, std::uint64_t bit) {
-    return ((words[bit >> 5] >> (bit & 31)) & 1u) != 0u;
-}
-
 /// The chessboard (L-infinity) distance, in cells, from each cell of an n^3 grid (x fastest)
 /// to the nearest cell holding 0, capped at 255 (cells outside the grid count as far): two
 /// raster passes over the 13 neighbours before and after a cell, each one step away, which
@@ -159,7 +150,6 @@ template <class T>
 bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int apron,
                           std::uint32_t* bits) const {
     const std::uint32_t depth = mTrees.depth(), leaves = mTrees.leavesPerAxis();
-    const std::uint32_t* words = mTrees.words().data() + brick * mTrees.wordsPerBrick();
     const int edge = brickVoxels + 2 * apron, s = int(mCell), n = int(mCellsPerAxis);
     // Cell c (per axis) holds the samples at brick-local p in [(c - 1) s + 1/2, c s + 1/2): at
     // stored texel q = p + apron - 1/2 in [(c - 1) s + apron, c s + apron), they read voxels
@@ -198,8 +188,7 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
                 }
         }
     std::vector<float> mn(nc * nc), mx(nc * nc);
-    const double last = double(mEntries - 1), scale = last / (mDomainMax - mDomainMin);
-    const std::uint32_t side = 1u << depth, leaf = mTrees.leafVoxels();
+    const std::uint32_t leaf = mTrees.leafVoxels();
     // The leaf of a cell's centre, for the share of empty cells among those the octree samples.
     auto leafOf = [&](int c) {
         const int centre = (2 * c - 1) * s + 1; // twice the centre, (c - 1/2) s + 1/2
@@ -220,19 +209,12 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
             }
         for (int cy = 0; cy < n; ++cy)
             for (int cx = 0; cx < n; ++cx) {
-                // OccupancyTrees' entrySpan(): the entries interpolation can reach, one of
-                // margin each side.
                 const std::size_t i = std::size_t(cy) * nc + std::size_t(cx);
-                const double u0 = std::clamp((double(mn[i]) - mDomainMin) * scale, 0.0, last);
-                const double u1 = std::clamp((double(mx[i]) - mDomainMin) * scale, 0.0, last);
-                const auto e0 = std::uint32_t(std::max(0.0, std::floor(u0) - 1.0));
-                const auto e1 = std::uint32_t(std::min(last, std::ceil(u1) + 1.0));
+                const auto [e0, e1] = entrySpan(mn[i], mx[i], mDomainMin, mDomainMax, mEntries);
                 const bool take = mPrefix[e1 + 1] != mPrefix[e0];
                 dist[(std::size_t(cz) * nc + std::size_t(cy)) * nc + std::size_t(cx)] =
                     take ? 0 : 255;
-                const std::uint64_t leafBit =
-                    bitOffset(depth) + (leafOf(cz) * side + leafOf(cy)) * side + leafOf(cx);
-                if (!bitSet(words, leafBit)) continue;
+                if (!mTrees.occupied(brick, depth, {leafOf(cx), leafOf(cy), leafOf(cz)})) continue;
                 ++sampledCells;
                 emptyCells += take ? 0 : 1;
             }

@@ -25,9 +25,8 @@ std::uint64_t nodeIndex(const std::array<std::uint32_t, 3>& p, std::uint32_t per
     return (std::uint64_t(p[2]) * perAxis + p[1]) * perAxis + p[0];
 }
 
-/// Table entries [i, j] whose interpolation can produce a value of [lo, hi]: those
-/// TransferFunctionTable::maxOpacity reads, widened by one entry on each side so that float
-/// rounding of the GPU's table position cannot reach an entry the test did not look at.
+} // namespace
+
 std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domainMin, double domainMax,
                                        std::uint32_t entries) {
     const double last = double(entries - 1), scale = last / (domainMax - domainMin);
@@ -37,8 +36,6 @@ std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domainMin, d
     const double i = std::max(0.0, std::floor(u0) - 1.0), j = std::min(last, std::ceil(u1) + 1.0);
     return {std::uint32_t(i), std::uint32_t(j)};
 }
-
-} // namespace
 
 void OccupancyConfig::validate() const {
     if (!(ratioThreshold >= 0.0 && ratioThreshold <= 1.0))

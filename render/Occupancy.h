@@ -23,6 +23,15 @@ namespace bc::render {
 
 struct TransferFunctionTable;
 
+/// Table entries [i, j] whose interpolation can produce a value of [lo, hi] (of a table of
+/// `entries` over [domainMin, domainMax]): those TransferFunctionTable::maxOpacity reads,
+/// widened by one entry on each side so that float rounding of the table position (the GPU's,
+/// or a sample position rounded across a face) cannot reach an entry the test did not look
+/// at. A NaN bound gives the whole table. The one range test of the octree's leaves and of
+/// the distance maps' cells (FineOccupancy.h).
+std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domainMin, double domainMax,
+                                       std::uint32_t entries);
+
 struct OccupancyConfig {
     /// A non-empty node whose ratio of non-empty leaves reaches this is drawn whole (its
     /// empty leaves are sampled, not leapt). 1 draws only full nodes whole; 0 draws every
