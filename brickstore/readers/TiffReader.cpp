@@ -320,11 +320,7 @@ class TiffVolume final : public VolumeSource, public detail::SliceLocator {
     /// TiffFile::readAhead): a window of pages of a file, or of the folder's next files.
     void readAhead(std::uint64_t z) {
         if (!mFolder) return mFile->readAhead();
-        const std::uint64_t window =
-            std::max<std::uint64_t>(1, detail::kFilesReadAheadBytes / mInfo.sliceBytes());
-        for (mAdvised = std::max(mAdvised, z + 1);
-             mAdvised < std::min(mFiles.size(), z + 1 + window); ++mAdvised)
-            detail::willNeed(mFiles[mAdvised]);
+        detail::willNeedAfter(mFiles, z, mInfo.sliceBytes(), mAdvised);
     }
 
     /// NaN or infinity would poison every min/max and average the store keeps.

@@ -22,6 +22,15 @@ void willNeed(const std::string& path) {
     ::close(fd);
 }
 
+void willNeedAfter(const std::vector<std::string>& files, std::uint64_t at, std::uint64_t fileBytes,
+                   std::uint64_t& advised) {
+    const std::uint64_t window =
+        std::max<std::uint64_t>(1, kFilesReadAheadBytes / std::max<std::uint64_t>(fileBytes, 1));
+    for (advised = std::max(advised, at + 1);
+         advised < std::min<std::uint64_t>(files.size(), at + 1 + window); ++advised)
+        willNeed(files[advised]);
+}
+
 ReadAhead::ReadAhead(int fd, std::uint64_t position, std::uint64_t fileEnd,
                      std::uint64_t windowBytes)
     : mFd(fd), mEnd(fileEnd), mWindow(windowBytes),

@@ -11,6 +11,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
 
 namespace bc::brickstore::detail {
 
@@ -24,6 +25,12 @@ constexpr std::uint64_t kFilesReadAheadBytes = 64ull << 20;
 /// Asks the kernel to read the whole file at `path` into the page cache, without waiting (a
 /// folder's next slices); a file that cannot be opened is left to the reader to report.
 void willNeed(const std::string& path);
+
+/// A folder's reader is at file `at` of `files`, each about `fileBytes` long: asks for the
+/// next files within kFilesReadAheadBytes (willNeed), those past `advised` only, and moves
+/// `advised` past them.
+void willNeedAfter(const std::vector<std::string>& files, std::uint64_t at, std::uint64_t fileBytes,
+                   std::uint64_t& advised);
 
 class ReadAhead {
   public:

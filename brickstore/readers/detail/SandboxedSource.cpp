@@ -462,11 +462,7 @@ class SandboxedSource final : public VolumeSource {
                     std::make_unique<detail::ReadAhead>(mDirectFd, 0, std::uint64_t(st.st_size));
             return mDirectFd;
         }
-        const std::uint64_t window =
-            std::max<std::uint64_t>(1, detail::kFilesReadAheadBytes / mInfo.sliceBytes());
-        for (mAdvised = std::max<std::uint64_t>(mAdvised, file + 1);
-             mAdvised < std::min<std::uint64_t>(files.size(), file + 1 + window); ++mAdvised)
-            detail::willNeed(files[mAdvised]);
+        detail::willNeedAfter(files, file, mInfo.sliceBytes(), mAdvised);
         return mDirectFd;
     }
 
