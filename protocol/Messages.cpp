@@ -122,7 +122,8 @@ void write(ByteWriter& w, const Frame& m) {
     w.u32(h.bricksSkipped);
     w.u64(h.bytesUploaded);
     w.boolean(h.occlusionUsed);
-    for (int i = 0; i < 3; ++i)
+    w.boolean(h.cached);
+    for (int i = 0; i < 2; ++i)
         w.u8(0); // reserved
     w.u32(static_cast<std::uint32_t>(m.image.size()));
     w.bytes(m.image);

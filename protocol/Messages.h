@@ -126,6 +126,9 @@ struct FrameHeader {
     std::uint32_t bricksDrawn = 0, bricksSkipped = 0;
     std::uint64_t bytesUploaded = 0;
     bool occlusionUsed = false;
+    /// Answered from the server's frame cache: drawn before for an identical request (this or
+    /// another session's); samples, bricks and bytesUploaded are then 0 (nothing was drawn).
+    bool cached = false;
     bool operator==(const FrameHeader&) const = default;
 };
 

@@ -233,7 +233,8 @@ FrameHeader readFrameHeader(PayloadReader& r) {
     h.bricksSkipped = r.u32("bricksSkipped");
     h.bytesUploaded = r.u64("bytesUploaded");
     h.occlusionUsed = r.boolean("occlusionUsed");
-    r.reserved("reserved", 3);
+    h.cached = r.boolean("cached");
+    r.reserved("reserved", 2);
     return h;
 }
 

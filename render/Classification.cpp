@@ -5,6 +5,7 @@
 #include <atomic>
 #include <bit>
 #include <chrono>
+#include <optional>
 
 namespace bc::render {
 
@@ -28,25 +29,52 @@ std::uint64_t tableBytes(const TransferFunctionTable& t) {
 
 // ---- Classification ---------------------------------------------------------------------
 
+Visibility Visibility::of(const TransferFunction& tf) {
+    // Which entries are visible does not depend on the step (a' > 0 exactly when a > 0), so
+    // the table at step 1 says it for every step.
+    const TransferFunctionTable table = tf.table(1.0, kClassificationTableEntries);
+    Visibility v{table.domainMin, table.domainMax, {}};
+    v.bits.assign((table.entries + 63) / 64, 0);
+    for (std::uint32_t i = 0; i < table.entries; ++i)
+        if (table.rgba[4 * std::size_t(i) + 3] > 0.0f) v.bits[i / 64] |= 1ull << (i % 64);
+    return v;
+}
+
+/// The distance maps, one per cell size asked for; shared with the octrees they are made from.
+struct Classification::FineMaps {
+    std::mutex mutex;
+    std::vector<std::unique_ptr<FineOccupancy>> maps;
+};
+
 Classification::Classification(const brickstore::BrickStore& store, std::uint32_t level,
                                const TransferFunction& tf, const OccupancyConfig* octree,
                                const Classification* donor)
     : mKey{store.instance(), level, tf.contentHash(), octree != nullptr,
            octree ? *octree : OccupancyConfig{}},
-      mTf(tf), mId(nextClassificationId()) {
+      mTf(tf), mVisibility(Visibility::of(tf)), mId(nextClassificationId()), mOccupancyId(mId),
+      mFine(std::make_shared<FineMaps>()) {
     if (!octree) return;
     octree->validate();
     if (store.layout().geometry().apronVoxels == 0) return;
-    // Which entries are visible does not depend on the step (a' > 0 exactly when a > 0), so
-    // the octrees are built from the table at step 1 and serve every step.
-    const TransferFunctionTable table = tf.table(1.0, kClassificationTableEntries);
-    if (donor && donor->mOccupancy) {
-        mOccupancy = std::make_unique<OccupancyTrees>(*donor->mOccupancy);
-        mBasedOn = donor->mId;
-    } else {
-        mOccupancy = std::make_unique<OccupancyTrees>(store, level);
+    if (donor && donor->mOccupancy && donor->mKey.octree == *octree &&
+        donor->mVisibility == mVisibility) {
+        mOccupancy = donor->mOccupancy; // the same octrees and maps, word for word
+        mFine = donor->mFine;
+        mOccupancyId = donor->mOccupancyId;
+        mBasedOn = donor->mBasedOn;
+        mBuild.bricksStored = donor->mBuild.bricksStored;
+        return;
     }
-    mBuild = mOccupancy->update(table, *octree);
+    const TransferFunctionTable table = tf.table(1.0, kClassificationTableEntries);
+    std::unique_ptr<OccupancyTrees> trees;
+    if (donor && donor->mOccupancy) {
+        trees = std::make_unique<OccupancyTrees>(*donor->mOccupancy);
+        mBasedOn = donor->mOccupancyId;
+    } else {
+        trees = std::make_unique<OccupancyTrees>(store, level);
+    }
+    mBuild = trees->update(table, *octree);
+    mOccupancy = std::move(trees);
 }
 
 std::shared_ptr<const TransferFunctionTable> Classification::table(double stepVoxels) const {
@@ -80,19 +108,20 @@ FineOccupancy* Classification::fine(std::uint32_t cellVoxels) const {
     const std::uint32_t leaf = mOccupancy->leafVoxels();
     if (!std::has_single_bit(leaf) || !std::has_single_bit(cellVoxels) || cellVoxels >= leaf)
         return nullptr;
-    std::lock_guard lock(mFineMutex);
-    for (const auto& f : mFine)
+    std::lock_guard lock(mFine->mutex);
+    for (const auto& f : mFine->maps)
         if (f->cellVoxels() == cellVoxels) return f.get();
     const TransferFunctionTable table = mTf.table(1.0, kClassificationTableEntries);
-    mFine.push_back(std::make_unique<FineOccupancy>(*mOccupancy, table, cellVoxels));
-    return mFine.back().get();
+    mFine->maps.push_back(std::make_unique<FineOccupancy>(*mOccupancy, table, cellVoxels));
+    return mFine->maps.back().get();
 }
 
 std::uint64_t Classification::bytes() const {
-    std::uint64_t n = sizeof(*this) + (mOccupancy ? mOccupancy->bytes() : 0);
+    std::uint64_t n = sizeof(*this) + (mOccupancy ? mOccupancy->bytes() : 0) +
+                      mVisibility.bits.size() * sizeof(std::uint64_t);
     {
-        std::lock_guard lock(mFineMutex);
-        for (const auto& f : mFine)
+        std::lock_guard lock(mFine->mutex);
+        for (const auto& f : mFine->maps)
             n += f->bytes();
     }
     std::lock_guard lock(mTablesMutex);
@@ -113,7 +142,8 @@ ClassificationCache::get(const brickstore::BrickStore& store, std::uint32_t leve
     const ClassificationKey key{store.instance(), level, tf.contentHash(), octree != nullptr,
                                 octree ? *octree : OccupancyConfig{}};
     std::lock_guard lock(mMutex);
-    const Classification* donor = nullptr;
+    const Classification *latest = nullptr, *sharer = nullptr;
+    std::optional<Visibility> visible; // computed when an entry could share its octrees
     for (auto it = mEntries.begin(); it != mEntries.end(); ++it) {
         const Classification& c = **it;
         const ClassificationKey& k = c.key();
@@ -126,13 +156,19 @@ ClassificationCache::get(const brickstore::BrickStore& store, std::uint32_t leve
             if (built) *built = false;
             return mEntries.front();
         }
-        if (!donor && c.occupancy() && k.storeInstance == key.storeInstance && k.level == level)
-            donor = &c; // the most recent octrees of this store and level
+        if (!c.occupancy() || k.storeInstance != key.storeInstance || k.level != level) continue;
+        if (!latest) latest = &c; // the most recent octrees of this store and level
+        if (!sharer && octree && k.octree == *octree) { // or octrees to share outright
+            if (!visible) visible = Visibility::of(tf);
+            if (c.visibility() == *visible) sharer = &c;
+        }
     }
+    const Classification* donor = sharer ? sharer : latest;
     // Built under the lock: a second request for this key waits and then finds it.
     const auto start = std::chrono::steady_clock::now();
     auto made = std::make_shared<const Classification>(store, level, tf, octree, donor);
     mStats.builds += 1;
+    mStats.shared += made->sharesOccupancy();
     mStats.bricksRebuilt += made->build().bricksRebuilt;
     mStats.buildMs +=
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

@@ -8,7 +8,9 @@
 // A new transfer function starts from the octrees of the most recent classification of the
 // same store and level (copied, then brought up to the new function), so only bricks whose
 // value range meets the table entries whose emptiness changed are rebuilt, and leaf tables
-// are read from the store once.
+// are read from the store once. A function that makes the same values visible as one held (an
+// edit of colours or of non-zero opacities: the octrees and distance maps depend on nothing
+// else) shares that one's octrees and distance maps outright: nothing is copied or rebuilt.
 #include "render/FineOccupancy.h"
 #include "render/Occupancy.h"
 #include "render/TransferFunction.h"
@@ -18,6 +20,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 namespace bc::brickstore {
 class BrickStore;
@@ -28,6 +31,15 @@ namespace bc::render {
 /// Entries of every table a classification makes (the raycasters', the splatters' and the
 /// reference's).
 inline constexpr std::uint32_t kClassificationTableEntries = TransferFunction::kDefaultTableEntries;
+
+/// Which values a transfer function makes visible (opacity above 0), over its table's domain:
+/// all that the octrees and distance maps depend on (besides the store, level and config).
+struct Visibility {
+    double domainMin = 0, domainMax = 0;
+    std::vector<std::uint64_t> bits; ///< entry i of kClassificationTableEntries at bit i
+    static Visibility of(const TransferFunction& tf);
+    bool operator==(const Visibility&) const = default;
+};
 
 /// What a classification is made for.
 struct ClassificationKey {
@@ -44,7 +56,8 @@ class Classification {
   public:
     /// Builds the octrees of `level` for `tf` under `octree` (none when `octree` is null or
     /// the store has no apron: without one, leaf ranges do not cover what border samples
-    /// read), starting from `donor`'s when given (same store and level).
+    /// read), starting from `donor`'s when given (same store and level); shares `donor`'s
+    /// octrees and distance maps when it has the same config and Visibility.
     /// @throw std::invalid_argument on a bad config; what OccupancyTrees throws.
     Classification(const brickstore::BrickStore& store, std::uint32_t level,
                    const TransferFunction& tf, const OccupancyConfig* octree,
@@ -55,9 +68,15 @@ class Classification {
     std::uint32_t level() const { return mKey.level; }
     /// Unique per classification built in this process: GPU copies of its octrees key on it.
     std::uint64_t id() const { return mId; }
-    /// id() of the classification whose octrees these were updated from (0: built from the
-    /// store): OccupancyTrees::changedBricks() lists the bricks whose words differ from it.
+    /// Names the octrees: id() of the classification that built them (another's when shared).
+    /// GPU copies of the octrees key on it.
+    std::uint64_t occupancyId() const { return mOccupancyId; }
+    /// occupancyId() of the octrees these were updated from (0: built from the store):
+    /// OccupancyTrees::changedBricks() lists the bricks whose words differ from those.
     std::uint64_t basedOn() const { return mBasedOn; }
+    /// Whether the octrees and distance maps are another classification's (same Visibility).
+    bool sharesOccupancy() const { return mOccupancyId != mId; }
+    const Visibility& visibility() const { return mVisibility; }
     /// The octrees, or nullptr when the store has no apron.
     const OccupancyTrees* occupancy() const { return mOccupancy.get(); }
     /// What building the octrees took (zero when there are none).
@@ -73,20 +92,22 @@ class Classification {
     /// depth of 0), under an octree that draws nodes whole (ratio threshold below 1, a level
     /// limit), for 0, or for a cell size they cannot take (not a power of two below the leaf).
     FineOccupancy* fine(std::uint32_t cellVoxels) const;
-    /// Host memory held: octrees, distance maps and tables.
+    /// Host memory held: octrees, distance maps and tables (shared octrees and maps count in
+    /// each holder: an upper bound).
     std::uint64_t bytes() const;
 
   private:
+    struct FineMaps;
     ClassificationKey mKey;
     TransferFunction mTf;
-    std::uint64_t mId = 0, mBasedOn = 0;
-    std::unique_ptr<OccupancyTrees> mOccupancy;
+    Visibility mVisibility;
+    std::uint64_t mId = 0, mOccupancyId = 0, mBasedOn = 0;
+    std::shared_ptr<const OccupancyTrees> mOccupancy;
+    std::shared_ptr<FineMaps> mFine; ///< with the octrees: shared with them
     OccupancyRebuild mBuild;
     mutable std::mutex mTablesMutex;
     mutable std::list<std::pair<double, std::shared_ptr<const TransferFunctionTable>>> mTables;
     mutable std::shared_ptr<const PreintegratedTable> mPreintegrated;
-    mutable std::mutex mFineMutex;
-    mutable std::vector<std::unique_ptr<FineOccupancy>> mFine; ///< one per cell size asked for
 };
 
 struct ClassificationCacheConfig {
@@ -97,9 +118,10 @@ struct ClassificationCacheConfig {
 
 /// Counters since the cache was made.
 struct ClassificationStats {
-    std::uint64_t builds = 0;        ///< classifications built (octrees made or updated)
-    std::uint64_t hits = 0;          ///< requests answered with one already built
-    std::uint64_t evictions = 0;     ///< dropped by the budget
+    std::uint64_t builds = 0;    ///< classifications built (octrees made, updated or shared)
+    std::uint64_t shared = 0;    ///< of those, with another's octrees and maps (same Visibility)
+    std::uint64_t hits = 0;      ///< requests answered with one already built
+    std::uint64_t evictions = 0; ///< dropped by the budget
     std::uint64_t bricksRebuilt = 0; ///< octrees rebuilt over all builds
     std::uint64_t residentBytes = 0; ///< held now
     std::uint64_t entries = 0;       ///< held now

@@ -334,7 +334,7 @@ void Raycaster::uploadOccupancy(const FrameClassification& classified) {
     const OccupancyTrees* occupancy = classified.occupancy;
     if (!occupancy || occupancy->depth() == 0) return; // brick roots only, no bits
     const Classification& c = *classified.classification;
-    if (mGpu->occupancyId == c.id()) return;
+    if (mGpu->occupancyId == c.occupancyId()) return; // these octrees (perhaps shared) are there
     const auto& words = occupancy->words();
     const std::uint32_t per = occupancy->wordsPerBrick();
     const auto& changed = occupancy->changedBricks();
@@ -351,7 +351,7 @@ void Raycaster::uploadOccupancy(const FrameClassification& classified) {
                                  &words[b * per]);
     }
     gl::glCheck("uploading octree occupancy");
-    mGpu->occupancyId = c.id();
+    mGpu->occupancyId = c.occupancyId();
 }
 
 std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint32_t level,

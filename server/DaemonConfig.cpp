@@ -381,7 +381,8 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
         const std::string p = "frames.";
         checkKeys(*t, p,
                   {"rest_ms", "write_queue", "write_queue_mb", "max_frame_gsamples",
-                   "max_unsliced_gsamples", "slice_ms", "prefetch", "cluster_timeout_ms"});
+                   "max_unsliced_gsamples", "slice_ms", "prefetch", "cluster_timeout_ms",
+                   "cache_mb"});
         assign(c.restMs, integer(*t, p, "rest_ms", 0, 60000));
         assign(c.writeQueueFrames, integer(*t, p, "write_queue", 1, 16));
         if (auto mb = integer(*t, p, "write_queue_mb", 1, 4096))
@@ -393,6 +394,8 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
         assign(c.sliceMs, integer(*t, p, "slice_ms", 10, 10000));
         if (auto b = boolean(*t, "frames.", "prefetch")) c.prefetch = *b;
         assign(c.clusterTimeoutMs, integer(*t, p, "cluster_timeout_ms", 100, 600000));
+        if (auto mb = integer(*t, p, "cache_mb", 0, kMaxBudgetMb))
+            c.frameCacheBytes = std::uint64_t(*mb) << 20;
     }
 }
 

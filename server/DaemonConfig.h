@@ -59,6 +59,8 @@ struct DaemonConfig {
     std::uint64_t maxUnslicedSamples = 4ull << 30; ///< for renderers that cannot slice
     std::uint32_t sliceMs = 50;                    ///< target length of one slice of a long frame
     bool prefetch = true; ///< bricks of each GPU session's predicted next view, while idle
+    /// Encoded frames kept for identical requests of any session (server/FrameCache.h); 0: off.
+    std::uint64_t frameCacheBytes = 64ull << 20;
     /// Under MPI: how long rank 0 waits for any rank's part of a frame (issue 19).
     std::uint32_t clusterTimeoutMs = 30000;
     std::string storeDir; ///< where generated volumes are ingested

@@ -9,6 +9,7 @@
 #include "render/RendererRegistry.h"
 #include "render/View.h"
 #include "server/Catalog.h"
+#include "server/FrameCache.h"
 #include "server/FrameCluster.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
@@ -226,7 +227,8 @@ struct FrameDrawing {
     render::FrameStats stats;
     const render::BrickPool* pool = nullptr;
     Clock::time_point start;
-    std::string rendererChoice; ///< why d.kind draws it (RendererChoice::reason)
+    std::string rendererChoice;       ///< why d.kind draws it (RendererChoice::reason)
+    std::optional<FrameKey> cacheKey; ///< set when the frame cache is on and had no frame
 
     /// A refined frame drawn because an adaptive session's camera came to rest.
     bool refinement() const {
@@ -385,6 +387,7 @@ RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog
     : mConfig(config), mCatalog(catalog), mLog(log), mVolumeFailed(std::move(volumeFailed)),
       mClassifications(std::make_unique<render::ClassificationCache>(
           render::ClassificationCacheConfig{config.classificationBudgetBytes})),
+      mFrames(std::make_unique<FrameCache>(FrameCacheConfig{config.frameCacheBytes})),
       mCounters(std::make_unique<Counters>()), mThread([this] { run(); }) {}
 
 RenderService::~RenderService() {
@@ -515,11 +518,33 @@ void RenderService::collect(MetricSet& m) {
     m.histogram("frame_encoded_bytes", "Encoded bytes of one frame message", c.frameBytes);
     m.counter("prefetch_ms_total", "Milliseconds the render thread spent prefetching",
               c.prefetchMs);
+    const FrameCacheStats fc = mFrames->stats();
+    m.counter("frame_cache_hits_total",
+              "Frames answered from the frame cache: drawn before for an identical request",
+              double(fc.hits));
+    m.counter("frame_cache_misses_total", "Frames looked up in the frame cache and drawn",
+              double(fc.misses));
+    m.counter("frame_cache_evictions_total", "Frames the frame cache dropped for its budget (LRU)",
+              double(fc.evictions));
+    m.counter("frame_cache_dropped_total",
+              "Frames the frame cache dropped because their volume was reopened, removed or "
+              "taken out of service",
+              double(fc.dropped));
+    m.counter("frame_cache_too_large_total",
+              "Frames not kept: over a quarter of the frame cache's budget", double(fc.tooLarge));
+    m.gauge("frame_cache_bytes", "Bytes of frames the frame cache holds", double(fc.bytes));
+    m.gauge("frame_cache_entries", "Frames the frame cache holds", double(fc.entries));
+    m.gauge("frame_cache_budget_bytes", "The frame cache's budget (frames.cache_mb; 0: off)",
+            double(fc.budgetBytes));
     const render::ClassificationStats cs = mClassifications->stats();
     m.counter("classification_builds_total",
               "Transfer functions committed for a store and level: octrees built or brought up "
               "to date, once per key however many sessions ask",
               double(cs.builds));
+    m.counter("classification_shared_total",
+              "Of those, classifications that took the octrees and distance maps of one with the "
+              "same visible values (an edit of colours or non-zero opacities): nothing rebuilt",
+              double(cs.shared));
     m.counter("classification_hits_total", "Frames that found their classification built",
               double(cs.hits));
     m.counter("classification_evictions_total",
@@ -647,6 +672,16 @@ void RenderService::record(const FrameRecord& f, double bytes, const std::string
         c.poolLive[volume] = pool->stats();
         c.poolBudget[volume] = double(pool->capacity()) * double(pool->slotBytes());
     }
+}
+
+void RenderService::recordCached(const protocol::FrameHeader& h, double bytes, double latencyMs) {
+    std::lock_guard lock(mMutex);
+    Counters& c = *mCounters;
+    c.encodeMs += h.encodeMs;
+    c.bytes += bytes;
+    c.latencyMs.observe(latencyMs);
+    c.encodeMsHist.observe(h.encodeMs);
+    c.frameBytes.observe(bytes);
 }
 
 void RenderService::retirePool(const std::string& volume) {
@@ -1061,12 +1096,19 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
     const std::uint32_t requestId = d.job.requestId;
     std::vector<std::uint8_t> bytes;
     try {
-        if (job) prepare(d);
-        if (!drawSlice(slotPtr, d)) return; // more slices: the other sessions' turn
+        std::optional<protocol::Frame> cached;
+        if (job) {
+            prepare(d);
+            cached = fromCache(slot, d);
+        }
+        if (!cached && !drawSlice(slotPtr, d)) return; // more slices: the other sessions' turn
         FrameRecord rec;
-        const protocol::Frame frame = finish(slot, d, rec);
+        const protocol::Frame frame = cached ? std::move(*cached) : finish(slot, d, rec);
         protocol::encode(frame, requestId, bytes);
-        record(rec, double(bytes.size()), volume, d.pool);
+        if (cached)
+            recordCached(frame.header, double(bytes.size()), msSince(d.job.queuedAt));
+        else
+            record(rec, double(bytes.size()), volume, d.pool);
         std::lock_guard lock(mMutex);
         mCounters->refined += frame.header.refined;
         mCounters->samples += double(frame.header.samples);
@@ -1115,7 +1157,8 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     // codec's default quality: codecQuality is `codec`'s.
     const bool ownCodec = d.job.refined && o.refinedCodec;
     const protocol::Codec codec = ownCodec ? *o.refinedCodec : o.codec;
-    auto encoded = slot.mEncoder.encode(rgba8, width, height, codec, ownCodec ? 0 : o.codecQuality);
+    const std::uint8_t quality = ownCodec ? 0 : o.codecQuality;
+    auto encoded = slot.mEncoder.encode(rgba8, width, height, codec, quality);
     auto& h = frame.header;
     h.frameId = slot.mNextFrameId++;
     h.cameraId = s.camera->cameraId;
@@ -1132,6 +1175,11 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     h.bricksSkipped = std::uint32_t(stats.bricksSkipped);
     h.bytesUploaded = stats.bytesUploaded;
     h.occlusionUsed = stats.occlusionUsed;
+    if (d.cacheKey) {
+        CachedFrame kept{width, height, codec, h.level, quality, {}};
+        kept.bytes = kept.pixels() ? std::move(rgba8) : encoded.bytes;
+        mFrames->insert(std::move(*d.cacheKey), std::move(kept), s.volume);
+    }
     frame.image = std::move(encoded.bytes);
     rec.renderer = d.kind->name;
     rec.renderMs = h.renderMs;
@@ -1143,6 +1191,61 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     rec.bricksRequested = double(stats.bricksRequested);
     rec.workingSetBytes = rec.bricks * double(slotBytesOf(*s.volume->store));
     rec.bricksUploaded = double(stats.bricksUploaded);
+    return frame;
+}
+
+namespace {
+
+/// What determines the frame `d` (prepared): FrameCache.h.
+FrameKey keyOf(const FrameDrawing& d) {
+    const auto& s = d.job.state;
+    FrameKey key;
+    key.storeInstance = s.volume->store->instance();
+    key.renderer = d.kind->name;
+    key.refined = d.job.refined;
+    key.shading = d.options.shading;
+    protocol::SetCamera camera = *s.camera;
+    camera.cameraId = 0; // the client's name for the view, not the view
+    protocol::encode(camera, 0, key.request);
+    protocol::SetRenderOptions options{s.options};
+    options.options.renderer = protocol::Renderer::Auto; // key.renderer says who draws it
+    protocol::encode(options, 0, key.request);
+    key.tf = s.tf;
+    return key;
+}
+
+} // namespace
+
+std::optional<protocol::Frame> RenderService::fromCache(RenderSlot& slot, FrameDrawing& d) {
+    if (!mFrames->enabled()) return std::nullopt;
+    FrameKey key = keyOf(d);
+    const std::shared_ptr<const CachedFrame> kept = mFrames->find(key);
+    if (!kept) {
+        d.cacheKey = std::move(key);
+        return std::nullopt;
+    }
+    protocol::Frame frame;
+    auto& h = frame.header;
+    if (kept->pixels()) { // a delta against this session's own previous frame
+        auto encoded = slot.mEncoder.encode(kept->bytes, kept->width, kept->height, kept->codec,
+                                            kept->quality);
+        h.keyframe = encoded.keyframe;
+        h.encodeMs = float(encoded.encodeMs);
+        frame.image = std::move(encoded.bytes);
+    } else {
+        slot.mEncoder.resetDelta(); // as encoding a frame of another codec does
+        frame.image = kept->bytes;
+    }
+    h.frameId = slot.mNextFrameId++;
+    h.cameraId = d.job.state.camera->cameraId;
+    h.width = kept->width;
+    h.height = kept->height;
+    h.codec = kept->codec;
+    h.level = kept->level;
+    h.refined = d.job.refined;
+    h.cached = true;
+    h.queueMs = float(std::chrono::duration<double, std::milli>(d.start - d.job.queuedAt).count());
+    h.renderMs = float(msSince(d.start));
     return frame;
 }
 

@@ -43,6 +43,7 @@ class Renderer;
 
 namespace bc::server {
 
+class FrameCache;
 class FrameCluster;
 struct ClusterFrameStats;
 struct Volume;
@@ -141,6 +142,8 @@ struct RenderServiceConfig {
     std::uint64_t maxFrameSamples = 64ull << 30;
     std::uint64_t maxUnslicedSamples = 4ull << 30;
     std::uint32_t sliceMs = 50; ///< target length of one slice of a long frame
+    /// Encoded frames kept for identical requests of any session (FrameCache.h); 0: none.
+    std::uint64_t frameCacheBytes = 64ull << 20;
     /// Under MPI (issue 19): the ranks that draw the CPU and GPU raycasters' frames with this one
     /// (FrameCluster.h); null: this process draws every frame. Used on the render thread only.
     FrameCluster* cluster = nullptr;
@@ -218,10 +221,15 @@ class RenderService {
                       render::Renderer& renderer);
     render::Renderer& rendererFor(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
     protocol::Frame finish(RenderSlot& slot, FrameDrawing& d, FrameRecord& record);
+    /// The frame `d` (prepared) from the frame cache, encoded for `slot`, or nullopt when the
+    /// cache has no frame for its key (then d.cacheKey is set for finish() to keep it).
+    std::optional<protocol::Frame> fromCache(RenderSlot& slot, FrameDrawing& d);
     /// Whether `slot` has a frame in progress (render thread).
     bool drawing(const RenderSlot* slot) const;
     void record(const FrameRecord& f, double bytes, const std::string& volume,
                 const render::BrickPool* pool);
+    /// A frame answered from the frame cache: its bytes, latency and encoding.
+    void recordCached(const protocol::FrameHeader& h, double bytes, double latencyMs);
     void retirePool(const std::string& volume); ///< its pool is replaced or freed
     /// After `e` failed a frame or prefetch of `volume`: a store error while its file has
     /// changed on disk takes the volume out of service (Catalog::markFailed) and tells
@@ -247,6 +255,7 @@ class RenderService {
     std::map<std::string, double, std::less<>> mSliceCostPerMs;
     /// Shared by every session and renderer (thread-safe).
     std::unique_ptr<render::ClassificationCache> mClassifications;
+    std::unique_ptr<FrameCache> mFrames; ///< shared by every session (thread-safe)
 
     struct Counters; // under mMutex
     std::unique_ptr<Counters> mCounters;

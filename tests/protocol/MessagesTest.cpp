@@ -280,6 +280,7 @@ TEST(Messages, FrameGoldenBytesRoundTrip) {
     h.bricksSkipped = 5;
     h.bytesUploaded = 65536;
     h.occlusionUsed = true;
+    h.cached = true;
     m.image = {0xFF, 0x00, 0x00, 0xFF, 0x00, 0x80, 0x00, 0x80};
     const Bytes golden = {
         BC_HEADER(0x0C, 68, 7),
@@ -299,7 +300,8 @@ TEST(Messages, FrameGoldenBytesRoundTrip) {
         0x05, 0x00, 0x00, 0x00,                         // bricksSkipped 5
         0x00, 0x00, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00, // bytesUploaded 65536
         0x01,                                           // occlusionUsed
-        0x00, 0x00, 0x00,                               // reserved
+        0x01,                                           // cached
+        0x00, 0x00,                                     // reserved
         0x08, 0x00, 0x00, 0x00,                         // imageBytes 8
         0xFF, 0x00, 0x00, 0xFF, 0x00, 0x80, 0x00, 0x80, // 2 x 1 RGBA pixels
     };

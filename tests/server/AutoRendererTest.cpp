@@ -43,6 +43,7 @@ TEST(AutoRenderer, ASessionAskingForAutoGetsTheChosenRaycastersFramesAndTheMetri
     DaemonConfig config = generatedConfig(dir, {{"p", 32}});
     config.metricsHost = "127.0.0.1";
     config.metricsPort = 0;
+    config.frameCacheBytes = 0; // every frame below is drawn, and counted as drawn
     TestDaemon daemon(config);
     auto metrics = [&] {
         return scrape(daemon.daemon->metricsPort(), "GET /metrics HTTP/1.1\r\n\r\n");

@@ -91,6 +91,7 @@ gpu_mb = 6
 rest_ms = 0
 write_queue = 16
 prefetch = false
+cache_mb = 0
 )") + kVolume + "description = \"d\"\n");
     EXPECT_EQ(c.listenHost, "::1");
     EXPECT_EQ(c.listenPort, 0);
@@ -108,6 +109,7 @@ prefetch = false
     EXPECT_EQ(c.restMs, 0u);
     EXPECT_EQ(c.writeQueueFrames, 16u);
     EXPECT_FALSE(c.prefetch);
+    EXPECT_EQ(c.frameCacheBytes, 0u);
     EXPECT_EQ(c.volumes.at(0).description, "d");
 }
 
@@ -162,6 +164,7 @@ std::vector<BadCase> badCases() {
          {"frames.rest_ms", "-1 is outside 0..60000"},
          2},
         {"write_queue 17", "[frames]\nwrite_queue = 17\n" + v, {"frames.write_queue", "1..16"}, 2},
+        {"negative cache", "[frames]\ncache_mb = -1\n" + v, {"frames.cache_mb", "outside 0.."}, 2},
         {"host_mb 0", "[budgets]\nhost_mb = 0\n" + v, {"budgets.host_mb", "outside 1.."}, 2},
         {"idle 0", "[timeouts]\nidle_ms = 0\n" + v, {"timeouts.idle_ms", "outside 1.."}, 2},
         {"long token",

@@ -84,6 +84,7 @@ class DaemonMetrics : public ::testing::Test {
         // Frames drawn whole, in one pass: the counts below are those of one plan per frame (a
         // first frame would otherwise be sliced, its renderer's speed not yet measured).
         c.sliceMs = 600000;
+        c.frameCacheBytes = 0; // the same view is drawn twice (FrameCacheTest has the cache)
         daemon = std::make_unique<TestDaemon>(c);
         port = daemon->daemon->metricsPort();
         ASSERT_NE(port, 0);

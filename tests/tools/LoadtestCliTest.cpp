@@ -32,12 +32,15 @@ TEST(LoadtestCli, FliesEveryPathAndReportsLatencyAndTheCacheTiers) {
                              "| tf-sweep | 1 | 5 |", "| all | 4 | 20 |"})
         EXPECT_NE(out.find(path), std::string::npos) << path << "\n" << out;
     EXPECT_NE(out.find("| disk -> host |"), std::string::npos) << out;
-    EXPECT_NE(out.find("Server: 20 frames, 0 render errors"), std::string::npos) << out;
+    EXPECT_NE(out.find("Server: 20 frames, 0 from the frame cache, 0 render errors"),
+              std::string::npos)
+        << out;
     std::ifstream f(csv);
     std::string line;
     std::getline(f, line);
     EXPECT_EQ(line,
-              "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_drawn");
+              "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_drawn,"
+              "cached");
     std::set<std::string> paths;
     int frames = 0;
     while (std::getline(f, line)) {
@@ -47,6 +50,19 @@ TEST(LoadtestCli, FliesEveryPathAndReportsLatencyAndTheCacheTiers) {
     }
     EXPECT_EQ(frames, 20);
     EXPECT_EQ(paths, (std::set<std::string>{"orbit", "zoom", "jumps", "tf-sweep"}));
+}
+
+// Clients on the same path fly views of their own: each frame is drawn, none is answered by
+// the server's frame cache (which would answer a crowd flying in step).
+TEST(LoadtestCli, ClientsSharingAPathAskForViewsOfTheirOwn) {
+    TempDir dir;
+    TestDaemon d(generatedConfig(dir, {{"lt", 48}}));
+    const auto [status, out] =
+        run(std::string(BC_BRICKCAST_EXE) + " loadtest --port " + std::to_string(d.port) +
+            " --volume lt --paths orbit --clients 3 --frames 3 --size 24,24");
+    ASSERT_EQ(status, 0) << out;
+    EXPECT_NE(out.find("| orbit | 3 | 9 |"), std::string::npos) << out;
+    EXPECT_NE(out.find("Server: 9 frames, 0 from the frame cache"), std::string::npos) << out;
 }
 
 TEST(LoadtestCli, BadOptionsAndServersOffLoopbackAreNamed) {

@@ -5,6 +5,10 @@
 //   jumps     a random view every frame (seeded per client): the worst case for caches
 //   tf-sweep  the orbit under a transfer-function window that slides across the value range,
 //             a new function every --tf-every frames (octrees rebuild on the server)
+// Clients that share a path start it 1/pi degree of azimuth apart (client i on its path's
+// lap i / paths), so that each asks for views of its own: the server's frame cache answers a
+// view asked for before without drawing it, which would make a crowd flying in step a test of
+// the cache, not of rendering (the report counts the frames it answered all the same).
 // Every frame is requested and awaited (one in flight per client), for --frames frames or
 // --duration-s seconds, whichever ends first; --timeout-s bounds the whole run. Before and
 // after, the server's counters (the Stats message) are read, and the report gives their
@@ -51,6 +55,7 @@ struct FrameRow {
     std::string path;
     double latencyMs = 0, renderMs = 0, queueMs = 0;
     std::uint64_t bytes = 0, bytesUploaded = 0, bricksDrawn = 0;
+    bool cached = false; ///< answered from the server's frame cache
 };
 
 protocol::Renderer rendererOf(const std::string& name) {
@@ -87,20 +92,24 @@ protocol::SetTransferFunction windowTf(double lo) {
     return tf;
 }
 
-/// The camera of `path` at frame f of n.
+/// The camera of `path` at frame f of n, for the client on lap `lap` of the paths.
 protocol::SetCamera cameraOf(const std::string& path, const protocol::VolumeInfo& v,
-                             std::uint32_t f, std::uint32_t n, std::mt19937& rng) {
+                             std::uint32_t f, std::uint32_t n, std::uint32_t lap,
+                             std::mt19937& rng) {
     const std::uint32_t id = f + 1;
+    // Views of its own (see the top of the file): laps start 1/pi degree apart, which no whole
+    // number of any path's steps (1 and 0.2 degrees) makes up.
+    const double start = 30.0 + lap / 3.141592653589793;
     if (path == "zoom") {
         const double t = n > 1 ? double(f) / double(n - 1) : 0.0;
-        return client::orbitCamera(v, 30.0 + 0.2 * f, 20.0, 2.5 * std::pow(0.4 / 2.5, t), id);
+        return client::orbitCamera(v, start + 0.2 * f, 20.0, 2.5 * std::pow(0.4 / 2.5, t), id);
     }
     if (path == "jumps") {
         std::uniform_real_distribution<double> az(0, 360), el(-70, 70), dist(0.7, 1.4);
         const double a = az(rng), e = el(rng), d = dist(rng);
         return client::orbitCamera(v, a, e, d, id);
     }
-    return client::orbitCamera(v, 30.0 + 1.0 * f, 20.0, 1.0, id); // orbit, tf-sweep
+    return client::orbitCamera(v, start + 1.0 * f, 20.0, 1.0, id); // orbit, tf-sweep
 }
 
 double quantile(std::vector<double> v, double q) {
@@ -147,23 +156,27 @@ void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, do
                 o.volume.c_str(), o.renderer.c_str(), o.size.c_str(), wallS);
     std::printf(
         "| Path | Clients | Frames | Frames/s (all its clients) | Latency p50 ms | p99 ms | "
-        "Render p50 ms | Bytes/frame |\n|---|---|---|---|---|---|---|---|\n");
+        "Render p50 ms | Bytes/frame | From the frame cache "
+        "|\n|---|---|---|---|---|---|---|---|---|"
+        "\n");
     auto line = [&](const std::string& path) {
         std::vector<double> latency, render;
         std::map<std::uint32_t, bool> clients;
         double bytes = 0;
+        std::size_t cached = 0;
         for (const auto& r : rows)
             if (path == "all" || r.path == path) {
                 latency.push_back(r.latencyMs);
                 render.push_back(r.renderMs);
                 bytes += double(r.bytes);
+                cached += r.cached;
                 clients[r.client] = true;
             }
         if (latency.empty()) return;
-        std::printf("| %s | %zu | %zu | %.1f | %.1f | %.1f | %.1f | %.0f |\n", path.c_str(),
+        std::printf("| %s | %zu | %zu | %.1f | %.1f | %.1f | %.1f | %.0f | %zu |\n", path.c_str(),
                     clients.size(), latency.size(), double(latency.size()) / wallS,
                     quantile(latency, 0.5), quantile(latency, 0.99), quantile(render, 0.5),
-                    bytes / double(latency.size()));
+                    bytes / double(latency.size()), cached);
     };
     for (const auto& p : kPaths)
         line(p);
@@ -185,10 +198,10 @@ void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, do
                 percent(gHits, gHits + gUp).c_str(), tools::formatBytes(upBytes).c_str(),
                 tools::formatBytes(upRefetched).c_str(),
                 ratio(upBytes, upBytes - upRefetched).c_str());
-    std::printf("\nServer: %.0f frames, %.0f render errors, %.0f ms rendering, %s sent; %u client "
-                "failures.\n",
-                d.of("frames_total", ""), d.of("render_errors_total", ""),
-                d.of("render_ms_total", ""),
+    std::printf("\nServer: %.0f frames, %.0f from the frame cache, %.0f render errors, %.0f ms "
+                "rendering, %s sent; %u client failures.\n",
+                d.of("frames_total", ""), d.of("frame_cache_hits_total", ""),
+                d.of("render_errors_total", ""), d.of("render_ms_total", ""),
                 tools::formatBytes(d.of("frame_bytes_total", "")).c_str(), failures);
 }
 
@@ -255,7 +268,8 @@ void runLoadtest(const LoadtestOptions& o) {
                     if (path == "tf-sweep" && f % o.tfEvery == 0)
                         c.setTransferFunction(
                             windowTf(0.1 + 0.6 * std::fmod(double(f / o.tfEvery) * 0.15, 1.0)));
-                    c.setCamera(cameraOf(path, v, f, o.frames, rng));
+                    c.setCamera(
+                        cameraOf(path, v, f, o.frames, std::uint32_t(i / paths.size()), rng));
                     const auto sent = Clock::now();
                     c.requestFrame();
                     const auto frame = c.nextFrame();
@@ -270,6 +284,7 @@ void runLoadtest(const LoadtestOptions& o) {
                     r.bytes = frame.wireBytes;
                     r.bytesUploaded = frame.header.bytesUploaded;
                     r.bricksDrawn = frame.header.bricksDrawn;
+                    r.cached = frame.header.cached;
                     mine.push_back(r);
                 }
                 c.bye();
@@ -294,11 +309,11 @@ void runLoadtest(const LoadtestOptions& o) {
     if (!o.csv.empty()) {
         std::ofstream out(o.csv);
         out << "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_"
-               "drawn\n";
+               "drawn,cached\n";
         for (const auto& r : rows)
             out << r.client << ',' << r.path << ',' << r.frame << ',' << r.latencyMs << ','
                 << r.renderMs << ',' << r.queueMs << ',' << r.bytes << ',' << r.bytesUploaded << ','
-                << r.bricksDrawn << '\n';
+                << r.bricksDrawn << ',' << int(r.cached) << '\n';
         if (!out) throw std::runtime_error(o.csv + ": cannot write the CSV");
     }
     if (!errors.empty())

@@ -435,7 +435,8 @@ const codecs = {
       w.u32(m.bricksSkipped, 'bricksSkipped');
       w.u64(m.bytesUploaded, 'bytesUploaded');
       w.bool(m.occlusionUsed, 'occlusionUsed');
-      w.raw(new Uint8Array(3));
+      w.bool(m.cached ?? false, 'cached');
+      w.raw(new Uint8Array(2));
       w.u32(m.image.length, 'imageBytes');
       w.raw(m.image);
     },
@@ -447,8 +448,9 @@ const codecs = {
         renderMs: r.f32('renderMs'), encodeMs: r.f32('encodeMs'), samples: r.u64('samples'),
         bricksDrawn: r.u32('bricksDrawn'), bricksSkipped: r.u32('bricksSkipped'),
         bytesUploaded: r.u64('bytesUploaded'), occlusionUsed: r.bool('occlusionUsed'),
+        cached: r.bool('cached'),
       };
-      r.bytes(3, 'reserved');
+      r.bytes(2, 'reserved');
       const imageBytes = r.u32('imageBytes');
       if (imageBytes !== r.left())
         throw new ProtocolError('BadPayload', `Frame: imageBytes ${imageBytes} but ${r.left()} bytes follow`);

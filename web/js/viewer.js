@@ -621,7 +621,9 @@ function drawOverlay() {
     `${s.fps(performance.now()).toFixed(1)} fps   latency ${s.latencyMs === null ? '—' : `${Math.round(s.latencyMs)} ms`}`,
     `${f.refined ? 'refined' : 'interactive'} ${f.width}×${f.height}${scaled}  level ${f.level}  ${CODEC_NAMES[f.codec] ?? f.codec} ${formatBytes(f.image.length)}`,
     `render ${f.renderMs.toFixed(1)} ms  encode ${f.encodeMs.toFixed(1)} ms  queue ${f.queueMs.toFixed(1)} ms`,
-    `bricks ${f.bricksDrawn} drawn, ${f.bricksSkipped} skipped  uploaded ${formatBytes(f.bytesUploaded)}`,
+    // (no "cache" in it: the residency line is the overlay's one line that says cache)
+    f.cached ? 'reused: the server drew this view before, nothing drawn now'
+      : `bricks ${f.bricksDrawn} drawn, ${f.bricksSkipped} skipped  uploaded ${formatBytes(f.bytesUploaded)}`,
   ];
   if (state.residency) lines.push(state.residency);
   if (state.options.renderer === Renderer.Auto && state.autoRenderer) lines.push(state.autoRenderer.reason);

@@ -217,7 +217,7 @@ const frameBytes = [
   0x2a, 0, 0, 0, 0x07, 0, 0, 0, 0x02, 0x00, 0x01, 0x00, 0x00, 0x01, 0x01, 0x00,
   0x00, 0x00, 0x00, 0x3f, 0x00, 0x00, 0x48, 0x41, 0x00, 0x00, 0x80, 0x3e,
   0xe8, 0x03, 0, 0, 0, 0, 0, 0, 0x03, 0, 0, 0, 0x05, 0, 0, 0,
-  0x00, 0x00, 0x01, 0, 0, 0, 0, 0, 0x01, 0, 0, 0, 0x08, 0, 0, 0,
+  0x00, 0x00, 0x01, 0, 0, 0, 0, 0, 0x01, 0x01, 0, 0, 0x08, 0, 0, 0,
   0xff, 0x00, 0x00, 0xff, 0x00, 0x80, 0x00, 0x80,
 ];
 
@@ -227,7 +227,7 @@ test('Frame: decodes a hand-built frame (golden bytes of MessagesTest.cpp)', () 
   assert.deepEqual(h, {
     frameId: 42, cameraId: 7, width: 2, height: 1, codec: 0, level: 1, refined: true, keyframe: false,
     queueMs: 0.5, renderMs: 12.5, encodeMs: 0.25, samples: 1000, bricksDrawn: 3, bricksSkipped: 5,
-    bytesUploaded: 65536, occlusionUsed: true,
+    bytesUploaded: 65536, occlusionUsed: true, cached: true,
   });
   assert.deepEqual(Array.from(image), [0xff, 0, 0, 0xff, 0, 0x80, 0, 0x80]);
   assert.deepEqual(bytes(encode(Type.Frame, m.body, 7)), frameBytes);
