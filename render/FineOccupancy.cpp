@@ -17,46 +17,72 @@ namespace {
 
 constexpr std::int64_t kUnbuilt = -1, kBuilding = -2;
 
+/// Per building thread: the build's buffers, kept between bricks. Fresh ones per brick (a few
+/// MB at 1-voxel cells) cost a page fault per page, more than the build itself.
+struct BuildScratch {
+    std::vector<float> minX, maxX, minY, maxY, mn, mx;
+    std::vector<std::uint8_t> dist, padded;
+    std::vector<std::uint32_t> words;
+};
+
+BuildScratch& scratch() {
+    thread_local BuildScratch s;
+    return s;
+}
+
+/// v + 1 for a distance, 255 staying 255 (far): min(v, 254) + 1.
+inline std::uint8_t next(std::uint8_t v) {
+    return std::uint8_t(std::min<std::uint8_t>(v, 254) + 1);
+}
+
 /// The chessboard (L-infinity) distance, in cells, from each cell of an n^3 grid (x fastest)
 /// to the nearest cell holding 0, capped at 255 (cells outside the grid count as far): two
 /// raster passes over the 13 neighbours before and after a cell, each one step away, which
-/// is exact for this metric.
-void chessboardDistances(std::vector<std::uint8_t>& d, int n) {
-    auto at = [n](int x, int y, int z) { return (std::size_t(z) * n + std::size_t(y)) * n + x; };
-    auto relax = [&](int x, int y, int z, int dz, int dyFrom, int dyTo) {
-        std::uint8_t& here = d[at(x, y, z)];
-        if (here == 0) return;
-        for (int oz = dz; oz <= 0; ++oz)
-            for (int oy = (oz == 0 ? dyFrom : -1); oy <= (oz == 0 ? dyTo : 1); ++oy)
-                for (int ox = -1; ox <= 1; ++ox) {
-                    if (oz == 0 && oy == 0 && ox >= 0) continue;
-                    const int X = x + ox, Y = y + oy, Z = z + oz;
-                    if (X < 0 || Y < 0 || Z < 0 || X >= n || Y >= n || Z >= n) continue;
-                    here = std::uint8_t(std::min<int>(here, d[at(X, Y, Z)] + 1));
-                }
+/// is exact for this metric. On a grid padded with far cells, so that no neighbour needs a
+/// bounds test; per row, the 12 neighbours in earlier rows and slices are taken for the whole
+/// row at once (a loop the compiler vectorises), then the one before it in the row, in order.
+void chessboardDistances(std::vector<std::uint8_t>& d, int n, std::vector<std::uint8_t>& g) {
+    const std::size_t p = std::size_t(n) + 2, row = p, slice = p * p;
+    g.assign(p * p * p, 255);
+    auto at = [&](std::size_t x, std::size_t y, std::size_t z) { return (z * p + y) * p + x; };
+    for (std::size_t z = 0; z < std::size_t(n); ++z)
+        for (std::size_t y = 0; y < std::size_t(n); ++y)
+            std::memcpy(&g[at(1, y + 1, z + 1)], &d[(z * std::size_t(n) + y) * std::size_t(n)],
+                        std::size_t(n));
+    std::vector<std::uint8_t> m(p);
+    auto pass = [&](std::size_t z, std::size_t y, std::ptrdiff_t dir) {
+        std::uint8_t* r = &g[at(0, y, z)];
+        // Forward (dir 1): the slice before (9 cells) and the row before (3); backward: after.
+        const std::ptrdiff_t dz = -dir * std::ptrdiff_t(slice), dy = -dir * std::ptrdiff_t(row);
+        std::fill(m.begin(), m.end(), std::uint8_t(255));
+        auto take = [&](std::ptrdiff_t offset) { // m = min(m, the row at offset), vectorised
+            const std::uint8_t* q = r + offset;
+            for (std::size_t x = 1; x <= std::size_t(n); ++x)
+                m[x] = std::min(m[x], q[x]);
+        };
+        for (std::ptrdiff_t oy : {-std::ptrdiff_t(row), std::ptrdiff_t(0), std::ptrdiff_t(row)})
+            for (std::ptrdiff_t ox = -1; ox <= 1; ++ox)
+                take(dz + oy + ox);
+        for (std::ptrdiff_t ox = -1; ox <= 1; ++ox)
+            take(dy + ox);
+        if (dir > 0) {
+            for (std::size_t x = 1; x <= std::size_t(n); ++x)
+                if (r[x] != 0) r[x] = std::min({r[x], next(m[x]), next(r[x - 1])});
+        } else {
+            for (std::size_t x = std::size_t(n); x >= 1; --x)
+                if (r[x] != 0) r[x] = std::min({r[x], next(m[x]), next(r[x + 1])});
+        }
     };
-    // Forward: neighbours at lower z, lower y at this z, lower x in this row.
-    for (int z = 0; z < n; ++z)
-        for (int y = 0; y < n; ++y)
-            for (int x = 0; x < n; ++x)
-                relax(x, y, z, -1, -1, 0);
-    // Backward: the mirror image.
-    auto mirrored = [&](int x, int y, int z) {
-        std::uint8_t& here = d[at(x, y, z)];
-        if (here == 0) return;
-        for (int oz = 0; oz <= 1; ++oz)
-            for (int oy = (oz == 0 ? 0 : -1); oy <= 1; ++oy)
-                for (int ox = -1; ox <= 1; ++ox) {
-                    if (oz == 0 && oy == 0 && ox <= 0) continue;
-                    const int X = x + ox, Y = y + oy, Z = z + oz;
-                    if (X < 0 || Y < 0 || Z < 0 || X >= n || Y >= n || Z >= n) continue;
-                    here = std::uint8_t(std::min<int>(here, d[at(X, Y, Z)] + 1));
-                }
-    };
-    for (int z = n; z-- > 0;)
-        for (int y = n; y-- > 0;)
-            for (int x = n; x-- > 0;)
-                mirrored(x, y, z);
+    for (std::size_t z = 1; z <= std::size_t(n); ++z)
+        for (std::size_t y = 1; y <= std::size_t(n); ++y)
+            pass(z, y, 1);
+    for (std::size_t z = std::size_t(n); z >= 1; --z)
+        for (std::size_t y = std::size_t(n); y >= 1; --y)
+            pass(z, y, -1);
+    for (std::size_t z = 0; z < std::size_t(n); ++z)
+        for (std::size_t y = 0; y < std::size_t(n); ++y)
+            std::memcpy(&d[(z * std::size_t(n) + y) * std::size_t(n)], &g[at(1, y + 1, z + 1)],
+                        std::size_t(n));
 }
 
 } // namespace
@@ -109,7 +135,8 @@ std::uint32_t FineOccupancy::offsetOf(std::uint64_t brick, const void* voxels,
         std::this_thread::yield(); // another thread builds it
     }
     const auto start = std::chrono::steady_clock::now();
-    std::vector<std::uint32_t> bits(mWordsPerBrick, 0u); // the map's bytes, 4 to a word
+    std::vector<std::uint32_t>& bits = scratch().words; // the map's bytes, 4 to a word
+    bits.assign(mWordsPerBrick, 0u);
     bool keep = false;
     switch (type) {
     case brickstore::VoxelType::U8:
@@ -161,7 +188,11 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
     auto hi = [&](int c) { return std::clamp(c * s + apron, 0, edge - 1); };
     // Min and max over each cell's reads, one axis at a time.
     const std::size_t e = std::size_t(edge), nc = std::size_t(n);
-    std::vector<float> minX(e * e * nc), maxX(e * e * nc);
+    BuildScratch& b = scratch();
+    std::vector<float>&minX = b.minX, &maxX = b.maxX, &minY = b.minY, &maxY = b.maxY;
+    std::vector<float>&mn = b.mn, &mx = b.mx;
+    minX.resize(e * e * nc); // every element is written before it is read
+    maxX.resize(e * e * nc);
     for (std::size_t row = 0; row < e * e; ++row) {
         const T* r = v + row * e;
         for (int c = 0; c < n; ++c) {
@@ -174,7 +205,8 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
             maxX[row * nc + std::size_t(c)] = mx;
         }
     }
-    std::vector<float> minY(e * nc * nc), maxY(e * nc * nc);
+    minY.resize(e * nc * nc);
+    maxY.resize(e * nc * nc);
     for (std::size_t z = 0; z < e; ++z)
         for (int c = 0; c < n; ++c) {
             float* mn = &minY[(z * nc + std::size_t(c)) * nc];
@@ -187,7 +219,8 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
                     mx[x] = std::max(mx[x], maxX[(z * e + std::size_t(y)) * nc + x]);
                 }
         }
-    std::vector<float> mn(nc * nc), mx(nc * nc);
+    mn.resize(nc * nc);
+    mx.resize(nc * nc);
     const std::uint32_t leaf = mTrees.leafVoxels();
     // The leaf of a cell's centre, for the share of empty cells among those the octree samples.
     auto leafOf = [&](int c) {
@@ -195,7 +228,8 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
         return std::uint32_t(std::clamp(centre / int(2 * leaf), 0, int(leaves) - 1));
     };
     // Per cell: 0 where a sample must be taken, else (below) its distance to the nearest such.
-    std::vector<std::uint8_t> dist(nc * nc * nc, 0);
+    std::vector<std::uint8_t>& dist = b.dist;
+    dist.resize(nc * nc * nc); // every cell is written below
     std::uint64_t sampledCells = 0, emptyCells = 0;
     for (int cz = 0; cz < n; ++cz) {
         for (std::size_t i = 0; i < nc * nc; ++i) {
@@ -221,7 +255,7 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
     }
     if (sampledCells == 0 || double(emptyCells) < kMinEmptyShare * double(sampledCells))
         return false;
-    chessboardDistances(dist, n);
+    chessboardDistances(dist, n, b.padded);
     std::memcpy(bits, dist.data(), dist.size());
     return true;
 }

@@ -27,16 +27,6 @@ std::uint64_t nodeIndex(const std::array<std::uint32_t, 3>& p, std::uint32_t per
 
 } // namespace
 
-std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domainMin, double domainMax,
-                                       std::uint32_t entries) {
-    const double last = double(entries - 1), scale = last / (domainMax - domainMin);
-    const double u0 = std::clamp((lo - domainMin) * scale, 0.0, last);
-    const double u1 = std::clamp((hi - domainMin) * scale, 0.0, last);
-    if (!(u0 == u0) || !(u1 == u1)) return {0, entries - 1}; // NaN: the whole table
-    const double i = std::max(0.0, std::floor(u0) - 1.0), j = std::min(last, std::ceil(u1) + 1.0);
-    return {std::uint32_t(i), std::uint32_t(j)};
-}
-
 void OccupancyConfig::validate() const {
     if (!(ratioThreshold >= 0.0 && ratioThreshold <= 1.0))
         throw std::invalid_argument("octree ratio threshold must lie in [0, 1], got " +

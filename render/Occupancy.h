@@ -10,7 +10,9 @@
 // here once per rebuild, not per frame) draws a node whole when its ratio reaches the
 // threshold or it sits at the level limit; what is left is a hierarchy of occupancy bits
 // per brick that the raycaster walks to leap over empty nodes (see render/OCCUPANCY.md).
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -29,8 +31,16 @@ struct TransferFunctionTable;
 /// or a sample position rounded across a face) cannot reach an entry the test did not look
 /// at. A NaN bound gives the whole table. The one range test of the octree's leaves and of
 /// the distance maps' cells (FineOccupancy.h).
-std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domainMin, double domainMax,
-                                       std::uint32_t entries);
+/// Inline: the distance maps call it for every cell of a brick.
+inline std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domainMin,
+                                              double domainMax, std::uint32_t entries) {
+    const double last = double(entries - 1), scale = last / (domainMax - domainMin);
+    const double u0 = std::clamp((lo - domainMin) * scale, 0.0, last);
+    const double u1 = std::clamp((hi - domainMin) * scale, 0.0, last);
+    if (!(u0 == u0) || !(u1 == u1)) return {0, entries - 1}; // NaN: the whole table
+    const double i = std::max(0.0, std::floor(u0) - 1.0), j = std::min(last, std::ceil(u1) + 1.0);
+    return {std::uint32_t(i), std::uint32_t(j)};
+}
 
 struct OccupancyConfig {
     /// A non-empty node whose ratio of non-empty leaves reaches this is drawn whole (its

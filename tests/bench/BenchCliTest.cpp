@@ -4,6 +4,7 @@
 
 #include <array>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <sys/wait.h>
 
@@ -24,6 +25,52 @@ Output benchSplat(const std::string& args) {
 
 bool contains(const std::string& text, const std::string& part) {
     return text.find(part) != std::string::npos;
+}
+
+// bc_bench_tunables: every tunable's values, one default row per tunable (its ratios' base),
+// finite
+// samples over oracle of at least 1 (no renderer takes fewer samples than are visible); bad
+// input named.
+TEST(BenchCli, TheTunablesSweepPrintsEveryValueAgainstTheDefault) {
+    if (!test::realScan("hydrogen")) return test::missingData("scan hydrogen");
+    test::TempDir dir;
+    const std::string csv = dir.file("tunables.csv");
+    auto r =
+        run(BC_BENCH_TUNABLES_EXE, "--data " + std::string(BC_SHARED_DATA_DIR) +
+                                       " --datasets hydrogen --size 24 --frames 2 --csv " + csv);
+    ASSERT_EQ(r.exitCode, 0) << r.text;
+    EXPECT_TRUE(contains(r.text, "### hydrogen / smoke")) << r.text;
+    std::ifstream f(csv);
+    std::string line;
+    std::getline(f, line);
+    EXPECT_EQ(line.rfind("dataset,tf,tunable,value,default,ms,ratio,samples_over_oracle,", 0), 0u)
+        << line;
+    std::map<std::string, int> values, defaults;
+    while (std::getline(f, line)) {
+        std::vector<std::string> cells;
+        std::stringstream in(line);
+        for (std::string c; std::getline(in, c, ',');)
+            cells.push_back(c);
+        ASSERT_EQ(cells.size(), 13u) << line;
+        ++values[cells[2]];
+        if (cells[4] == "1") {
+            ++defaults[cells[2]];
+            EXPECT_EQ(std::stod(cells[6]), 1.0) << "a default row is its tunable's ratios' base";
+        }
+        EXPECT_GE(std::stod(cells[7]), 1.0) << "fewer samples than the oracle's: " << line;
+        EXPECT_FALSE(contains(line, "nan")) << line;
+    }
+    EXPECT_EQ(values, (std::map<std::string, int>{{"brick edge", 3},
+                                                  {"leaf edge", 3},
+                                                  {"map cell edge", 4},
+                                                  {"octree ratio", 3},
+                                                  {"octree level limit", 3}}));
+    for (const auto& [tunable, n] : defaults)
+        EXPECT_EQ(n, 1) << tunable << ": not one default value";
+    EXPECT_EQ(defaults.size(), 5u);
+    auto bad = run(BC_BENCH_TUNABLES_EXE, "--datasets hydrogen --path spiral");
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_TRUE(contains(bad.text, "spiral")) << bad.text;
 }
 
 // bc_bench_render (formerly `brickcast bench`) on the smallest real scan: every technique set of
