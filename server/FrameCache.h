@@ -8,9 +8,11 @@
 // entries of a volume gone or out of service are dropped.
 //
 // What "identical" means is exact: the key holds the camera and options as encoded on the wire
-// (every field, bit for bit), the renderer that draws them (auto resolved), whether the frame is
-// refined, the shading resolved for it, and the placed transfer function (compared by
-// TransferFunction::sameFunction, not by a hash alone).
+// (every field, bit for bit, but the renderer and quality, which it holds as what they decide:
+// the renderer that draws the frame, auto resolved, and whether the frame is refined), the
+// shading resolved for it, and the placed transfer function (compared by
+// TransferFunction::sameFunction, not by a hash alone). A frame that depends on more (drawn at a
+// coarser level than asked for because level 0 exceeded the GPU pool's share) is not kept.
 #include "protocol/Wire.h"
 
 #include <cstdint>

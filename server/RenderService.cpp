@@ -1175,7 +1175,9 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     h.bricksSkipped = std::uint32_t(stats.bricksSkipped);
     h.bytesUploaded = stats.bytesUploaded;
     h.occlusionUsed = stats.occlusionUsed;
-    if (d.cacheKey) {
+    // A frame drawn at a coarser level than asked for (level 0 over the GPU pool's share,
+    // which changes with the sessions) depends on more than its key: not kept.
+    if (d.cacheKey && stats.level == std::uint32_t(d.options.level)) {
         CachedFrame kept{width, height, codec, h.level, quality, {}};
         kept.bytes = kept.pixels() ? std::move(rgba8) : encoded.bytes;
         mFrames->insert(std::move(*d.cacheKey), std::move(kept), s.volume);
@@ -1208,7 +1210,10 @@ FrameKey keyOf(const FrameDrawing& d) {
     camera.cameraId = 0; // the client's name for the view, not the view
     protocol::encode(camera, 0, key.request);
     protocol::SetRenderOptions options{s.options};
-    options.options.renderer = protocol::Renderer::Auto; // key.renderer says who draws it
+    // What they decide is in the key already: who draws it (key.renderer) and whether it is
+    // refined (an adaptive session's frame at rest is a refined session's frame).
+    options.options.renderer = protocol::Renderer::Auto;
+    options.options.quality = protocol::Quality::Adaptive;
     protocol::encode(options, 0, key.request);
     key.tf = s.tf;
     return key;

@@ -89,6 +89,12 @@ TEST_F(FrameCacheTest, ASecondSessionGetsTheSameBytesWithoutARender) {
 
     // The first session asking again (a refined frame at rest asked for twice) is a hit too.
     EXPECT_TRUE(frame(*a, 30, 2).header.cached);
+    // So is an adaptive session's frame at rest: the refined frame of the same view.
+    options.quality = protocol::Quality::Adaptive;
+    const protocol::Frame adaptive = frame(*session(), 30, 3);
+    EXPECT_TRUE(adaptive.header.cached);
+    EXPECT_TRUE(adaptive.header.refined);
+    EXPECT_EQ(adaptive.image, first.image);
     EXPECT_EQ(drawn(), 1);
 }
 
