@@ -182,8 +182,6 @@ void benchScene(Scene& s, const Dataset& d, const BenchOptions& o, BenchReport& 
                 for (const std::string renderer : {"gpu", "cpu"}) {
                     if (o.renderer != "both" && o.renderer != renderer) continue;
                     if (renderer == "cpu" && t.frustums) continue; // a GPU technique
-                    // A CPU one: on the GPU these rows would be +octree +ERT again.
-                    if (renderer == "gpu" && t.cells > 0 && !t.frustums) continue;
                     BenchRow row = measure(s, t, renderer, cams, base,
                                            (d.budgetMb ? d.budgetMb : o.gpuBudgetMb) << 20,
                                            reference ? &*reference : nullptr, rs);

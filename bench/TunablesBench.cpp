@@ -16,6 +16,7 @@
 #include "render/BrickPlan.h"
 #include "render/Camera.h"
 #include "render/Classification.h"
+#include "render/EglContext.h"
 #include "render/ReferenceRenderer.h"
 #include "render/RendererRegistry.h"
 #include "render/View.h"
@@ -30,6 +31,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <random>
 #include <unistd.h>
 
@@ -202,6 +204,8 @@ void runSweep(const TunablesOptions& o) {
         throw std::invalid_argument("--renderer: '" + o.renderer + "' is not cpu or gpu");
     const auto datasets = realDatasets(o.data, o.datasets, o.tf, "bc_bench_tunables");
     if (datasets.empty()) throw std::invalid_argument("--datasets: none of them is here");
+    std::optional<render::EglContext> context; // the GPU raycaster's (llvmpipe without a GPU)
+    if (o.renderer == "gpu") context.emplace();
     std::printf("bc_bench_tunables: %s raycaster, %u^2, %s path, %d timed frames after one, "
                 "step 1, shaded, samples / oracle over the first %d timed frames\n",
                 o.renderer.c_str(), o.size, o.path.c_str(), o.frames, o.oracleFrames);

@@ -260,6 +260,16 @@ bool FineOccupancy::build(std::uint64_t brick, const T* v, int brickVoxels, int 
     return true;
 }
 
+std::int64_t FineOccupancy::builtOffset(std::uint64_t brick) const {
+    if (brick >= mBricks) return 0;
+    const std::int64_t state = mOffsets[brick].load(std::memory_order_acquire);
+    return state >= 0 ? state : -1;
+}
+
+std::uint64_t FineOccupancy::usedWords() const {
+    return std::min(mNextSlot.load(), mSlots) * mWordsPerBrick;
+}
+
 FineOccupancyStats FineOccupancy::stats() const {
     FineOccupancyStats s;
     s.bricksBuilt = mBuilt.load();

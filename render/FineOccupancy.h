@@ -19,14 +19,15 @@
 // Layout: one byte per cell, x fastest, cellsPerAxis()^3 of them: 0 where samples are taken,
 // else the chessboard distance in cells to the nearest such cell (255 at most). Every brick's
 // map is one slot of one pool, so the CPU raycaster's gathers address them by 32-bit offsets;
-// slot 0 is no brick's (a brick without a map walks the octree).
+// slot 0 is no brick's (a brick without a map walks the octree). The GPU raycaster keeps a
+// copy of the pool in a storage buffer, appending the slots filled since its last frame.
 //
 // Memory: the pool holds at most `budgetBytes` (default 64 MiB: 1,800 bricks of 2-voxel cells
 // at 35 KiB, 240 of 1-voxel cells at 269 KiB, for 64-voxel bricks); past it further bricks get
 // no map (and walk the octree, as before). A brick whose sampled leaves hold few empty cells
 // (dense tissue) gets none either: its map would cost a lookup per sample and leap little.
 // Maps are used only under the exact octree (ratio threshold 1, no level limit): a node drawn
-// whole must keep its samples.
+// whole must keep its samples. Both raycasters leap by them (render/OCCUPANCY.md).
 #include "brickstore/VoxelType.h"
 
 #include <atomic>
@@ -80,6 +81,15 @@ class FineOccupancy {
     /// threads at once is built by one, the other waits.
     std::uint32_t offsetOf(std::uint64_t brick, const void* voxels, brickstore::VoxelType type,
                            int brickVoxels, int apronVoxels);
+
+    /// Brick `brick`'s offset as offsetOf() returned it, or -1 while it is not built.
+    std::int64_t builtOffset(std::uint64_t brick) const;
+    /// Words of the pool in use: slots [0, usedWords() / wordsPerBrick()), every one written
+    /// once no offsetOf() call is running. A copy of the pool (the GPU's) can follow it by
+    /// appending.
+    std::uint64_t usedWords() const;
+    /// Words the pool may come to use (its budget).
+    std::uint64_t capacityWords() const { return mSlots * mWordsPerBrick; }
 
     FineOccupancyStats stats() const;
     /// Host bytes held: the pool's used slots and the per-brick table.

@@ -3,7 +3,9 @@
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "render/BrickPlan.h"
+#include "render/Classification.h"
 #include "render/Error.h"
+#include "render/FineOccupancy.h"
 #include "render/Occupancy.h"
 #include "render/TransferFunction.h"
 #include "render/detail/Gl.h"
@@ -13,9 +15,13 @@
 #include "render/detail/ShaderPrograms.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include <limits>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 namespace bc::render {
 namespace {
@@ -38,6 +44,11 @@ struct Raycaster::Gpu {
     gl::Buffer pages, counters;
     gl::Buffer occupancy; ///< OccupancyTrees::words() of classification occupancyId
     std::uint64_t occupancyWords = 0, occupancyId = 0;
+    /// The distance maps: a copy of the FineOccupancy pool of (cellsId, cellsVoxels), its
+    /// first cellsWords words uploaded; and per brick of the level its map's word offset.
+    gl::Buffer cells, cellBase;
+    std::uint64_t cellsId = 0, cellsVoxels = 0, cellsCapacity = 0, cellsWords = 0;
+    std::uint64_t cellBaseBricks = 0;
     std::unique_ptr<detail::OcclusionFrustums> occlusion; ///< created on first use
     gl::Buffer feedback; ///< per brick of the level: entered, then asked for (2 uints)
     std::uint64_t feedbackBricks = 0;
@@ -330,6 +341,94 @@ void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount, bool f
     glViewport(0, 0, GLsizei(mGpu->width), GLsizei(mGpu->height));
 }
 
+void Raycaster::uploadCells(const Scene& scene, const FrameClassification& classified,
+                            const RenderOptions& options, const BrickPlan& plan,
+                            const std::vector<std::size_t>& deferred, std::uint64_t brickCount,
+                            FrameStats& stats) {
+    const GLuint program = mGpu->program.get();
+    const OccupancyTrees* occupancy = classified.occupancy;
+    FineOccupancy* fine = occupancy && occupancy->depth() > 0 && classified.classification
+                              ? classified.classification->fine(options.cellVoxels)
+                              : nullptr;
+    glProgramUniform1i(program, glGetUniformLocation(program, "uCells"), fine != nullptr);
+    auto ensure = [](gl::Buffer& b, std::uint64_t bytes) { // binding must name a buffer
+        if (b) return;
+        b = gl::createBuffer();
+        glNamedBufferStorage(b.get(), GLsizeiptr(std::max<std::uint64_t>(bytes, 4)), nullptr,
+                             GL_DYNAMIC_STORAGE_BIT);
+    };
+    if (!fine) {
+        ensure(mGpu->cells, 4);
+        ensure(mGpu->cellBase, 4);
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, mGpu->cells.get());
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, mGpu->cellBase.get());
+        return;
+    }
+    // Maps of the bricks drawn now (a deferred one walks the octree: reading its voxels for a
+    // map would load what ray guidance leaves unloaded), built in parallel where not yet.
+    const brickstore::BrickStore& store = scene.store;
+    const brickstore::VoxelType type = store.info().volume.type;
+    const int brick = int(store.layout().geometry().brickVoxels);
+    const int apron = int(store.layout().geometry().apronVoxels);
+    std::vector<std::uint8_t> skip(plan.drawn.size(), 0);
+    for (std::size_t i : deferred)
+        skip[i] = 1;
+    std::vector<std::uint32_t> base(std::max<std::uint64_t>(brickCount, 1), 0);
+    const FineOccupancyStats before = fine->stats();
+    std::atomic<std::uint64_t> withCells{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, plan.drawn.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                              const PlannedBrick& b = plan.drawn[i];
+                              if (b.draw != BrickDraw::Sampled || skip[i]) continue;
+                              std::int64_t offset = fine->builtOffset(b.index);
+                              if (offset < 0) {
+                                  const brickstore::BrickPin pin = scene.cache.pin(b.key);
+                                  offset = fine->offsetOf(b.index, pin.data().data(), type, brick,
+                                                          apron);
+                              }
+                              base[b.index] = std::uint32_t(offset);
+                              if (offset != 0) ++withCells;
+                          }
+                      });
+    const FineOccupancyStats after = fine->stats();
+    stats.cellBricksBuilt += after.bricksBuilt - before.bricksBuilt;
+    stats.cellBuildMs += after.buildMs - before.buildMs;
+    stats.cellBricks += withCells;
+    // The pool's copy: made anew for other maps, else the slots filled since appended.
+    const std::uint64_t id = classified.classification->occupancyId();
+    if (mGpu->cellsId != id || mGpu->cellsVoxels != fine->cellVoxels() ||
+        mGpu->cellsCapacity != fine->capacityWords() || !mGpu->cells) {
+        mGpu->cells = gl::createBuffer();
+        glNamedBufferStorage(mGpu->cells.get(), GLsizeiptr(fine->capacityWords() * 4), nullptr,
+                             GL_DYNAMIC_STORAGE_BIT);
+        mGpu->cellsId = id;
+        mGpu->cellsVoxels = fine->cellVoxels();
+        mGpu->cellsCapacity = fine->capacityWords();
+        mGpu->cellsWords = 0;
+    }
+    const std::uint64_t used = fine->usedWords();
+    if (used > mGpu->cellsWords) {
+        glNamedBufferSubData(mGpu->cells.get(), GLintptr(mGpu->cellsWords * 4),
+                             GLsizeiptr((used - mGpu->cellsWords) * 4),
+                             fine->pool() + mGpu->cellsWords);
+        mGpu->cellsWords = used;
+    }
+    if (mGpu->cellBaseBricks != base.size() || !mGpu->cellBase) {
+        mGpu->cellBase = gl::createBuffer();
+        glNamedBufferStorage(mGpu->cellBase.get(), GLsizeiptr(base.size() * 4), nullptr,
+                             GL_DYNAMIC_STORAGE_BIT);
+        mGpu->cellBaseBricks = base.size();
+    }
+    glNamedBufferSubData(mGpu->cellBase.get(), 0, GLsizeiptr(base.size() * 4), base.data());
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, mGpu->cells.get());
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, mGpu->cellBase.get());
+    glProgramUniform1f(program, glGetUniformLocation(program, "uCell"), float(fine->cellVoxels()));
+    glProgramUniform1i(program, glGetUniformLocation(program, "uCellAxis"),
+                       int(fine->cellsPerAxis()));
+    gl::glCheck("uploading distance maps");
+}
+
 void Raycaster::uploadOccupancy(const FrameClassification& classified) {
     const OccupancyTrees* occupancy = classified.occupancy;
     if (!occupancy || occupancy->depth() == 0) return; // brick roots only, no bits
@@ -531,6 +630,7 @@ Image Raycaster::render(const Scene& scene, const View& view, const RenderOption
             return fits && mPool->resident(levelFirst + i);
         });
     }
+    uploadCells(scene, p.classified, options, plan, deferred, g.brickCount(), stats);
     if (!slice) mGpu->guide.reset(); // this frame's findings replace it (none if it throws)
     if (deferred.empty() || !drawGuided(plan, deferred, levelFirst, cache, pages, pass, stats)) {
         if (!deferred.empty()) { // requests overflowed the pool: draw the frame in batches

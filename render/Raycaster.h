@@ -99,6 +99,14 @@ class Raycaster final : public Renderer, public GpuResidency {
     /// classification's than the buffer holds (only the changed bricks' words when the buffer
     /// holds the classification they were updated from).
     void uploadOccupancy(const FrameClassification& classified);
+    /// The distance maps (FineOccupancy) of the plan's sampled bricks but `deferred` (indices
+    /// into plan.drawn), built from their voxels (pinned one by one) where not yet; the pool's
+    /// new slots appended to the GPU's copy, each brick's offset in the per-brick table.
+    /// Without maps (none for these options) the shader walks the octree alone.
+    void uploadCells(const Scene& scene, const FrameClassification& classified,
+                     const RenderOptions& options, const BrickPlan& plan,
+                     const std::vector<std::size_t>& deferred, std::uint64_t brickCount,
+                     FrameStats& stats);
     void drawPass(int pass);
     std::uint64_t sceneKey(const brickstore::BrickStore& store, std::uint32_t level,
                            const TransferFunctionTable& table, const RenderOptions& options) const;

@@ -13,6 +13,13 @@ layout(r32f, binding = 0) uniform image2D uFirstHit;
 uniform bool uUseStart, uWriteFirstHit;
 // Per brick of the level, the occupancy bits of its octree levels 1..uOctDepth (OCCUPANCY.md).
 layout(std430, binding = 2) readonly buffer Occupancy { uint occ[]; };
+// Distance maps (render/FineOccupancy.h): the pool of per-brick maps, a byte per cell (4 to a
+// word), and per brick of the level its map's word offset (0: none, walk the octree).
+layout(std430, binding = 4) readonly buffer Cells { uint cellWords[]; };
+layout(std430, binding = 5) readonly buffer CellBases { uint cellBase[]; };
+uniform bool uCells;
+uniform float uCell;          // cell edge in voxels (a power of two)
+uniform int uCellAxis;        // cells per brick axis
 // Ray-guided residency: feedback[b] = 1 once an unsaturated ray enters resident brick b, and
 // feedback[uBrickCount + b] = 1 once one reaches deferred brick b (planned, not uploaded). A
 // ray stops at a deferred brick; uResumeAt holds the sample it goes on from in the next pass
@@ -182,11 +189,27 @@ void main() {
             vec3 local = ov - vec3(cell * uBrick);   // brick-local voxel position at t = 0
             vec3 rel = local + (float(uApron) - 0.5);
             int base = brickIndex * uOccWords;
+            uint map = uCells ? cellBase[brickIndex] : 0u;
             ivec3 checkedLeaf = ivec3(-1);           // the last leaf found to be sampled
             for (; k < kEnd; ++k) {
                 float t = t0 + (float(k) + 0.5) * uStepMm;
                 vec3 q = rel + dv * t;
-                if (uOctDepth > 0) {
+                if (map != 0u) {
+                    // The map decides in place of the octree: a cell at distance d > 0 is the
+                    // centre of an empty cube of 2d - 1 cells (corner (c - d) cell + 1/2).
+                    ivec3 c = clamp(ivec3(floor((local + dv * t + (uCell - 0.5)) * (1.0 / uCell))),
+                                    ivec3(0), ivec3(uCellAxis - 1));
+                    uint i = uint((c.z * uCellAxis + c.y) * uCellAxis + c.x);
+                    int dist = int((cellWords[map + (i >> 2u)] >> ((i & 3u) * 8u)) & 255u);
+                    if (dist > 0) {
+                        vec3 lo = vec3(c - dist) * uCell + 0.5;
+                        float tExit = exitParameter(local, dv, lo, float(2 * dist - 1) * uCell);
+                        int kNext = int(ceil((tExit - t0) / uStepMm - 0.5));
+                        ++leaps;
+                        k = max(k, min(kNext, kEnd) - 1); // the loop's ++k reaches kNext
+                        continue;
+                    }
+                } else if (uOctDepth > 0) {
                     // Second stage: leap over the largest empty octree node holding the sample.
                     ivec3 leaf = clamp(ivec3(floor((local + dv * t) / uLeaf)), ivec3(0), ivec3(uLeafAxis - 1));
                     if (leaf != checkedLeaf) {

@@ -99,7 +99,7 @@ TEST(BenchCli, PrintsEveryTechniqueSetWithErrorsAndASweepAndNamesBadInput) {
         }
         EXPECT_FALSE(contains(line, "nan")) << line;
     }
-    EXPECT_EQ(paths, 14) << "7 technique sets x 2 paths";
+    EXPECT_EQ(paths, 18) << "9 technique sets x 2 paths";
     EXPECT_EQ(sweeps, 2);
     EXPECT_EQ(plain, 2);
     auto bad = benchRender("--datasets hydrogen --paths spiral --no-rebuild-512 --no-generated");

@@ -187,9 +187,10 @@ int fly(const Options& o) {
         latency.push_back(ms);
         bytes += frame.wireBytes;
         std::printf(
-            "frame %3d  camera %3u  %.1f ms  render %.1f ms  encode %.2f ms  %llu bytes%s\n", f,
+            "frame %3d  camera %3u  %.1f ms  render %.1f ms  encode %.2f ms  %llu bytes%s%s\n", f,
             frame.header.cameraId, ms, frame.header.renderMs, frame.header.encodeMs,
-            (unsigned long long)frame.wireBytes, frame.header.refined ? "" : "  (interactive)");
+            (unsigned long long)frame.wireBytes, frame.header.refined ? "" : "  (interactive)",
+            frame.header.cached ? "  (from the server's frame cache)" : "");
         if (!o.outputDir.empty() && f % std::max(o.saveEvery, 1) == 0) {
             char name[64];
             std::snprintf(name, sizeof name, "frame_%04d.png", f);
