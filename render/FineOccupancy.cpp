@@ -266,10 +266,6 @@ std::int64_t FineOccupancy::builtOffset(std::uint64_t brick) const {
     return state >= 0 ? state : -1;
 }
 
-std::uint64_t FineOccupancy::usedWords() const {
-    return std::min(mNextSlot.load(), mSlots) * mWordsPerBrick;
-}
-
 FineOccupancyStats FineOccupancy::stats() const {
     FineOccupancyStats s;
     s.bricksBuilt = mBuilt.load();

@@ -20,7 +20,7 @@
 // else the chessboard distance in cells to the nearest such cell (255 at most). Every brick's
 // map is one slot of one pool, so the CPU raycaster's gathers address them by 32-bit offsets;
 // slot 0 is no brick's (a brick without a map walks the octree). The GPU raycaster keeps a
-// copy of the pool in a storage buffer, appending the slots filled since its last frame.
+// copy of the pool in a storage buffer, copying each slot once a frame draws its brick.
 //
 // Memory: the pool holds at most `budgetBytes` (default 64 MiB: 1,800 bricks of 2-voxel cells
 // at 35 KiB, 240 of 1-voxel cells at 269 KiB, for 64-voxel bricks); past it further bricks get
@@ -82,12 +82,9 @@ class FineOccupancy {
     std::uint32_t offsetOf(std::uint64_t brick, const void* voxels, brickstore::VoxelType type,
                            int brickVoxels, int apronVoxels);
 
-    /// Brick `brick`'s offset as offsetOf() returned it, or -1 while it is not built.
+    /// Brick `brick`'s offset as offsetOf() returned it, or -1 while it is not built. A slot
+    /// whose offset has been handed out is written (a copy, the GPU's, may read it then).
     std::int64_t builtOffset(std::uint64_t brick) const;
-    /// Words of the pool in use: slots [0, usedWords() / wordsPerBrick()), every one written
-    /// once no offsetOf() call is running. A copy of the pool (the GPU's) can follow it by
-    /// appending.
-    std::uint64_t usedWords() const;
     /// Words the pool may come to use (its budget).
     std::uint64_t capacityWords() const { return mSlots * mWordsPerBrick; }
 

@@ -44,10 +44,11 @@ struct Raycaster::Gpu {
     gl::Buffer pages, counters;
     gl::Buffer occupancy; ///< OccupancyTrees::words() of classification occupancyId
     std::uint64_t occupancyWords = 0, occupancyId = 0;
-    /// The distance maps: a copy of the FineOccupancy pool of (cellsId, cellsVoxels), its
-    /// first cellsWords words uploaded; and per brick of the level its map's word offset.
+    /// The distance maps: a copy of the FineOccupancy pool of (cellsId, cellsVoxels), the
+    /// slots flagged in cellsUploaded copied; and per brick of the level its map's word offset.
     gl::Buffer cells, cellBase;
-    std::uint64_t cellsId = 0, cellsVoxels = 0, cellsCapacity = 0, cellsWords = 0;
+    std::uint64_t cellsId = 0, cellsVoxels = 0, cellsCapacity = 0;
+    std::vector<std::uint8_t> cellsUploaded;
     std::uint64_t cellBaseBricks = 0;
     std::unique_ptr<detail::OcclusionFrustums> occlusion; ///< created on first use
     gl::Buffer feedback; ///< per brick of the level: entered, then asked for (2 uints)
@@ -395,8 +396,12 @@ void Raycaster::uploadCells(const Scene& scene, const FrameClassification& class
     stats.cellBricksBuilt += after.bricksBuilt - before.bricksBuilt;
     stats.cellBuildMs += after.buildMs - before.buildMs;
     stats.cellBricks += withCells;
-    // The pool's copy: made anew for other maps, else the slots filled since appended.
+    // The pool's copy: made anew for other maps; the slots of this frame's bricks not copied
+    // yet are, in runs of consecutive slots. Only slots whose offsets this frame was handed
+    // (each written before its offset is published) are read, so a map another thread is
+    // building meanwhile is never copied half done.
     const std::uint64_t id = classified.classification->occupancyId();
+    const std::uint64_t words = fine->wordsPerBrick();
     if (mGpu->cellsId != id || mGpu->cellsVoxels != fine->cellVoxels() ||
         mGpu->cellsCapacity != fine->capacityWords() || !mGpu->cells) {
         mGpu->cells = gl::createBuffer();
@@ -405,14 +410,22 @@ void Raycaster::uploadCells(const Scene& scene, const FrameClassification& class
         mGpu->cellsId = id;
         mGpu->cellsVoxels = fine->cellVoxels();
         mGpu->cellsCapacity = fine->capacityWords();
-        mGpu->cellsWords = 0;
+        mGpu->cellsUploaded.assign(fine->capacityWords() / words, 0);
     }
-    const std::uint64_t used = fine->usedWords();
-    if (used > mGpu->cellsWords) {
-        glNamedBufferSubData(mGpu->cells.get(), GLintptr(mGpu->cellsWords * 4),
-                             GLsizeiptr((used - mGpu->cellsWords) * 4),
-                             fine->pool() + mGpu->cellsWords);
-        mGpu->cellsWords = used;
+    std::vector<std::uint64_t> slots;
+    for (std::uint32_t offset : base)
+        if (offset != 0 && !mGpu->cellsUploaded[offset / words]) {
+            mGpu->cellsUploaded[offset / words] = 1;
+            slots.push_back(offset / words);
+        }
+    std::sort(slots.begin(), slots.end());
+    for (std::size_t i = 0; i < slots.size();) {
+        std::size_t j = i + 1;
+        while (j < slots.size() && slots[j] == slots[j - 1] + 1)
+            ++j;
+        glNamedBufferSubData(mGpu->cells.get(), GLintptr(slots[i] * words * 4),
+                             GLsizeiptr((j - i) * words * 4), fine->pool() + slots[i] * words);
+        i = j;
     }
     if (mGpu->cellBaseBricks != base.size() || !mGpu->cellBase) {
         mGpu->cellBase = gl::createBuffer();
