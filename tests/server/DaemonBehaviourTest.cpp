@@ -71,11 +71,13 @@ TEST_F(DaemonBehaviour, SessionsOnOneVolumeShareItsCacheAndBudgetsFollowTheSessi
     client::Client a(sDaemon->clientConfig()), b(sDaemon->clientConfig());
     const auto v = a.openVolume("small");
     b.openVolume("small");
-    for (auto* c : {&a, &b}) {
+    double azDeg = 10;
+    for (auto* c : {&a, &b}) { // views of their own: the same view would be the frame cache's
         c->setRenderOptions(smallCpuFrames(48));
-        c->setCamera(orbitCamera(v, 10, 1));
+        c->setCamera(orbitCamera(v, azDeg, 1));
         c->requestFrame();
         c->nextFrame();
+        azDeg += 2;
     }
     auto counter = [](const std::vector<std::pair<std::string, double>>& s, const std::string& k) {
         for (const auto& [name, value] : s)
