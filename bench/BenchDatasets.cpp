@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <optional>
+#include <random>
 
 namespace bc::bench {
 
@@ -47,6 +48,17 @@ std::vector<Dataset> realDatasets(const std::string& dataDir, const std::string&
             out.push_back(d);
     }
     return out;
+}
+
+std::vector<render::Camera> cameraPath(const std::string& path, const render::Box& box,
+                                       int frames) {
+    std::vector<render::Camera> cams;
+    std::mt19937 rng(20261201);
+    std::uniform_real_distribution<double> az(0, 360), el(-70, 70), dist(0.7, 1.4);
+    for (int f = 0; f <= frames; ++f)
+        cams.push_back(path == "orbit" ? render::Camera::orbit(box, 30.0 + 2.0 * f, 20.0)
+                                       : render::Camera::orbit(box, az(rng), el(rng), dist(rng)));
+    return cams;
 }
 
 } // namespace bc::bench

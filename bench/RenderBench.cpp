@@ -83,17 +83,6 @@ constexpr TechniqueSet kSets[] = {
     {"all", render::SkipMode::All, true, true, kCells},
 };
 
-std::vector<render::Camera> cameraPath(const std::string& path, const render::Box& box,
-                                       int frames) {
-    std::vector<render::Camera> cams;
-    std::mt19937 rng(20261201);
-    std::uniform_real_distribution<double> az(0, 360), el(-70, 70), dist(0.7, 1.4);
-    for (int f = 0; f <= frames; ++f) // frame 0 warms pools and octrees; not timed
-        cams.push_back(path == "orbit" ? render::Camera::orbit(box, 30.0 + 2.0 * f, 20.0)
-                                       : render::Camera::orbit(box, az(rng), el(rng), dist(rng)));
-    return cams;
-}
-
 double median(std::vector<double> v) {
     if (v.empty()) return 0.0;
     std::sort(v.begin(), v.end());

@@ -99,17 +99,6 @@ double median(std::vector<double> v) {
     return v[v.size() / 2];
 }
 
-std::vector<render::Camera> cameraPath(const std::string& path, const render::Box& box,
-                                       int frames) {
-    std::vector<render::Camera> cams;
-    std::mt19937 rng(20261201);
-    std::uniform_real_distribution<double> az(0, 360), el(-70, 70), dist(0.7, 1.4);
-    for (int f = 0; f <= frames; ++f) // frame 0 builds octrees and maps; not timed
-        cams.push_back(path == "orbit" ? render::Camera::orbit(box, 30.0 + 2.0 * f, 20.0)
-                                       : render::Camera::orbit(box, az(rng), el(rng), dist(rng)));
-    return cams;
-}
-
 /// A store of `d` with `geometry`, ingested once per geometry into `dir`.
 struct Stores {
     std::string dir;
