@@ -15,8 +15,9 @@ What it does, for every scan x preset x view x size (--scans, --tfs, --views, --
      (max abs, RGBA) or --conv-floor / --conv-time-s is reached (then marked NOT converged).
      It and the same-step references are cached in OUT/refcache under a hash of everything that
      determines them (scan bytes, TF file, view, size, shading, step or convergence settings,
-     the model's sources), so reruns skip them. --refs-only makes them and stops, timing
-     nothing.
+     and the model: the pixels of a 64^2 reference probe of the same view, so a rebuilt
+     brickcast keeps them unless its reference draws differently), so reruns skip them.
+     --refs-only makes them and stops, timing nothing.
   4. Times VTK's CPU raycaster (vtkFixedPointVolumeRayCastMapper) at --step: --warmup frames,
      then the median of --frames frames (render + framebuffer read-back); the first is the
      cold frame.
@@ -444,11 +445,15 @@ def raw_path(args, scan):
         return os.path.join(args.data_dir, spec["file"])
     return os.path.join(args.out, "stores", scan + ".raw")
 
-# What the float64 reference's image depends on besides its inputs: a change to any of these
-# files invalidates the cached references (a rebuilt brickcast with other raycasters does not).
-MODEL_SOURCES = ["render/ReferenceRenderer.cpp", "render/ConvergedReference.cpp",
-                 "render/TransferFunction.cpp", "render/Camera.cpp", "render/View.cpp",
-                 "render/RenderTypes.cpp", "render/Classification.cpp", "render/OPTICS.md"]
+# The model (render/OPTICS.md as the float64 reference implements it) is identified by what it
+# draws, not by its sources: a probe of each scan/preset/view/shading (PROBE_SIZE^2, step 1,
+# `brickcast render --reference`), hashed over its decoded RGBA pixels. A rebuilt brickcast
+# whose reference draws the same pixels keeps the cache (a refactor of a file the reference
+# shares with the raycasters invalidates nothing); one that draws any pixel differently (TF
+# placement, camera, optics, classification) makes every reference of that probe anew. The
+# halving loop is not in the probe, so its sources are hashed as well.
+PROBE_SIZE = 64
+CONVERGENCE_SOURCES = ["render/ConvergedReference.cpp", "render/ConvergedReference.h"]
 
 
 def sha256_of(path, chunk=1 << 20):
@@ -460,29 +465,57 @@ def sha256_of(path, chunk=1 << 20):
     return h.hexdigest()
 
 
-def model_hash():
+def sources_hash(paths):
     import hashlib
     h = hashlib.sha256()
-    for rel in MODEL_SOURCES:
+    for rel in paths:
         path = os.path.join(REPO, rel)
         if os.path.exists(path):
             h.update(rel.encode() + b"\0" + open(path, "rb").read())
     return h.hexdigest()[:16]
 
 
+def pixels_hash(vtk, np, path):
+    """sha256 of a PNG's decoded pixels and shape (the encoder's bytes may change, they may not)."""
+    import hashlib
+    from vtk.util import numpy_support
+    r = vtk.vtkPNGReader()
+    r.SetFileName(path)
+    r.Update()
+    img = r.GetOutput()
+    a = np.ascontiguousarray(numpy_support.vtk_to_numpy(img.GetPointData().GetScalars()))
+    h = hashlib.sha256(repr((img.GetDimensions(), a.shape, str(a.dtype))).encode())
+    h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
 class ReferenceCache:
     """Reference frames on disk in OUT/refcache, named by a hash of everything that determines
     them: the scan's bytes, dims, type, spacing, the TF file, view, fov, size, shading, the step
-    (or the convergence settings) and the model's sources. Reruns reuse them."""
+    (or the convergence settings) and the model (a probe's pixels and the halving loop's
+    sources). Reruns reuse them."""
 
-    def __init__(self, args):
+    def __init__(self, args, vtk, np):
         self.args = args
+        self.vtk, self.np = vtk, np
         self.folder = os.path.join(args.out, "refcache")
-        os.makedirs(self.folder, exist_ok=True)
-        self.model = model_hash()
+        os.makedirs(os.path.join(self.folder, "probes"), exist_ok=True)
+        self.convergence = sources_hash(CONVERGENCE_SOURCES)
         self.scan_ids = {}
+        self.probes = {}
 
-    def _key(self, scan, tf, view, size, shade, what):
+    def model(self, store, scan, tf, view, shade):
+        """The probe's pixel hash for this scan/preset/view/shading, drawn once per run."""
+        key = (scan, tf, view["text"], shade)
+        if key not in self.probes:
+            png = os.path.join(self.folder, "probes",
+                               f"probe_{scan}_{tf}_{view['name']}_{int(shade)}.png")
+            brickcast_render(self.args, store, png, tf, view, PROBE_SIZE, 1.0,
+                             ["--reference"] + ([] if shade else ["--no-shading"]))
+            self.probes[key] = pixels_hash(self.vtk, self.np, png) + ":" + self.convergence
+        return self.probes[key]
+
+    def _key(self, store, scan, tf, view, size, shade, what):
         import hashlib
         spec = SCANS[scan]
         if scan not in self.scan_ids:
@@ -490,12 +523,13 @@ class ReferenceCache:
         tf_path = os.path.join(REPO, "configs", "tf", tf + ".json")
         key = {"scan": self.scan_ids[scan], "dims": spec["dims"], "type": spec["type"],
                "spacing": spec["spacing"], "tf": sha256_of(tf_path), "view": view["text"],
-               "fov": self.args.fov, "size": size, "shade": shade, "model": self.model, **what}
+               "fov": self.args.fov, "size": size, "shade": shade,
+               "model": self.model(store, scan, tf, view, shade), **what}
         digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:20]
         return key, digest
 
     def same_step(self, store, scan, tf, view, size, shade, step):
-        key, digest = self._key(scan, tf, view, size, shade, {"step": step})
+        key, digest = self._key(store, scan, tf, view, size, shade, {"step": step})
         png = os.path.join(self.folder, f"ref_{scan}_{tf}_{size}_{digest}.png")
         if not os.path.exists(png):
             brickcast_render(self.args, store, png, tf, view, size, step,
@@ -504,7 +538,7 @@ class ReferenceCache:
 
     def converged(self, store, scan, tf, view, size, shade):
         a = self.args
-        key, digest = self._key(scan, tf, view, size, shade,
+        key, digest = self._key(store, scan, tf, view, size, shade,
                                 {"tolerance": a.conv_tol, "start": a.conv_start,
                                  "floor": a.conv_floor})
         png = os.path.join(self.folder, f"conv_{scan}_{tf}_{size}_{digest}.png")
@@ -721,7 +755,7 @@ def main():
     if not os.access(args.brickcast, os.X_OK):
         raise SystemExit(f"{args.brickcast}: not an executable (build brickcast first)")
     os.makedirs(os.path.join(args.out, "frames"), exist_ok=True)
-    ctx = {"np": np, "vtk": vtk, "cache": ReferenceCache(args), "scenes": {}, "stores": {},
+    ctx = {"np": np, "vtk": vtk, "cache": ReferenceCache(args, vtk, np), "scenes": {}, "stores": {},
            "stats": {}}
     start = time.perf_counter()
     results = {"machine": {"cpus": os.cpu_count(), "uname": " ".join(os.uname())},
