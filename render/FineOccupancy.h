@@ -93,10 +93,19 @@ class FineOccupancy {
     std::uint64_t bytes() const;
 
   private:
-    /// Builds a brick's map into `bits` (wordsPerBrick() words); false when it gains too little.
-    template <class T>
+    /// The per-value range tests of integer voxels (mLowPrefix, mHighPrefix), once; every
+    /// brick's voxels are of the first one's type.
+    void prepareType(brickstore::VoxelType type);
+    /// Marks a brick's cells in `grid` (the distance passes' padded grid: cellsPerAxis() + 2 a
+    /// side, its padding 255): every cell, 0 where samples are taken, 255 where none are; false
+    /// when the map would gain too little. S: the cell's voxels when fixed at compile time (1, 2),
+    /// else 0 (cellVoxels()).
+    template <int S, class T>
     bool build(std::uint64_t brick, const T* voxels, int brickVoxels, int apron,
-               std::uint32_t* bits) const;
+               std::uint8_t* grid) const;
+    /// Whether a cell whose reads range over [lo, hi] holds a sample with opacity: the
+    /// octree leaves' test (entrySpan() and the visible-entry prefix count).
+    template <class T> bool takes(T lo, T hi) const;
 
     const OccupancyTrees& mTrees;
     std::uint32_t mCell = 1, mLevels = 0, mCellsPerAxis = 1, mWordsPerBrick = 0;
@@ -107,6 +116,11 @@ class FineOccupancy {
     std::unique_ptr<std::atomic<std::int64_t>[]> mOffsets;
     std::uint64_t mBricks = 0;
     std::vector<std::uint32_t> mPrefix; ///< visible table entries before entry i
+    /// Integer voxels, per value v (i16: v + 32768): mPrefix at the first and one past the last
+    /// entry of entrySpan(v, v), so a range [lo, hi] takes samples when they differ.
+    std::vector<std::uint32_t> mLowPrefix, mHighPrefix;
+    std::once_flag mTypeOnce;
+    brickstore::VoxelType mType = brickstore::VoxelType::U8;
     double mDomainMin = 0, mDomainMax = 1;
     std::uint32_t mEntries = 2;
     std::atomic<std::uint64_t> mBuilt{0}, mKept{0}, mBuildNs{0};
