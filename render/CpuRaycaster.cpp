@@ -326,10 +326,7 @@ void cellsOfBatch(const BrickPlan& plan, std::size_t first, std::size_t end, Fin
                               if (ref.fine != 0) ++withCells;
                           }
                       });
-    const FineOccupancyStats after = fine.stats();
-    stats.cellBricksBuilt += after.bricksBuilt - before.bricksBuilt;
-    stats.cellBuildMs += after.buildMs - before.buildMs;
-    stats.cellBricks += withCells;
+    fine.addFrameCost(before, withCells, stats);
 }
 
 } // namespace

@@ -1,6 +1,7 @@
 #include "render/FineOccupancy.h"
 
 #include "render/Occupancy.h"
+#include "render/RenderTypes.h"
 #include "render/TransferFunction.h"
 
 #include <algorithm>
@@ -382,6 +383,14 @@ FineOccupancyStats FineOccupancy::stats() const {
     s.bytes = std::min(mNextSlot.load(), mSlots) * mWordsPerBrick * 4ull;
     s.buildMs = double(mBuildNs.load()) * 1e-6;
     return s;
+}
+
+void FineOccupancy::addFrameCost(const FineOccupancyStats& before, std::uint64_t withMaps,
+                                 FrameStats& stats) const {
+    const FineOccupancyStats after = this->stats();
+    stats.cellBricksBuilt += after.bricksBuilt - before.bricksBuilt;
+    stats.cellBuildMs += after.buildMs - before.buildMs;
+    stats.cellBricks += withMaps;
 }
 
 std::uint64_t FineOccupancy::bytes() const {

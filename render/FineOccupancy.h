@@ -39,6 +39,7 @@
 namespace bc::render {
 
 class OccupancyTrees;
+struct FrameStats;
 struct TransferFunctionTable;
 
 /// What building cells has cost so far.
@@ -89,6 +90,10 @@ class FineOccupancy {
     std::uint64_t capacityWords() const { return mSlots * mWordsPerBrick; }
 
     FineOccupancyStats stats() const;
+    /// Adds to a frame's stats what building maps has cost since `before` (stats() when the
+    /// frame began asking for them) and the `withMaps` bricks it draws by a map.
+    void addFrameCost(const FineOccupancyStats& before, std::uint64_t withMaps,
+                      FrameStats& stats) const;
     /// Host bytes held: the pool's used slots and the per-brick table.
     std::uint64_t bytes() const;
 

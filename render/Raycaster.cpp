@@ -352,15 +352,14 @@ void Raycaster::uploadCells(const Scene& scene, const FrameClassification& class
                               ? classified.classification->fine(options.cellVoxels)
                               : nullptr;
     glProgramUniform1i(program, glGetUniformLocation(program, "uCells"), fine != nullptr);
-    auto ensure = [](gl::Buffer& b, std::uint64_t bytes) { // binding must name a buffer
+    auto ensure = [](gl::Buffer& b) { // a binding must name a buffer: one word, unread
         if (b) return;
         b = gl::createBuffer();
-        glNamedBufferStorage(b.get(), GLsizeiptr(std::max<std::uint64_t>(bytes, 4)), nullptr,
-                             GL_DYNAMIC_STORAGE_BIT);
+        glNamedBufferStorage(b.get(), 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
     };
     if (!fine) {
-        ensure(mGpu->cells, 4);
-        ensure(mGpu->cellBase, 4);
+        ensure(mGpu->cells);
+        ensure(mGpu->cellBase);
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, mGpu->cells.get());
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, mGpu->cellBase.get());
         return;
@@ -392,10 +391,7 @@ void Raycaster::uploadCells(const Scene& scene, const FrameClassification& class
                               if (offset != 0) ++withCells;
                           }
                       });
-    const FineOccupancyStats after = fine->stats();
-    stats.cellBricksBuilt += after.bricksBuilt - before.bricksBuilt;
-    stats.cellBuildMs += after.buildMs - before.buildMs;
-    stats.cellBricks += withCells;
+    fine->addFrameCost(before, withCells, stats);
     // The pool's copy: made anew for other maps; the slots of this frame's bricks not copied
     // yet are, in runs of consecutive slots. Only slots whose offsets this frame was handed
     // (each written before its offset is published) are read, so a map another thread is
