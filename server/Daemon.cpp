@@ -32,6 +32,7 @@ struct Daemon::Impl {
                                      .maxFrameSamples = config.maxFrameSamples,
                                      .maxUnslicedSamples = config.maxUnslicedSamples,
                                      .sliceMs = config.sliceMs,
+                                     .interactiveMs = config.interactiveMs,
                                      .frameCacheBytes = config.frameCacheBytes,
                                      .cluster = cluster},
                  catalog, log,

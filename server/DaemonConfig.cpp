@@ -84,6 +84,10 @@ max_unsliced_gsamples = 4
 # ms); sessions take turns between slices, and a frame whose session has gone or whose camera
 # has moved on is dropped at the next slice.
 slice_ms = 50
+# While a camera moves, the time a frame should take (0..10000 ms): each such frame is drawn
+# at the requested size divided by 1, 2, 3, 4, 6 or 8, whichever the frames drawn so far of
+# the volume and renderer predict to fit, and scaled back up. 0: half size, whatever it takes.
+interactive_ms = 0
 # While the render thread is idle, upload the bricks of each GPU session's next view (its
 # camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick
 # of its last frame.
@@ -382,7 +386,7 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
         checkKeys(*t, p,
                   {"rest_ms", "write_queue", "write_queue_mb", "max_frame_gsamples",
                    "max_unsliced_gsamples", "slice_ms", "prefetch", "cluster_timeout_ms",
-                   "cache_mb"});
+                   "cache_mb", "interactive_ms"});
         assign(c.restMs, integer(*t, p, "rest_ms", 0, 60000));
         assign(c.writeQueueFrames, integer(*t, p, "write_queue", 1, 16));
         if (auto mb = integer(*t, p, "write_queue_mb", 1, 4096))
@@ -392,6 +396,7 @@ void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
         if (auto g = integer(*t, p, "max_unsliced_gsamples", 1, 65536))
             c.maxUnslicedSamples = std::uint64_t(*g) << 30;
         assign(c.sliceMs, integer(*t, p, "slice_ms", 10, 10000));
+        assign(c.interactiveMs, integer(*t, p, "interactive_ms", 0, 10000));
         if (auto b = boolean(*t, "frames.", "prefetch")) c.prefetch = *b;
         assign(c.clusterTimeoutMs, integer(*t, p, "cluster_timeout_ms", 100, 600000));
         if (auto mb = integer(*t, p, "cache_mb", 0, kMaxBudgetMb))

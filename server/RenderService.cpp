@@ -9,6 +9,7 @@
 #include "render/RendererRegistry.h"
 #include "render/View.h"
 #include "server/Catalog.h"
+#include "server/FrameBudget.h"
 #include "server/FrameCache.h"
 #include "server/FrameCluster.h"
 #include "server/Log.h"
@@ -229,6 +230,8 @@ struct FrameDrawing {
     Clock::time_point start;
     std::string rendererChoice;       ///< why d.kind draws it (RendererChoice::reason)
     std::optional<FrameKey> cacheKey; ///< set when the frame cache is on and had no frame
+    /// An interactive frame is drawn at the requested size over this (rounded up).
+    std::uint32_t divisor = 1;
 
     /// A refined frame drawn because an adaptive session's camera came to rest.
     bool refinement() const {
@@ -385,6 +388,9 @@ const char* rendererName(protocol::Renderer r) {
 RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log,
                              VolumeFailed volumeFailed)
     : mConfig(config), mCatalog(catalog), mLog(log), mVolumeFailed(std::move(volumeFailed)),
+      mBudget(config.interactiveMs > 0
+                  ? std::make_unique<InteractiveBudget>(double(config.interactiveMs))
+                  : nullptr),
       mClassifications(std::make_unique<render::ClassificationCache>(
           render::ClassificationCacheConfig{config.classificationBudgetBytes})),
       mFrames(std::make_unique<FrameCache>(FrameCacheConfig{config.frameCacheBytes})),
@@ -884,10 +890,6 @@ void RenderService::prepare(FrameDrawing& d) {
     d.start = Clock::now();
     if (const auto why = s.volume->failure())
         throw VolumeOutOfService("volume '" + s.volume->name + "' is out of service: " + *why);
-    d.options = toRenderOptions(o, !d.job.refined);
-    d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
-    // The decoder validated the camera (the same rules as Camera::validate).
-    d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
     std::string_view name = rendererName(o.renderer);
     d.rendererChoice = "asked for " + std::string(name);
     if (o.renderer == protocol::Renderer::Auto) {
@@ -898,6 +900,17 @@ void RenderService::prepare(FrameDrawing& d) {
     d.kind = render::RendererRegistry::builtin().find(name);
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
     if (d.kind->needsGl) makeContext();
+    // An interactive frame: drawn smaller, by what its budget allows (half size without one).
+    d.options = toRenderOptions(o, false);
+    if (!d.job.refined) {
+        d.divisor = mBudget ? mBudget->divisor(s.volume->name, d.kind->name, o.width, o.height)
+                            : InteractiveBudget::kFirstDivisor;
+        d.options.width = InteractiveBudget::drawnEdge(o.width, d.divisor);
+        d.options.height = InteractiveBudget::drawnEdge(o.height, d.divisor);
+    }
+    d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
+    // The decoder validated the camera (the same rules as Camera::validate).
+    d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
 
     // Cost: an upper bound of the samples (every ray as long as the level's diagonal), or the
     // voxels a splatter projects.
@@ -1150,9 +1163,12 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     const auto width = std::uint16_t(asDrawn ? d.options.width : o.width);
     const auto height = std::uint16_t(asDrawn ? d.options.height : o.height);
     if (!d.job.refined && !asDrawn)
-        rgba8 = interactiveUpscale(rgba8, d.options.width, d.options.height, o.width, o.height);
+        rgba8 = upscaleBy(rgba8, d.options.width, d.options.height, o.width, o.height, d.divisor);
     protocol::Frame frame;
     frame.header.renderMs = float(msSince(d.start));
+    if (mBudget && !d.job.refined)
+        mBudget->record(s.volume->name, d.kind->name,
+                        std::uint64_t(d.options.width) * d.options.height, frame.header.renderMs);
     // A refined frame may have its own codec (lossless at rest, JPEG while moving), at that
     // codec's default quality: codecQuality is `codec`'s.
     const bool ownCodec = d.job.refined && o.refinedCodec;
@@ -1222,7 +1238,9 @@ FrameKey keyOf(const FrameDrawing& d) {
 } // namespace
 
 std::optional<protocol::Frame> RenderService::fromCache(RenderSlot& slot, FrameDrawing& d) {
-    if (!mFrames->enabled()) return std::nullopt;
+    // Under a time budget an interactive frame's size follows the machine's speed as well as
+    // its request: neither served from the cache nor kept in it.
+    if (!mFrames->enabled() || (mBudget && !d.job.refined)) return std::nullopt;
     FrameKey key = keyOf(d);
     const std::shared_ptr<const CachedFrame> kept = mFrames->find(key);
     if (!kept) {

@@ -142,6 +142,8 @@ struct RenderServiceConfig {
     std::uint64_t maxFrameSamples = 64ull << 30;
     std::uint64_t maxUnslicedSamples = 4ull << 30;
     std::uint32_t sliceMs = 50; ///< target length of one slice of a long frame
+    /// DaemonConfig::interactiveMs: the time an interactive frame should take; 0: half size.
+    std::uint32_t interactiveMs = 0;
     /// Encoded frames kept for identical requests of any session (FrameCache.h); 0: none.
     std::uint64_t frameCacheBytes = 64ull << 20;
     /// Under MPI (issue 19): the ranks that draw the CPU and GPU raycasters' frames with this one
@@ -150,6 +152,7 @@ struct RenderServiceConfig {
 };
 
 struct FrameDrawing;
+class InteractiveBudget;
 
 class RenderService {
   public:
@@ -253,6 +256,8 @@ class RenderService {
     std::map<std::string, double, std::less<>> mCostPerMs;
     /// The same against each slice's pixels' estimated samples (sizes slices).
     std::map<std::string, double, std::less<>> mSliceCostPerMs;
+    /// The image scale of interactive frames (render thread only); null: half size.
+    std::unique_ptr<InteractiveBudget> mBudget;
     /// Shared by every session and renderer (thread-safe).
     std::unique_ptr<render::ClassificationCache> mClassifications;
     std::unique_ptr<FrameCache> mFrames; ///< shared by every session (thread-safe)

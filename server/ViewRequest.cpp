@@ -87,13 +87,21 @@ bool shadingFor(const protocol::RenderOptions& options,
 std::vector<std::uint8_t> interactiveUpscale(const std::vector<std::uint8_t>& half,
                                              std::uint32_t halfWidth, std::uint32_t halfHeight,
                                              std::uint32_t width, std::uint32_t height) {
+    return upscaleBy(half, halfWidth, halfHeight, width, height, 2);
+}
+
+std::vector<std::uint8_t> upscaleBy(const std::vector<std::uint8_t>& drawn,
+                                    std::uint32_t drawnWidth, std::uint32_t drawnHeight,
+                                    std::uint32_t width, std::uint32_t height,
+                                    std::uint32_t divisor) {
     std::vector<std::uint8_t> out(std::size_t(width) * height * 4);
+    const std::uint32_t d = std::max<std::uint32_t>(divisor, 1);
     for (std::uint32_t y = 0; y < height; ++y) {
         const std::uint8_t* row =
-            &half[std::size_t(std::min(y / 2, halfHeight - 1)) * halfWidth * 4];
+            &drawn[std::size_t(std::min(y / d, drawnHeight - 1)) * drawnWidth * 4];
         std::uint8_t* to = &out[std::size_t(y) * width * 4];
         for (std::uint32_t x = 0; x < width; ++x)
-            std::copy_n(row + std::size_t(std::min(x / 2, halfWidth - 1)) * 4, 4, to + 4 * x);
+            std::copy_n(row + std::size_t(std::min(x / d, drawnWidth - 1)) * 4, 4, to + 4 * x);
     }
     return out;
 }

@@ -92,6 +92,7 @@ rest_ms = 0
 write_queue = 16
 prefetch = false
 cache_mb = 0
+interactive_ms = 66
 )") + kVolume + "description = \"d\"\n");
     EXPECT_EQ(c.listenHost, "::1");
     EXPECT_EQ(c.listenPort, 0);
@@ -110,6 +111,7 @@ cache_mb = 0
     EXPECT_EQ(c.writeQueueFrames, 16u);
     EXPECT_FALSE(c.prefetch);
     EXPECT_EQ(c.frameCacheBytes, 0u);
+    EXPECT_EQ(c.interactiveMs, 66u);
     EXPECT_EQ(c.volumes.at(0).description, "d");
 }
 
@@ -165,6 +167,10 @@ std::vector<BadCase> badCases() {
          2},
         {"write_queue 17", "[frames]\nwrite_queue = 17\n" + v, {"frames.write_queue", "1..16"}, 2},
         {"negative cache", "[frames]\ncache_mb = -1\n" + v, {"frames.cache_mb", "outside 0.."}, 2},
+        {"interactive_ms 10001",
+         "[frames]\ninteractive_ms = 10001\n" + v,
+         {"frames.interactive_ms", "10001 is outside 0..10000"},
+         2},
         {"host_mb 0", "[budgets]\nhost_mb = 0\n" + v, {"budgets.host_mb", "outside 1.."}, 2},
         {"idle 0", "[timeouts]\nidle_ms = 0\n" + v, {"timeouts.idle_ms", "outside 1.."}, 2},
         {"long token",

@@ -1,0 +1,176 @@
+// Interactive frames on a time budget (issue 22, server/FrameBudget.h): the image scale of a
+// moving camera's frames follows the time its frames take. The controller is driven here by
+// frame times from a cost model of its own (a fixed part and a part per drawn pixel, as the
+// raycasters' frames have), so that what it decides is checked exactly, not timed.
+#include "server/FrameBudget.h"
+#include "ServerTestSupport.h"
+#include "server/ViewRequest.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <vector>
+
+namespace bc::server {
+namespace {
+
+/// A frame's ms: `fixedMs` plus `perPixelMs` per drawn pixel.
+struct Cost {
+    double fixedMs, perPixelMs;
+    double operator()(std::uint64_t pixels) const { return fixedMs + perPixelMs * double(pixels); }
+};
+
+struct Flown {
+    std::uint32_t divisor;
+    double ms;
+};
+
+/// `frames` interactive frames of (volume, renderer) at `edge`^2 under `budget`.
+std::vector<Flown> fly(InteractiveBudget& budget, const std::string& volume, Cost cost, int frames,
+                       std::uint32_t edge = 512) {
+    std::vector<Flown> out;
+    for (int i = 0; i < frames; ++i) {
+        const std::uint32_t d = budget.divisor(volume, "cpu", edge, edge);
+        const std::uint64_t pixels = std::uint64_t(InteractiveBudget::drawnEdge(edge, d)) *
+                                     InteractiveBudget::drawnEdge(edge, d);
+        const double ms = cost(pixels);
+        budget.record(volume, "cpu", pixels, ms);
+        out.push_back({d, ms});
+    }
+    return out;
+}
+
+/// The time of the frame one divisor step larger than `d` (its image larger), or -1 at 1.
+double nextLarger(Cost cost, std::uint32_t d, std::uint32_t edge = 512) {
+    std::uint32_t previous = 0;
+    for (const std::uint32_t c : InteractiveBudget::kDivisors) {
+        if (c == d) break;
+        previous = c;
+    }
+    if (previous == 0) return -1;
+    const std::uint64_t e = InteractiveBudget::drawnEdge(edge, previous);
+    return cost(e * e);
+}
+
+TEST(FrameBudget, NothingKnownDrawsHalfSizeAndACheapVolumeFullSize) {
+    InteractiveBudget budget(66);
+    EXPECT_EQ(budget.divisor("v", "cpu", 512, 512), 2u);
+    EXPECT_LT(budget.expectedMs("v", "cpu", 1), 0.0);
+    const auto frames = fly(budget, "v", {2.0, 1e-5}, 3);
+    EXPECT_EQ(frames.back().divisor, 1u);
+}
+
+TEST(FrameBudget, MeetsTheTargetWithin25PercentAfterTenFramesOnAScanFourTimesLarger) {
+    const double target = 66;
+    for (const double fixedMs : {0.0, 5.0, 15.0}) {
+        InteractiveBudget budget(target);
+        const Cost small{fixedMs, 0.6e-3};     // 512^2 full size: 157 ms + fixed
+        const Cost large{fixedMs * 4, 2.4e-3}; // four times the voxels: four times the work
+        const auto first = fly(budget, "scan", small, 10);
+        EXPECT_LE(first.back().ms, 1.25 * target) << "fixed " << fixedMs;
+        // Then the same volume name serves a scan four times larger (reopened): the first
+        // frames run late, and ten frames later the target holds again.
+        const auto second = fly(budget, "scan", large, 10);
+        EXPECT_GT(second.front().ms, target) << "the larger scan's first frame is late";
+        for (std::size_t i = 4; i < second.size(); ++i)
+            EXPECT_LE(second[i].ms, 1.25 * target) << "frame " << i << ", fixed " << fixedMs;
+        // And the image is the largest that fits: the next larger one would not.
+        const Flown last = second.back();
+        const double larger = nextLarger(large, last.divisor);
+        if (larger >= 0) {
+            EXPECT_GT(larger, target) << "divisor " << last.divisor;
+        }
+    }
+}
+
+TEST(FrameBudget, ASlowFrameIsBelievedAtOnceAFastOneByHalves) {
+    InteractiveBudget budget(50);
+    budget.record("v", "cpu", 1000, 10.0); // 0.01 ms a pixel
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 10.0);
+    budget.record("v", "cpu", 1000, 40.0); // slower: taken as it is
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 40.0);
+    budget.record("v", "cpu", 1000, 20.0); // faster: half way
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 30.0);
+    budget.record("v", "cpu", 0, 1e9); // nothing drawn: nothing learnt
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 30.0);
+}
+
+TEST(FrameBudget, VolumesAndRenderersAreKeptApart) {
+    InteractiveBudget budget(66);
+    budget.record("heavy", "cpu", 1000, 1000.0);
+    budget.record("light", "cpu", 1000, 0.001);
+    EXPECT_EQ(budget.divisor("heavy", "cpu", 512, 512), 8u);
+    EXPECT_EQ(budget.divisor("light", "cpu", 512, 512), 1u);
+    EXPECT_EQ(budget.divisor("heavy", "gpu", 512, 512), InteractiveBudget::kFirstDivisor);
+}
+
+TEST(FrameBudget, NoDrawnEdgeBelowTheMinimum) {
+    InteractiveBudget budget(1);
+    budget.record("v", "cpu", 1, 1000.0);                // hopeless: the smallest image allowed
+    EXPECT_EQ(budget.divisor("v", "cpu", 512, 512), 8u); // 64^2
+    EXPECT_EQ(budget.divisor("v", "cpu", 64, 64), 4u);   // 16^2, not 11^2
+    EXPECT_EQ(budget.divisor("v", "cpu", 600, 40), 2u);  // 300x20, not 200x14
+    EXPECT_EQ(budget.divisor("v", "cpu", 8, 8), 1u);     // smaller than the minimum asked
+    EXPECT_THROW(InteractiveBudget(0), std::invalid_argument);
+}
+
+TEST(FrameBudget, UpscaleReplicatesEachDrawnPixel) {
+    // 5x3 drawn at divisor 3 for a 13x7 request: pixel (x, y) is drawn (x / 3, y / 3), the
+    // last row and column clipped to the drawn image.
+    const std::uint32_t dw = 5, dh = 3, w = 13, h = 7;
+    std::vector<std::uint8_t> drawn(dw * dh * 4);
+    for (std::uint32_t i = 0; i < dw * dh; ++i)
+        for (int c = 0; c < 4; ++c)
+            drawn[4 * i + c] = std::uint8_t(10 * i + c);
+    const std::vector<std::uint8_t> out = upscaleBy(drawn, dw, dh, w, h, 3);
+    ASSERT_EQ(out.size(), std::size_t(w) * h * 4);
+    for (std::uint32_t y = 0; y < h; ++y)
+        for (std::uint32_t x = 0; x < w; ++x) {
+            const std::uint32_t from = std::min(y / 3, dh - 1) * dw + std::min(x / 3, dw - 1);
+            for (int c = 0; c < 4; ++c)
+                ASSERT_EQ(out[(y * w + x) * 4 + c], drawn[4 * from + c]) << x << "," << y;
+        }
+    // Divisor 2 is the half-size frames' upscale, unchanged.
+    EXPECT_EQ(upscaleBy(drawn, dw, dh, 10, 6, 2), interactiveUpscale(drawn, dw, dh, 10, 6));
+}
+
+/// Interactive frames of a session at 65x47, sent as drawn: their drawn sizes.
+std::vector<std::pair<int, int>> drawnSizes(std::uint32_t interactiveMs, int frames) {
+    const test::TempDir dir;
+    DaemonConfig c = test::generatedConfig(dir, {{"phantom", 32}});
+    c.interactiveMs = interactiveMs;
+    test::TestDaemon daemon(std::move(c));
+    client::Client client(daemon.clientConfig());
+    const auto info = client.openVolume("phantom");
+    protocol::RenderOptions o = test::smallCpuFrames(65);
+    o.height = 47;
+    o.quality = protocol::Quality::Interactive;
+    o.codec = protocol::Codec::Raw;
+    o.flags = protocol::kFlagUnscaledInteractive;
+    client.setRenderOptions(o);
+    std::vector<std::pair<int, int>> sizes;
+    for (int i = 0; i < frames; ++i) {
+        client.setCamera(test::orbitCamera(info, 10.0 * i, std::uint32_t(i + 1)));
+        client.requestFrame();
+        const auto frame = client.nextFrame();
+        EXPECT_FALSE(frame.header.refined);
+        EXPECT_FALSE(frame.header.cached);
+        sizes.emplace_back(frame.header.width, frame.header.height);
+    }
+    return sizes;
+}
+
+TEST(FrameBudget, TheDaemonDrawsInteractiveFramesAtTheScaleItsBudgetAllows) {
+    // Without a budget: half size, rounded up, every frame.
+    for (const auto& s : drawnSizes(0, 4))
+        EXPECT_EQ(s, std::make_pair(33, 24));
+    // With one that any frame of a 32^3 phantom meets: half size while nothing is known, then
+    // the requested size.
+    const auto sizes = drawnSizes(10000, 4);
+    EXPECT_EQ(sizes.front(), std::make_pair(33, 24));
+    for (std::size_t i = 1; i < sizes.size(); ++i)
+        EXPECT_EQ(sizes[i], std::make_pair(65, 47)) << "frame " << i;
+}
+
+} // namespace
+} // namespace bc::server
