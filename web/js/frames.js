@@ -52,9 +52,16 @@ export class FrameStats {
   }
 }
 
-/** Size of an interactive frame the server sends unscaled (RenderOptions flags bit 0): half of each edge, rounded up. */
-export function halfSize(width, height) {
-  return { width: Math.ceil(width / 2), height: Math.ceil(height / 2) };
+/**
+ * Divisors of the edges of an interactive frame the server sends unscaled (RenderOptions flags
+ * bit 0): 2 (half of each edge, rounded up) without a frame-time budget, any of them under one
+ * (frames.interactive_ms, server/FrameBudget.h).
+ */
+export const INTERACTIVE_DIVISORS = Object.freeze([1, 2, 3, 4, 6, 8]);
+
+/** Whether a frame of fw x fh is an interactive frame for options of width x height: each edge over one divisor, rounded up. */
+export function isInteractiveSizeOf(fw, fh, width, height) {
+  return INTERACTIVE_DIVISORS.some((d) => fw === Math.ceil(width / d) && fh === Math.ceil(height / d));
 }
 
 const MIB = 1024 * 1024;

@@ -10,7 +10,7 @@ import {
 import { Trackball } from './trackball.js';
 import { attachControls } from './controls.js';
 import { TfEditor } from './tfeditor.js';
-import { FrameStats, autoRendererOf, formatBytes, frameSize, halfSize, residencyLine, volumeLabel } from './frames.js';
+import { FrameStats, autoRendererOf, formatBytes, frameSize, isInteractiveSizeOf, residencyLine, volumeLabel } from './frames.js';
 
 const STATS_INTERVAL_MS = 3000;
 const RENDERER_NAMES = {
@@ -557,16 +557,16 @@ async function toBitmap(f) {
 
 /**
  * The canvas backing size a frame is shown at: a refined frame's own size (drawn 1:1); for an
- * interactive frame the size of the RenderOptions it answers (it may be half of it, rounded up,
- * under flags bit 0), or the canvas's size when it answers options sent before a resize.
+ * interactive frame the size of the RenderOptions it answers (under flags bit 0 it may be drawn
+ * smaller: half of each edge rounded up, or over another divisor under the server's frame-time
+ * budget), or the canvas's size when it answers options sent before a resize.
  */
 function canvasSizeFor(f) {
   const own = { width: f.width, height: f.height };
   if (f.refined) return own;
   const o = state.lastOptions;
   if (o) {
-    const half = halfSize(o.width, o.height);
-    if ((f.width === o.width && f.height === o.height) || (f.width === half.width && f.height === half.height)) {
+    if (isInteractiveSizeOf(f.width, f.height, o.width, o.height)) {
       return { width: o.width, height: o.height };
     }
   }
@@ -587,7 +587,7 @@ function draw(f, bitmap) {
     ctx.imageSmoothingEnabled = false;
     ctx.drawImage(bitmap, 0, 0);
   } else {
-    // An interactive frame drawn at half size: scaled up smoothly, not pixel-replicated.
+    // An interactive frame drawn smaller: scaled up smoothly, not pixel-replicated.
     ctx.imageSmoothingEnabled = true;
     ctx.imageSmoothingQuality = 'high';
     ctx.drawImage(bitmap, 0, 0, c.width, c.height);

@@ -1,6 +1,6 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { frameSize, formatBytes, volumeLabel, FrameStats, halfSize, residencyLine, autoRendererOf } from '../js/frames.js';
+import { frameSize, formatBytes, volumeLabel, FrameStats, isInteractiveSizeOf, residencyLine, autoRendererOf } from '../js/frames.js';
 
 test('frame size follows the canvas, capped by the configured max and 4096, aspect kept', () => {
   assert.deepEqual(frameSize(800, 600, 1024), { width: 800, height: 600 });
@@ -27,10 +27,18 @@ test('fps counts the frames of the last second; latency keeps the last measured'
   assert.equal(s.fps(5000), 0);
 });
 
-test('unscaled interactive frames are half of each edge, rounded up', () => {
-  assert.deepEqual(halfSize(960, 762), { width: 480, height: 381 });
-  assert.deepEqual(halfSize(961, 1), { width: 481, height: 1 });
-  assert.deepEqual(halfSize(1, 1), { width: 1, height: 1 });
+test('unscaled interactive frames are each edge over a divisor, rounded up', () => {
+  assert.ok(isInteractiveSizeOf(480, 381, 960, 762));
+  assert.ok(isInteractiveSizeOf(481, 1, 961, 1));
+  assert.ok(isInteractiveSizeOf(1, 1, 1, 1));
+  assert.ok(!isInteractiveSizeOf(480, 382, 960, 762));
+  // Under a frame-time budget: each edge over 1, 2, 3, 4, 6 or 8, rounded up, and nothing else.
+  assert.ok(isInteractiveSizeOf(65, 47, 65, 47));
+  assert.ok(isInteractiveSizeOf(33, 24, 65, 47));
+  assert.ok(isInteractiveSizeOf(22, 16, 65, 47));
+  assert.ok(isInteractiveSizeOf(9, 6, 65, 47));
+  assert.ok(!isInteractiveSizeOf(13, 10, 65, 47), 'divisor 5 is not one of them');
+  assert.ok(!isInteractiveSizeOf(33, 16, 65, 47), 'both edges over the same divisor');
 });
 
 test('the residency line shows the open volume only', () => {
