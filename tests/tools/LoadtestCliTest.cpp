@@ -73,6 +73,11 @@ TEST(LoadtestCli, BadOptionsAndServersOffLoopbackAreNamed) {
     const auto [pathStatus, path] = run(exe + " --paths orbit,spiral --port 1");
     EXPECT_NE(pathStatus, 0);
     EXPECT_NE(path.find("'spiral'"), std::string::npos) << path;
+    const auto [qualityStatus, quality] = run(exe + " --quality adaptive --port 1");
+    EXPECT_NE(qualityStatus, 0);
+    EXPECT_NE(quality.find("--quality: 'adaptive' is not refined or interactive"),
+              std::string::npos)
+        << quality;
     const auto [clientsStatus, clients] = run(exe + " --clients 0 --port 1");
     EXPECT_NE(clientsStatus, 0);
     EXPECT_NE(clients.find("--clients"), std::string::npos) << clients;

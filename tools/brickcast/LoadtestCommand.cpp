@@ -42,7 +42,7 @@ using Clock = std::chrono::steady_clock;
 
 struct LoadtestOptions {
     std::string host = "127.0.0.1", token, volume = "phantom", paths = "orbit,zoom,jumps,tf-sweep",
-                size = "128,128", renderer = "auto", codec = "zstd", csv;
+                size = "128,128", renderer = "auto", codec = "zstd", quality = "refined", csv;
     std::uint16_t port = 7411;
     std::uint32_t clients = 4, frames = 60, tfEvery = 10;
     double durationS = 0, timeoutS = 600, step = 1.0;
@@ -75,6 +75,12 @@ protocol::Codec codecOf(const std::string& name) {
     if (name == "jpeg") return protocol::Codec::Jpeg;
     if (name == "png") return protocol::Codec::Png;
     throw std::invalid_argument("--codec: '" + name + "' is not raw, zstd, delta, jpeg or png");
+}
+
+protocol::Quality qualityOf(const std::string& name) {
+    if (name == "refined") return protocol::Quality::Refined;
+    if (name == "interactive") return protocol::Quality::Interactive;
+    throw std::invalid_argument("--quality: '" + name + "' is not refined or interactive");
 }
 
 /// A window ramp over fractions [lo, lo + 0.25] of the value range.
@@ -232,7 +238,7 @@ void runLoadtest(const LoadtestOptions& o) {
     ro.renderer = rendererOf(o.renderer);
     ro.codec = codecOf(o.codec);
     ro.stepVoxels = float(o.step);
-    ro.quality = protocol::Quality::Refined;
+    ro.quality = qualityOf(o.quality);
 
     client::ClientConfig cc;
     cc.host = o.host;
@@ -351,6 +357,10 @@ void addLoadtestCommand(CLI::App& app) {
         ->capture_default_str();
     cmd->add_option("--codec", o->codec, "raw, zstd, delta or jpeg")->capture_default_str();
     cmd->add_option("--step", o->step, "Sample step, voxels")->capture_default_str();
+    cmd->add_option("--quality", o->quality,
+                    "refined (every frame at full quality) or interactive (every frame as a "
+                    "moving camera's: half size, or the server's frame-time budget)")
+        ->capture_default_str();
     cmd->add_option("--csv", o->csv, "Write every frame as CSV");
     cmd->callback([o] { runLoadtest(*o); });
 }
