@@ -130,7 +130,7 @@ FineOccupancy::~FineOccupancy() = default;
 void FineOccupancy::prepareType(brickstore::VoxelType type) {
     std::call_once(mTypeOnce, [&] {
         mType = type;
-        // Integer voxels: the range test per value, as prefix counts (takeOf()).
+        // Integer voxels: the range test per value, as prefix counts (takes()).
         std::int64_t first = 0, count = 0;
         switch (type) {
         case brickstore::VoxelType::U8:

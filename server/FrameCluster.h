@@ -33,7 +33,9 @@ struct ClusterOrder {
     protocol::SetCamera camera;
     protocol::SetTransferFunction tf;
     protocol::RenderOptions options;
-    bool refined = true;
+    /// The frame is drawn at options' size over this (toRenderOptions): 1 refined, more for an
+    /// interactive frame (InteractiveBudget::kDivisors).
+    std::uint32_t divisor = 1;
     render::PixelRect region; ///< the slice of the frame this order draws
 };
 

@@ -901,13 +901,10 @@ void RenderService::prepare(FrameDrawing& d) {
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
     if (d.kind->needsGl) makeContext();
     // An interactive frame: drawn smaller, by what its budget allows (half size without one).
-    d.options = toRenderOptions(o, false);
-    if (!d.job.refined) {
+    if (!d.job.refined)
         d.divisor = mBudget ? mBudget->divisor(s.volume->name, d.kind->name, o.width, o.height)
                             : InteractiveBudget::kFirstDivisor;
-        d.options.width = InteractiveBudget::drawnEdge(o.width, d.divisor);
-        d.options.height = InteractiveBudget::drawnEdge(o.height, d.divisor);
-    }
+    d.options = toRenderOptions(o, d.divisor);
     d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
     d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
@@ -1029,8 +1026,8 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     // same store).
     if (!cluster || cluster->ranks() < 2 || !d.kind->parts)
         return renderer.render(scene, d.view, options, stats);
-    ClusterOrder order{s.volume->name, d.kind->name,  *s.camera,     s.tfMessage,
-                       s.options,      d.job.refined, options.region};
+    ClusterOrder order{s.volume->name, d.kind->name, *s.camera,     s.tfMessage,
+                       s.options,      d.divisor,    options.region};
     if (order.region.whole()) order.region = {0, 0, options.width, options.height};
     render::RenderOptions whole = options;
     whole.region = order.region;

@@ -1,6 +1,7 @@
 #include "server/ViewRequest.h"
 
 #include "render/Error.h"
+#include "server/FrameBudget.h"
 
 #include <algorithm>
 #include <cmath>
@@ -18,11 +19,11 @@ render::Camera toCamera(const protocol::SetCamera& c) {
     return out;
 }
 
-render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, bool interactive) {
+render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, std::uint32_t divisor) {
     using namespace protocol;
     render::RenderOptions r;
-    r.width = interactive ? (o.width + 1u) / 2u : o.width;
-    r.height = interactive ? (o.height + 1u) / 2u : o.height;
+    r.width = InteractiveBudget::drawnEdge(o.width, std::max<std::uint32_t>(divisor, 1));
+    r.height = InteractiveBudget::drawnEdge(o.height, std::max<std::uint32_t>(divisor, 1));
     r.stepVoxels = o.stepVoxels;
     r.earlyTermination = (o.techniques & kTechEarlyTermination) != 0;
     r.ertThreshold = o.ertThreshold;

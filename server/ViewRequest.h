@@ -19,9 +19,12 @@ namespace bc::server {
 /// The renderer's camera for a protocol camera (already validated by the decoder).
 render::Camera toCamera(const protocol::SetCamera& camera);
 
-/// The renderer's options for a protocol request. Interactive frames (the camera is moving)
-/// are drawn at half the width and height, rounded up, and scaled back up by interactiveUpscale.
-render::RenderOptions toRenderOptions(const protocol::RenderOptions& options, bool interactive);
+/// The renderer's options for a protocol request, drawn at its width and height over `divisor`
+/// (rounded up; InteractiveBudget::drawnEdge): 1 for a refined frame; an interactive frame's
+/// (the camera is moving) is 2 (half size) or what the server's frame-time budget allows
+/// (server/FrameBudget.h), and the frame is scaled back up by upscaleBy.
+render::RenderOptions toRenderOptions(const protocol::RenderOptions& options,
+                                      std::uint32_t divisor);
 
 /// Presets a config added: name -> JSON text (Catalog::configPresets).
 using PresetTexts = std::map<std::string, std::string>;

@@ -8,6 +8,7 @@
 #include "render/RendererRegistry.h"
 #include "render/View.h"
 #include "server/Catalog.h"
+#include "server/FrameBudget.h"
 #include "server/Log.h"
 #include "server/ViewRequest.h"
 
@@ -91,7 +92,7 @@ std::vector<std::uint8_t> encodeOrder(const ClusterOrder& o) {
     std::vector<std::uint8_t> out;
     for (std::uint32_t v : {o.region.x, o.region.y, o.region.width, o.region.height})
         putU32(out, v);
-    out.push_back(o.refined ? 1 : 0);
+    out.push_back(std::uint8_t(o.divisor));
     putName(out, o.volume);
     putName(out, o.renderer);
     protocol::encode(o.camera, 0, out);
@@ -129,9 +130,12 @@ ClusterOrder decodeOrder(std::span<const std::uint8_t> bytes) {
     o.region.y = u32("region.y");
     o.region.width = u32("region.width");
     o.region.height = u32("region.height");
-    need(1, "refined");
-    if (bytes[at] > 1) throw std::runtime_error("cluster order: refined is not 0 or 1");
-    o.refined = bytes[at++] == 1;
+    need(1, "divisor");
+    o.divisor = bytes[at++];
+    if (std::find(std::begin(InteractiveBudget::kDivisors), std::end(InteractiveBudget::kDivisors),
+                  o.divisor) == std::end(InteractiveBudget::kDivisors))
+        throw std::runtime_error("cluster order: divisor " + std::to_string(o.divisor) +
+                                 " is not 1, 2, 3, 4, 6 or 8");
     o.volume = name("volume");
     o.renderer = name("renderer");
     protocol::Decoder decoder(protocol::kMaxClientPayloadBytes);
@@ -474,7 +478,7 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
                 tfVolume = &volume;
                 tfMessage = order.tf;
             }
-            render::RenderOptions options = toRenderOptions(order.options, !order.refined);
+            render::RenderOptions options = toRenderOptions(order.options, order.divisor);
             options.shading = shadingFor(order.options, order.tf, *tf);
             const render::View view =
                 render::View::ofDecoded(toCamera(order.camera), options.width, options.height);

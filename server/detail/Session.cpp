@@ -347,7 +347,7 @@ void Session::onSetRenderOptions(const protocol::SetRenderOptions& m, std::uint3
             return;
         }
     }
-    toRenderOptions(m.options, false).validate();
+    toRenderOptions(m.options, 1).validate();
     mOptions = m.options;
     mSlot->setOptions(mOptions);
 }

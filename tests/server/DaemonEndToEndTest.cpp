@@ -69,7 +69,7 @@ std::vector<std::uint8_t> directRender(bc::test::TestStore& t, const Received& r
                                        render::GpuSplatter& gpuSplat) {
     const auto tf =
         toTransferFunction(r.tf, render::VolumeValueStats::fromStore(t.store->info()), {});
-    render::RenderOptions o = toRenderOptions(r.options, false);
+    render::RenderOptions o = toRenderOptions(r.options, 1);
     o.shading = shadingFor(r.options, r.tf, *tf);
     o.level = r.frame.header.level;
     o.interactive = false;

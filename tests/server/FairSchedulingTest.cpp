@@ -8,6 +8,7 @@
 #include "render/RendererRegistry.h"
 #include "render/TransferFunction.h"
 #include "render/View.h"
+#include "server/FrameBudget.h"
 #include "server/ViewRequest.h"
 
 #include <algorithm>
@@ -88,7 +89,8 @@ class FairScheduling : public ::testing::Test {
 
         // The same frame in one call, as the renderer draws it for any caller.
         const auto tf = toTransferFunction(tfMessage, sStore->stats, {});
-        render::RenderOptions options = toRenderOptions(o, interactive);
+        render::RenderOptions options =
+            toRenderOptions(o, interactive ? InteractiveBudget::kFirstDivisor : 1);
         options.shading = shadingFor(o, tfMessage, *tf);
         const auto whole = render::RendererRegistry::builtin().create(name);
         render::FrameStats stats;
