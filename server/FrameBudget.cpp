@@ -1,6 +1,7 @@
 #include "server/FrameBudget.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace bc::server {
@@ -10,31 +11,53 @@ InteractiveBudget::InteractiveBudget(double targetMs) : mTargetMs(targetMs) {
 }
 
 double InteractiveBudget::expectedMs(const std::string& volume, const std::string& renderer,
-                                     std::uint64_t pixels) const {
-    const auto it = mMsPerPixel.find({volume, renderer});
-    return it == mMsPerPixel.end() ? -1.0 : it->second * double(pixels);
+                                     std::uint32_t level, std::uint64_t pixels) const {
+    // The drawn level nearest `level` (the finer one on a tie), scaled by 2 a level.
+    const auto from = mMsPerPixel.lower_bound({volume, renderer, 0});
+    double rate = -1;
+    std::uint32_t nearest = 0;
+    for (auto it = from; it != mMsPerPixel.end(); ++it) {
+        const auto& [v, r, l] = it->first;
+        if (v != volume || r != renderer) break;
+        const std::uint32_t distance = l > level ? l - level : level - l;
+        if (rate < 0 || distance < (nearest > level ? nearest - level : level - nearest)) {
+            rate = it->second;
+            nearest = l;
+        }
+    }
+    if (rate < 0) return -1;
+    return rate * std::ldexp(1.0, int(nearest) - int(level)) * double(pixels);
 }
 
-std::uint32_t InteractiveBudget::divisor(const std::string& volume, const std::string& renderer,
-                                         std::uint32_t width, std::uint32_t height) const {
-    const auto it = mMsPerPixel.find({volume, renderer});
-    if (it == mMsPerPixel.end()) return kFirstDivisor;
-    std::uint32_t chosen = 1;
-    for (const std::uint32_t d : kDivisors) {
-        // Past the smallest edge allowed, a larger divisor draws no smaller an image.
-        if (d > 1 && std::min(drawnEdge(width, d), drawnEdge(height, d)) < kMinEdge) break;
-        chosen = d;
-        const double pixels = double(drawnEdge(width, d)) * double(drawnEdge(height, d));
-        if (it->second * pixels <= mTargetMs) break;
-    }
+InteractiveChoice InteractiveBudget::choose(const std::string& volume, const std::string& renderer,
+                                            std::uint32_t width, std::uint32_t height,
+                                            const LevelRange& levels, std::uint32_t sharers) const {
+    // The levels tried: those whose bricks stay resident, or the coarsest when none does.
+    std::vector<std::uint32_t> tried;
+    for (std::uint32_t l = levels.first; l <= levels.last; ++l)
+        if (levels.fitting(l)) tried.push_back(l);
+    if (tried.empty()) tried.push_back(levels.last);
+    const double target = mTargetMs / double(std::max<std::uint32_t>(sharers, 1));
+    InteractiveChoice chosen{tried.front(), kFirstDivisor, -1};
+    if (expectedMs(volume, renderer, chosen.level, 1) < 0) return chosen;
+    for (const std::uint32_t level : tried)
+        for (const std::uint32_t d : kDivisors) {
+            // Past the smallest edge allowed, a larger divisor draws no smaller an image.
+            if (d > 1 && std::min(drawnEdge(width, d), drawnEdge(height, d)) < kMinEdge) break;
+            const std::uint64_t pixels = std::uint64_t(drawnEdge(width, d)) * drawnEdge(height, d);
+            chosen = {level, d, expectedMs(volume, renderer, level, pixels)};
+            if (chosen.expectedMs <= target) return chosen;
+        }
     return chosen;
 }
 
 void InteractiveBudget::record(const std::string& volume, const std::string& renderer,
-                               std::uint64_t pixels, double ms) {
+                               std::uint32_t level, std::uint64_t pixels, double ms,
+                               double loadMs) {
     if (pixels == 0 || !(ms >= 0)) return;
-    const double rate = ms / double(pixels);
-    auto [it, fresh] = mMsPerPixel.try_emplace({volume, renderer}, rate);
+    const double rays = std::max(ms - std::clamp(loadMs, 0.0, ms), 0.0);
+    const double rate = std::max(rays, 1e-3) / double(pixels);
+    auto [it, fresh] = mMsPerPixel.try_emplace({volume, renderer, level}, rate);
     if (!fresh) it->second = rate > it->second ? rate : 0.5 * (it->second + rate);
 }
 

@@ -1,24 +1,48 @@
 #pragma once
-// Interactive frames on a time budget (issue 22, its first step): while a camera moves, the
-// daemon draws each frame at the requested size divided by a whole number (1, 2, 3, 4, 6, 8)
-// and scales it back up, choosing the divisor so that the frame is expected to take at most
-// `[frames] interactive_ms`. The expectation comes from the frames drawn: per volume and
-// renderer, the time per drawn pixel of its latest interactive frames. Image scale is the
-// first thing given up because it costs least: on the shared scans a quarter-size frame at
-// full resolution is both faster and closer to the converged image than a full-size frame
-// of the next pyramid level (README, "Frames on a budget").
+// Interactive frames on a time budget (issue 22): while a camera moves, the daemon draws each
+// frame at a pyramid level and at the requested size divided by a whole number (1, 2, 3, 4, 6,
+// 8), scaled back up, choosing both so that the frame is expected to take at most its share of
+// `[frames] interactive_ms`.
 //
-// The model is one rate per (volume, renderer): ms a frame = rate x pixels drawn. A frame
-// that ran slower than predicted is believed at once; a faster one moves the rate half way,
-// so one fast frame does not buy a larger image that then runs late. With a fixed cost per
-// frame the rate measured at a small size overstates a larger one's, so the choice errs
-// towards the smaller image rather than oscillating. Render thread only.
+// What is given up first: image scale, then level. On the shared scans a quarter-size frame at
+// level 0 is both faster and closer to the converged image than a full-size frame of level 1
+// (README, "Frames on a budget"): a coarser level moves the surfaces the transfer function
+// picks out, a smaller image only blurs them. So the candidates are tried level by level, finest
+// first, and within a level largest image first; the first expected within the target is drawn.
+// A level is passed over when its bricks do not fit the volume's share of the host cache whole
+// (LevelRange::fits): every frame of it then reloads bricks from the store, and loading, which
+// does not shrink with the image, bounds it (the 2.36 GiB mosaic's level 0 under 1 GiB takes
+// over a second a frame at any size).
+//
+// The model: per (volume, renderer, level), the ms per drawn pixel of the rays alone (a frame's
+// drawing time less the time it waited for bricks to load, which is transient for a level that
+// fits). A frame that ran slower than predicted is believed at once; a faster one moves the rate
+// half way, so one fast frame does not buy a larger image that then runs late. A level not
+// drawn yet is expected at the nearest drawn level's rate, halved per level coarser (a ray
+// crosses half the samples) and doubled per level finer. Several sessions moving at once share
+// the target: each frame gets target / sharers. Render thread only.
 #include <cstdint>
 #include <map>
 #include <string>
-#include <utility>
+#include <tuple>
+#include <vector>
 
 namespace bc::server {
+
+/// The pyramid levels an interactive frame may be drawn at, finest `first` to coarsest `last`.
+struct LevelRange {
+    std::uint32_t first = 0, last = 0;
+    /// Per level: whether its bricks fit the volume's host cache share whole. Empty: all do.
+    std::vector<bool> fits;
+    bool fitting(std::uint32_t level) const { return level >= fits.size() || fits[level]; }
+};
+
+/// What an interactive frame is drawn at.
+struct InteractiveChoice {
+    std::uint32_t level = 0;
+    std::uint32_t divisor = 2;
+    double expectedMs = -1; ///< < 0: nothing known of the volume and renderer
+};
 
 class InteractiveBudget {
   public:
@@ -34,18 +58,23 @@ class InteractiveBudget {
 
     double targetMs() const { return mTargetMs; }
 
-    /// The divisor for the next interactive frame of `volume` drawn by `renderer` at a
-    /// requested `width` x `height`: the smallest whose frame is expected within the target,
-    /// else the largest allowed.
-    std::uint32_t divisor(const std::string& volume, const std::string& renderer,
-                          std::uint32_t width, std::uint32_t height) const;
+    /// The level and divisor of the next interactive frame of `volume` drawn by `renderer` at a
+    /// requested `width` x `height`, while `sharers` sessions (>= 1, this one included) draw
+    /// interactive frames: the first candidate (finest fitting level, then largest image)
+    /// expected within targetMs / sharers, else the coarsest fitting level's smallest image.
+    /// Nothing known of the volume and renderer: the finest fitting level at kFirstDivisor.
+    InteractiveChoice choose(const std::string& volume, const std::string& renderer,
+                             std::uint32_t width, std::uint32_t height, const LevelRange& levels,
+                             std::uint32_t sharers = 1) const;
 
-    /// An interactive frame of `volume` by `renderer`, `pixels` drawn, took `ms`.
-    void record(const std::string& volume, const std::string& renderer, std::uint64_t pixels,
-                double ms);
+    /// An interactive frame of `volume` by `renderer` at `level`, `pixels` drawn, took `ms`, of
+    /// which it waited `loadMs` for bricks to load.
+    void record(const std::string& volume, const std::string& renderer, std::uint32_t level,
+                std::uint64_t pixels, double ms, double loadMs = 0);
 
-    /// The expected ms of a frame of `pixels` (negative while nothing is known).
-    double expectedMs(const std::string& volume, const std::string& renderer,
+    /// The expected ms of a frame of `pixels` at `level` (negative while nothing is known of
+    /// the volume and renderer at any level).
+    double expectedMs(const std::string& volume, const std::string& renderer, std::uint32_t level,
                       std::uint64_t pixels) const;
 
     /// The drawn edge for a requested `edge` and `divisor`: ceil(edge / divisor).
@@ -54,8 +83,9 @@ class InteractiveBudget {
     }
 
   private:
+    using Key = std::tuple<std::string, std::string, std::uint32_t>;
     double mTargetMs;
-    std::map<std::pair<std::string, std::string>, double> mMsPerPixel;
+    std::map<Key, double> mMsPerPixel;
 };
 
 } // namespace bc::server

@@ -232,6 +232,9 @@ struct FrameDrawing {
     std::optional<FrameKey> cacheKey; ///< set when the frame cache is on and had no frame
     /// An interactive frame is drawn at the requested size over this (rounded up).
     std::uint32_t divisor = 1;
+    /// Sessions drawing interactive frames now, this one included: they share the budget.
+    std::uint32_t sharers = 1;
+    double drawMs = 0; ///< drawing its slices, not waiting for other sessions' turns
 
     /// A refined frame drawn because an adaptive session's camera came to rest.
     bool refinement() const {
@@ -258,6 +261,8 @@ struct SessionRenderers {
         std::uint64_t lastFrameBricks = 0;
     };
     std::optional<Prefetch> prefetch;
+    /// When its last interactive frame started (budget sharing, InteractiveBudget::choose).
+    std::optional<Clock::time_point> lastInteractive;
 };
 
 struct RenderService::Renderers {
@@ -876,6 +881,27 @@ void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool
     total.totalMs += slice.totalMs;
 }
 
+/// The levels an interactive frame of `volume` may be drawn at: the one asked for, or under
+/// automatic level every level, each marked by whether its bricks fit the volume's share of
+/// the host cache whole (decompressed, aprons included).
+LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions& o) {
+    const brickstore::StoreLayout& layout = volume.store->layout();
+    const auto levels = std::uint32_t(layout.levels().size());
+    if (o.level != protocol::kLevelAutomatic) {
+        const std::uint32_t l = std::min<std::uint32_t>(o.level, levels - 1);
+        return {l, l, {}};
+    }
+    const brickstore::BrickGeometry& g = layout.geometry();
+    const double edge = double(g.brickVoxels + 2 * g.apronVoxels);
+    const double brickBytes =
+        edge * edge * edge * double(brickstore::voxelBytes(volume.store->info().volume.type));
+    const double share = double(volume.cache->stats().budgetBytes);
+    LevelRange range{0, levels - 1, {}};
+    for (std::uint32_t l = 0; l < levels; ++l)
+        range.fits.push_back(double(layout.levels()[l].brickCount()) * brickBytes <= share);
+    return range;
+}
+
 std::string giga(std::uint64_t samples) {
     char text[32];
     std::snprintf(text, sizeof text, "%.3g", double(samples) / double(1ull << 30));
@@ -900,11 +926,15 @@ void RenderService::prepare(FrameDrawing& d) {
     d.kind = render::RendererRegistry::builtin().find(name);
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
     if (d.kind->needsGl) makeContext();
-    // An interactive frame: drawn smaller, by what its budget allows (half size without one).
-    if (!d.job.refined)
-        d.divisor = mBudget ? mBudget->divisor(s.volume->name, d.kind->name, o.width, o.height)
-                            : InteractiveBudget::kFirstDivisor;
+    // An interactive frame: drawn smaller, and at the level, its budget allows (half size at
+    // the level asked for without one).
+    std::optional<InteractiveChoice> budgeted;
+    if (!d.job.refined && mBudget)
+        budgeted = mBudget->choose(s.volume->name, d.kind->name, o.width, o.height,
+                                   interactiveLevels(*s.volume, o), d.sharers);
+    if (!d.job.refined) d.divisor = budgeted ? budgeted->divisor : InteractiveBudget::kFirstDivisor;
     d.options = toRenderOptions(o, d.divisor);
+    if (budgeted) d.options.level = std::int32_t(budgeted->level);
     d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
     d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
@@ -982,7 +1012,8 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     };
     if (!d.sliced) {
         d.rgba8 = render::toRgba8(drawRegion(renderer, d, d.options, d.stats));
-        calibrate(mCostPerMs, double(d.cost), msSince(start));
+        d.drawMs = msSince(start);
+        calibrate(mCostPerMs, double(d.cost), d.drawMs);
         planPrefetch(slot, d, renderer);
         return true;
     }
@@ -1003,6 +1034,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     d.sliceTargetMs = std::max(double(mConfig.sliceMs), 2.0 * loadMs);
     ++d.slices;
     d.slicesMs += msSince(start);
+    d.drawMs = d.slicesMs;
     d.nextPixel += options.region.pixels();
     {
         std::lock_guard lock(mMutex);
@@ -1029,6 +1061,9 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     ClusterOrder order{s.volume->name, d.kind->name, *s.camera,     s.tfMessage,
                        s.options,      d.divisor,    options.region};
     if (order.region.whole()) order.region = {0, 0, options.width, options.height};
+    // The level the frame-time budget chose (the workers keep no budget of their own).
+    if (order.options.level == protocol::kLevelAutomatic && options.level > 0)
+        order.options.level = std::uint8_t(options.level);
     render::RenderOptions whole = options;
     whole.region = order.region;
     ClusterFrameStats ranks;
@@ -1090,6 +1125,17 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
     if (job) {
         mine.drawing = std::make_unique<FrameDrawing>();
         mine.drawing->job = std::move(*job);
+        if (!mine.drawing->job.refined) {
+            // Sessions that started an interactive frame within the last second share the
+            // frame-time budget.
+            const auto now = Clock::now();
+            mine.lastInteractive = now;
+            std::uint32_t sharers = 0;
+            for (const auto& [key, other] : mRenderers->sessions)
+                sharers += other.lastInteractive && !other.slot.expired() &&
+                           now - *other.lastInteractive < std::chrono::seconds(1);
+            mine.drawing->sharers = std::max<std::uint32_t>(sharers, 1);
+        }
     } else if (slot.closed() || (mine.drawing->refinement() && slot.superseded())) {
         // Nobody waits for it, or it refines a view the camera has left (interactive frames
         // follow). Other frames complete: a client that keeps moving its camera while its
@@ -1164,8 +1210,9 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     protocol::Frame frame;
     frame.header.renderMs = float(msSince(d.start));
     if (mBudget && !d.job.refined)
-        mBudget->record(s.volume->name, d.kind->name,
-                        std::uint64_t(d.options.width) * d.options.height, frame.header.renderMs);
+        mBudget->record(s.volume->name, d.kind->name, stats.level,
+                        std::uint64_t(d.options.width) * d.options.height, d.drawMs,
+                        stats.uploadMs);
     // A refined frame may have its own codec (lossless at rest, JPEG while moving), at that
     // codec's default quality: codecQuality is `codec`'s.
     const bool ownCodec = d.job.refined && o.refinedCodec;

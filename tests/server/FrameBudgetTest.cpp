@@ -1,4 +1,4 @@
-// Interactive frames on a time budget (issue 22, server/FrameBudget.h): the image scale of a
+// Interactive frames on a time budget (issue 22, server/FrameBudget.h): the level and scale of a
 // moving camera's frames follows the time its frames take. The controller is driven here by
 // frame times from a cost model of its own (a fixed part and a part per drawn pixel, as the
 // raycasters' frames have), so that what it decides is checked exactly, not timed.
@@ -8,34 +8,47 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
 namespace bc::server {
 namespace {
 
-/// A frame's ms: `fixedMs` plus `perPixelMs` per drawn pixel.
+/// A frame's ms: `fixedMs` plus `perPixelMs` per drawn pixel at level 0, half that a level
+/// coarser (a ray crosses half the samples).
 struct Cost {
     double fixedMs, perPixelMs;
-    double operator()(std::uint64_t pixels) const { return fixedMs + perPixelMs * double(pixels); }
+    double operator()(std::uint64_t pixels, std::uint32_t level = 0) const {
+        return fixedMs + perPixelMs * std::ldexp(1.0, -int(level)) * double(pixels);
+    }
 };
 
 struct Flown {
-    std::uint32_t divisor;
+    std::uint32_t level, divisor;
     double ms;
 };
 
+const LevelRange kOneLevel{0, 0, {}};
+
+/// The divisor of the next frame at a single level.
+std::uint32_t divisorOf(const InteractiveBudget& budget, const std::string& volume,
+                        const std::string& renderer, std::uint32_t width, std::uint32_t height) {
+    return budget.choose(volume, renderer, width, height, kOneLevel).divisor;
+}
+
 /// `frames` interactive frames of (volume, renderer) at `edge`^2 under `budget`.
 std::vector<Flown> fly(InteractiveBudget& budget, const std::string& volume, Cost cost, int frames,
-                       std::uint32_t edge = 512) {
+                       std::uint32_t edge = 512, const LevelRange& levels = kOneLevel,
+                       std::uint32_t sharers = 1) {
     std::vector<Flown> out;
     for (int i = 0; i < frames; ++i) {
-        const std::uint32_t d = budget.divisor(volume, "cpu", edge, edge);
-        const std::uint64_t pixels = std::uint64_t(InteractiveBudget::drawnEdge(edge, d)) *
-                                     InteractiveBudget::drawnEdge(edge, d);
-        const double ms = cost(pixels);
-        budget.record(volume, "cpu", pixels, ms);
-        out.push_back({d, ms});
+        const InteractiveChoice c = budget.choose(volume, "cpu", edge, edge, levels, sharers);
+        const std::uint64_t pixels = std::uint64_t(InteractiveBudget::drawnEdge(edge, c.divisor)) *
+                                     InteractiveBudget::drawnEdge(edge, c.divisor);
+        const double ms = cost(pixels, c.level);
+        budget.record(volume, "cpu", c.level, pixels, ms);
+        out.push_back({c.level, c.divisor, ms});
     }
     return out;
 }
@@ -54,8 +67,8 @@ double nextLarger(Cost cost, std::uint32_t d, std::uint32_t edge = 512) {
 
 TEST(FrameBudget, NothingKnownDrawsHalfSizeAndACheapVolumeFullSize) {
     InteractiveBudget budget(66);
-    EXPECT_EQ(budget.divisor("v", "cpu", 512, 512), 2u);
-    EXPECT_LT(budget.expectedMs("v", "cpu", 1), 0.0);
+    EXPECT_EQ(divisorOf(budget, "v", "cpu", 512, 512), 2u);
+    EXPECT_LT(budget.expectedMs("v", "cpu", 0, 1), 0.0);
     const auto frames = fly(budget, "v", {2.0, 1e-5}, 3);
     EXPECT_EQ(frames.back().divisor, 1u);
 }
@@ -83,34 +96,100 @@ TEST(FrameBudget, MeetsTheTargetWithin25PercentAfterTenFramesOnAScanFourTimesLar
     }
 }
 
+TEST(FrameBudget, ImageScaleGoesBeforeLevelAndLevelWhenScaleIsNotEnough) {
+    const LevelRange four{0, 3, {}};
+    // 512^2 at level 0 takes 400 ms: a third of the edge (171^2, 44 ms) meets 66 ms at level 0.
+    InteractiveBudget budget(66);
+    auto frames = fly(budget, "v", {0.0, 400.0 / (512.0 * 512.0)}, 10, 512, four);
+    EXPECT_EQ(frames.back().level, 0u);
+    EXPECT_EQ(frames.back().divisor, 3u);
+    // 25 times slower: even 64^2 at level 0 (156 ms) misses; level 1 (78 ms) too; level 2's
+    // 64^2 (39 ms) meets it, and the larger images of level 2 do not.
+    InteractiveBudget slow(66);
+    frames = fly(slow, "v", {0.0, 10000.0 / (512.0 * 512.0)}, 12, 512, four);
+    for (std::size_t i = 6; i < frames.size(); ++i) {
+        EXPECT_EQ(frames[i].level, 2u) << "frame " << i;
+        EXPECT_EQ(frames[i].divisor, 8u) << "frame " << i;
+        EXPECT_LE(frames[i].ms, 66.0 * 1.25) << "frame " << i;
+    }
+}
+
+TEST(FrameBudget, ALevelWhoseBricksDoNotFitTheHostShareIsPassedOver) {
+    // Level 0 is over the volume's host cache share (every frame of it reloads bricks), level 1
+    // fits: drawn at level 1 from the first frame, however cheap its rays look.
+    InteractiveBudget budget(66);
+    const LevelRange mosaic{0, 3, {false, true, true, true}};
+    const auto frames = fly(budget, "mosaic", {0.0, 1e-6}, 4, 512, mosaic);
+    for (const Flown& f : frames)
+        EXPECT_EQ(f.level, 1u);
+    EXPECT_EQ(frames.front().divisor, InteractiveBudget::kFirstDivisor);
+    EXPECT_EQ(frames.back().divisor, 1u);
+    // When none fits, the coarsest.
+    const LevelRange none{0, 2, {false, false, false}};
+    EXPECT_EQ(budget.choose("mosaic", "cpu", 512, 512, none).level, 2u);
+    // A level the client asked for is the only one.
+    EXPECT_EQ(budget.choose("mosaic", "cpu", 512, 512, {0, 0, {}}).level, 0u);
+}
+
+TEST(FrameBudget, ALevelNotDrawnYetIsExpectedFromTheNearestDrawnOne) {
+    InteractiveBudget budget(66);
+    budget.record("v", "cpu", 1, 1000, 10.0);
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1, 1000), 10.0);
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 0, 1000), 20.0); // twice a level finer
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 3, 1000), 2.5);  // half a level coarser
+    budget.record("v", "cpu", 3, 1000, 4.0);                        // level 3 measured
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 3, 1000), 4.0);
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 4, 1000), 2.0);
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 2, 1000), 5.0); // level 1 and 3 as near: 1
+}
+
+TEST(FrameBudget, TimeWaitingForBricksIsNotTakenForTheRays) {
+    InteractiveBudget budget(66);
+    budget.record("v", "cpu", 0, 1000, 500.0, 490.0); // a cold frame: 490 ms of loading
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 0, 1000), 10.0);
+    budget.record("v", "cpu", 0, 1000, 5.0, 50.0); // load over the frame's time: clamped
+    EXPECT_NEAR(budget.expectedMs("v", "cpu", 0, 1000), 5.0, 1e-3);
+}
+
+TEST(FrameBudget, SessionsMovingAtOnceShareTheTarget) {
+    // 512^2 in 100 ms: alone, half size (25 ms) meets 66 ms and full size does not; four
+    // sessions get 16.5 ms each, which a third of the edge (11 ms) meets.
+    const Cost cost{0.0, 100.0 / (512.0 * 512.0)};
+    InteractiveBudget budget(66);
+    EXPECT_EQ(fly(budget, "v", cost, 6).back().divisor, 2u);
+    const auto shared = fly(budget, "v", cost, 6, 512, kOneLevel, 4);
+    EXPECT_EQ(shared.back().divisor, 3u);
+    EXPECT_LE(shared.back().ms, 66.0 / 4);
+}
+
 TEST(FrameBudget, ASlowFrameIsBelievedAtOnceAFastOneByHalves) {
     InteractiveBudget budget(50);
-    budget.record("v", "cpu", 1000, 10.0); // 0.01 ms a pixel
-    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 10.0);
-    budget.record("v", "cpu", 1000, 40.0); // slower: taken as it is
-    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 40.0);
-    budget.record("v", "cpu", 1000, 20.0); // faster: half way
-    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 30.0);
-    budget.record("v", "cpu", 0, 1e9); // nothing drawn: nothing learnt
-    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1000), 30.0);
+    budget.record("v", "cpu", 0, 1000, 10.0); // 0.01 ms a pixel
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 0, 1000), 10.0);
+    budget.record("v", "cpu", 0, 1000, 40.0); // slower: taken as it is
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 0, 1000), 40.0);
+    budget.record("v", "cpu", 0, 1000, 20.0); // faster: half way
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 0, 1000), 30.0);
+    budget.record("v", "cpu", 0, 0, 1e9); // nothing drawn: nothing learnt
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 0, 1000), 30.0);
 }
 
 TEST(FrameBudget, VolumesAndRenderersAreKeptApart) {
     InteractiveBudget budget(66);
-    budget.record("heavy", "cpu", 1000, 1000.0);
-    budget.record("light", "cpu", 1000, 0.001);
-    EXPECT_EQ(budget.divisor("heavy", "cpu", 512, 512), 8u);
-    EXPECT_EQ(budget.divisor("light", "cpu", 512, 512), 1u);
-    EXPECT_EQ(budget.divisor("heavy", "gpu", 512, 512), InteractiveBudget::kFirstDivisor);
+    budget.record("heavy", "cpu", 0, 1000, 1000.0);
+    budget.record("light", "cpu", 0, 1000, 0.001);
+    EXPECT_EQ(divisorOf(budget, "heavy", "cpu", 512, 512), 8u);
+    EXPECT_EQ(divisorOf(budget, "light", "cpu", 512, 512), 1u);
+    EXPECT_EQ(divisorOf(budget, "heavy", "gpu", 512, 512), InteractiveBudget::kFirstDivisor);
 }
 
 TEST(FrameBudget, NoDrawnEdgeBelowTheMinimum) {
     InteractiveBudget budget(1);
-    budget.record("v", "cpu", 1, 1000.0);                // hopeless: the smallest image allowed
-    EXPECT_EQ(budget.divisor("v", "cpu", 512, 512), 8u); // 64^2
-    EXPECT_EQ(budget.divisor("v", "cpu", 64, 64), 4u);   // 16^2, not 11^2
-    EXPECT_EQ(budget.divisor("v", "cpu", 600, 40), 2u);  // 300x20, not 200x14
-    EXPECT_EQ(budget.divisor("v", "cpu", 8, 8), 1u);     // smaller than the minimum asked
+    budget.record("v", "cpu", 0, 1, 1000.0);                // hopeless: the smallest image allowed
+    EXPECT_EQ(divisorOf(budget, "v", "cpu", 512, 512), 8u); // 64^2
+    EXPECT_EQ(divisorOf(budget, "v", "cpu", 64, 64), 4u);   // 16^2, not 11^2
+    EXPECT_EQ(divisorOf(budget, "v", "cpu", 600, 40), 2u);  // 300x20, not 200x14
+    EXPECT_EQ(divisorOf(budget, "v", "cpu", 8, 8), 1u);     // smaller than the minimum asked
     EXPECT_THROW(InteractiveBudget(0), std::invalid_argument);
 }
 
