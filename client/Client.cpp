@@ -89,6 +89,10 @@ void Client::setRenderOptions(const protocol::RenderOptions& options) {
     send(protocol::SetRenderOptions{options}, nextId());
 }
 
+void Client::setFrameBudget(const protocol::SetFrameBudget& budget) {
+    send(budget, nextId());
+}
+
 std::uint32_t Client::requestFrame(protocol::FrameMode mode) {
     const std::uint32_t id = nextId();
     send(protocol::RequestFrame{mode}, id);

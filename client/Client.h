@@ -48,6 +48,9 @@ class Client {
     void setCamera(const protocol::SetCamera& camera);
     void setTransferFunction(const protocol::SetTransferFunction& tf);
     void setRenderOptions(const protocol::RenderOptions& options);
+    /// The session's frame-time target and error bound at rest (servers with
+    /// protocol::kCapFrameBudget; older ones answer UnknownType).
+    void setFrameBudget(const protocol::SetFrameBudget& budget);
     /// Sends RequestFrame; returns its request id.
     std::uint32_t requestFrame(protocol::FrameMode mode = protocol::FrameMode::Once);
     /// The next Frame (decoded). @throw ServerError when an Error arrives first.

@@ -199,6 +199,8 @@ void check(Rules& r, const Frame& m) {
     r.intRange("height", h.height, 1, kMaxImageEdge);
     r.enumValue("codec", std::uint8_t(h.codec), std::uint8_t(Codec::Png));
     r.intRange("level", h.level, 0, kMaxLevel);
+    r.intRange("scale", h.scale, 0, 8);
+    r.intRange("estimatedPsnrDb", h.estimatedPsnrDb, 0, kMaxRestPsnrDb);
     const std::uint64_t rawBytes = std::uint64_t(h.width) * h.height * 4;
     if (r.ok() && h.codec == Codec::Raw && m.image.size() != rawBytes)
         r.fail(ErrorCode::BadPayload, "imageBytes",
@@ -221,6 +223,11 @@ void check(Rules& r, const Error& m) {
 
 void check(Rules& r, const Bye& m) {
     r.enumValue("reason", std::uint16_t(m.reason), 2);
+}
+
+void check(Rules& r, const SetFrameBudget& m) {
+    r.intRange("interactiveMs", m.interactiveMs, 0, kMaxInteractiveMs);
+    if (m.restPsnrDb != 0) r.intRange("restPsnrDb", m.restPsnrDb, kMinRestPsnrDb, kMaxRestPsnrDb);
 }
 
 void check(Rules&, const AuthOk&) {}

@@ -13,7 +13,7 @@ namespace {
 using detail::ByteWriter;
 
 // Variant alternatives are in wire order: alternative i is message type i + 1.
-static_assert(std::variant_size_v<Message> == std::size_t(MessageType::Histogram));
+static_assert(std::variant_size_v<Message> == std::size_t(MessageType::SetFrameBudget));
 static_assert(
     std::is_same_v<std::variant_alternative_t<std::size_t(MessageType::SetCamera) - 1, Message>,
                    SetCamera>);
@@ -123,8 +123,8 @@ void write(ByteWriter& w, const Frame& m) {
     w.u64(h.bytesUploaded);
     w.boolean(h.occlusionUsed);
     w.boolean(h.cached);
-    for (int i = 0; i < 2; ++i)
-        w.u8(0); // reserved
+    w.u8(h.scale);
+    w.u8(h.estimatedPsnrDb);
     w.u32(static_cast<std::uint32_t>(m.image.size()));
     w.bytes(m.image);
 }
@@ -154,6 +154,11 @@ void write(ByteWriter& w, const Histogram& m) {
     w.u16(static_cast<std::uint16_t>(m.counts.size()));
     for (std::uint64_t c : m.counts)
         w.u64(c);
+}
+
+void write(ByteWriter& w, const SetFrameBudget& m) {
+    w.u16(m.interactiveMs);
+    w.u8(m.restPsnrDb);
 }
 
 void write(ByteWriter&, const AuthOk&) {}

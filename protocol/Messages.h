@@ -129,6 +129,12 @@ struct FrameHeader {
     /// Answered from the server's frame cache: drawn before for an identical request (this or
     /// another session's); samples, bricks and bytesUploaded are then 0 (nothing was drawn).
     bool cached = false;
+    /// Drawn at width and height over this (rounded up): 1 refined; an interactive frame's
+    /// divisor; 0 from servers before 2026-12-06.
+    std::uint8_t scale = 0;
+    /// The server's estimate of the frame's PSNR against the converged image, whole dB rounded
+    /// down (<= kMaxRestPsnrDb); 0: none.
+    std::uint8_t estimatedPsnrDb = 0;
     bool operator==(const FrameHeader&) const = default;
 };
 
@@ -165,6 +171,13 @@ struct RequestHistogram {
     bool operator==(const RequestHistogram&) const = default;
 };
 
+/// The session's frame-time target and error bound at rest (PROTOCOL.md, SetFrameBudget).
+struct SetFrameBudget {
+    std::uint16_t interactiveMs = 0; ///< 0: the server's frames.interactive_ms; else 1..10000
+    std::uint8_t restPsnrDb = 0;     ///< 0: none; else kMinRestPsnrDb..kMaxRestPsnrDb
+    bool operator==(const SetFrameBudget&) const = default;
+};
+
 /// The open volume's level-0 voxels in equal bins over [valueMin, valueMax].
 struct Histogram {
     double valueMin = 0, valueMax = 0;
@@ -172,9 +185,10 @@ struct Histogram {
     bool operator==(const Histogram&) const = default;
 };
 
-using Message = std::variant<Hello, Auth, AuthOk, ListVolumes, VolumeList, OpenVolume, VolumeOpened,
-                             SetCamera, SetTransferFunction, SetRenderOptions, RequestFrame, Frame,
-                             RequestStats, Stats, Error, Bye, RequestHistogram, Histogram>;
+using Message =
+    std::variant<Hello, Auth, AuthOk, ListVolumes, VolumeList, OpenVolume, VolumeOpened, SetCamera,
+                 SetTransferFunction, SetRenderOptions, RequestFrame, Frame, RequestStats, Stats,
+                 Error, Bye, RequestHistogram, Histogram, SetFrameBudget>;
 
 inline constexpr std::size_t kRenderOptionsBytes = 24;
 inline constexpr std::size_t kFrameHeaderBytes = 60;

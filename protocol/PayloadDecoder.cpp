@@ -234,7 +234,8 @@ FrameHeader readFrameHeader(PayloadReader& r) {
     h.bytesUploaded = r.u64("bytesUploaded");
     h.occlusionUsed = r.boolean("occlusionUsed");
     h.cached = r.boolean("cached");
-    r.reserved("reserved", 2);
+    h.scale = r.u8("scale");
+    h.estimatedPsnrDb = r.u8("estimatedPsnrDb");
     return h;
 }
 
@@ -291,6 +292,13 @@ Message readRequestHistogram(PayloadReader&) {
     return RequestHistogram{};
 }
 
+Message readSetFrameBudget(PayloadReader& r) {
+    SetFrameBudget m;
+    m.interactiveMs = r.u16("interactiveMs");
+    m.restPsnrDb = r.u8("restPsnrDb");
+    return m;
+}
+
 Message readHistogram(PayloadReader& r) {
     Histogram m;
     m.valueMin = r.f64("valueMin");
@@ -327,8 +335,9 @@ constexpr PayloadKind kKinds[] = {
     {readBye, 2},
     {readRequestHistogram, 0},
     {readHistogram, {}},
+    {readSetFrameBudget, 3},
 };
-static_assert(std::size(kKinds) == std::size_t(MessageType::Histogram));
+static_assert(std::size(kKinds) == std::size_t(MessageType::SetFrameBudget));
 
 DecodeError decodeError(detail::Violation v, std::uint8_t type) {
     return DecodeError{v.code, false, type, 0, std::move(v.text)};

@@ -40,6 +40,8 @@ const char* typeName(std::uint8_t type) {
         return "RequestHistogram";
     case MessageType::Histogram:
         return "Histogram";
+    case MessageType::SetFrameBudget:
+        return "SetFrameBudget";
     }
     return "unknown";
 }

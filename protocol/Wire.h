@@ -27,6 +27,9 @@ inline constexpr std::size_t kMaxVolumes = 1024;
 inline constexpr std::size_t kMaxStats = 4096;
 inline constexpr std::size_t kMaxCodecs = 16;
 inline constexpr std::uint8_t kLevelAutomatic = 255;
+/// SetFrameBudget's limits: the interactive target's ms, the PSNR bound's dB.
+inline constexpr std::uint16_t kMaxInteractiveMs = 10000;
+inline constexpr std::uint8_t kMinRestPsnrDb = 20, kMaxRestPsnrDb = 50;
 inline constexpr std::uint8_t kMaxLevel = 15;
 
 enum class MessageType : std::uint8_t {
@@ -48,6 +51,7 @@ enum class MessageType : std::uint8_t {
     Bye = 0x10,
     RequestHistogram = 0x11,
     Histogram = 0x12,
+    SetFrameBudget = 0x13,
 };
 
 enum class ErrorCode : std::uint16_t {
@@ -76,6 +80,7 @@ enum Capability : std::uint32_t {
     kCapCpuRenderer = 1u << 1,
     kCapGpuRenderer = 1u << 2,
     kCapContinuous = 1u << 3,
+    kCapFrameBudget = 1u << 4, ///< takes SetFrameBudget (servers since 2026-12-06)
 };
 
 /// RenderOptions.flags bits.

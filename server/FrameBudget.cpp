@@ -31,13 +31,15 @@ double InteractiveBudget::expectedMs(const std::string& volume, const std::strin
 
 InteractiveChoice InteractiveBudget::choose(const std::string& volume, const std::string& renderer,
                                             std::uint32_t width, std::uint32_t height,
-                                            const LevelRange& levels, std::uint32_t sharers) const {
+                                            const LevelRange& levels, std::uint32_t sharers,
+                                            double targetMs) const {
     // The levels tried: those whose bricks stay resident, or the coarsest when none does.
     std::vector<std::uint32_t> tried;
     for (std::uint32_t l = levels.first; l <= levels.last; ++l)
         if (levels.fitting(l)) tried.push_back(l);
     if (tried.empty()) tried.push_back(levels.last);
-    const double target = mTargetMs / double(std::max<std::uint32_t>(sharers, 1));
+    const double target =
+        (targetMs > 0 ? targetMs : mTargetMs) / double(std::max<std::uint32_t>(sharers, 1));
     InteractiveChoice chosen{tried.front(), kFirstDivisor, -1};
     if (expectedMs(volume, renderer, chosen.level, 1) < 0) return chosen;
     for (const std::uint32_t level : tried)
@@ -57,8 +59,24 @@ void InteractiveBudget::record(const std::string& volume, const std::string& ren
     if (pixels == 0 || !(ms >= 0)) return;
     const double rays = std::max(ms - std::clamp(loadMs, 0.0, ms), 0.0);
     const double rate = std::max(rays, 1e-3) / double(pixels);
-    auto [it, fresh] = mMsPerPixel.try_emplace({volume, renderer, level}, rate);
-    if (!fresh) it->second = rate > it->second ? rate : 0.5 * (it->second + rate);
+    // What was expected of the level: its own rate, or the nearest drawn level's scaled.
+    const double before = expectedMs(volume, renderer, level, 1);
+    if (before <= 0) {
+        mMsPerPixel[{volume, renderer, level}] = rate;
+        return;
+    }
+    const double after = rate > before ? rate : 0.5 * (before + rate);
+    mMsPerPixel[{volume, renderer, level}] = after;
+    // What changed the level's speed (the machine's load, caches gone cold or warm) changes the
+    // other levels' too: they move by the same factor, keeping what each costs against the
+    // others. Without it, a level left after one slow frame would keep that frame's rate, and
+    // the budget would never come back to it.
+    const double factor = after / before;
+    for (auto o = mMsPerPixel.lower_bound({volume, renderer, 0});
+         o != mMsPerPixel.end() && std::get<0>(o->first) == volume &&
+         std::get<1>(o->first) == renderer;
+         ++o)
+        if (std::get<2>(o->first) != level) o->second *= factor;
 }
 
 } // namespace bc::server

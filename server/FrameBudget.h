@@ -16,11 +16,14 @@
 //
 // The model: per (volume, renderer, level), the ms per drawn pixel of the rays alone (a frame's
 // drawing time less the time it waited for bricks to load, which is transient for a level that
-// fits). A frame that ran slower than predicted is believed at once; a faster one moves the rate
-// half way, so one fast frame does not buy a larger image that then runs late. A level not
-// drawn yet is expected at the nearest drawn level's rate, halved per level coarser (a ray
-// crosses half the samples) and doubled per level finer. Several sessions moving at once share
-// the target: each frame gets target / sharers. Render thread only.
+// fits, and the octree and cell maps built for a new transfer function). A frame that ran slower
+// than predicted is believed at once; a faster one moves the rate half way, so one fast frame
+// does not buy a larger image that then runs late. Whatever changes a level's rate changes the
+// other levels' by the same factor (the load or the caches changed, not what a level costs
+// against another), so that after a slow frame the budget comes back to the levels it left. A
+// level not drawn yet is expected at the nearest drawn level's rate, halved per level coarser
+// (a ray crosses half the samples) and doubled per level finer. Several sessions moving at once
+// share the target: each frame gets target / sharers. Render thread only.
 #include <cstdint>
 #include <map>
 #include <string>
@@ -53,7 +56,8 @@ class InteractiveBudget {
     /// No drawn edge is made shorter than this (unless the request's is).
     static constexpr std::uint32_t kMinEdge = 16;
 
-    /// `targetMs` > 0: the time an interactive frame should take.
+    /// `targetMs` > 0: the time an interactive frame should take, unless choose() is told
+    /// another (a session's own target, SetFrameBudget).
     explicit InteractiveBudget(double targetMs);
 
     double targetMs() const { return mTargetMs; }
@@ -63,12 +67,14 @@ class InteractiveBudget {
     /// interactive frames: the first candidate (finest fitting level, then largest image)
     /// expected within targetMs / sharers, else the coarsest fitting level's smallest image.
     /// Nothing known of the volume and renderer: the finest fitting level at kFirstDivisor.
+    /// `targetMs` > 0 replaces targetMs() for this frame.
     InteractiveChoice choose(const std::string& volume, const std::string& renderer,
                              std::uint32_t width, std::uint32_t height, const LevelRange& levels,
-                             std::uint32_t sharers = 1) const;
+                             std::uint32_t sharers = 1, double targetMs = 0) const;
 
     /// An interactive frame of `volume` by `renderer` at `level`, `pixels` drawn, took `ms`, of
-    /// which it waited `loadMs` for bricks to load.
+    /// which `loadMs` went to loading bricks and building what a new transfer function needs
+    /// (octrees, cell maps): not to the rays.
     void record(const std::string& volume, const std::string& renderer, std::uint32_t level,
                 std::uint64_t pixels, double ms, double loadMs = 0);
 

@@ -5,6 +5,7 @@
 #include "render/BrickPool.h"
 #include "render/Classification.h"
 #include "render/EglContext.h"
+#include "render/RefinementEstimate.h"
 #include "render/RendererChoice.h"
 #include "render/RendererRegistry.h"
 #include "render/View.h"
@@ -73,6 +74,7 @@ void RenderSlot::setCamera(const protocol::SetCamera& camera) {
         markChanged();
         mState.camera = camera; // latest wins: an undrawn camera is simply replaced
         mLastCamera = Clock::now();
+        mCameraMoved = true;
         mDirty = true;
     }
     changed();
@@ -97,6 +99,20 @@ void RenderSlot::setOptions(const protocol::RenderOptions& options) {
         mState.options = options;
         mDirty = true;
         mResetDelta = true;
+    }
+    changed();
+}
+
+void RenderSlot::setFrameBudget(const protocol::SetFrameBudget& budget) {
+    std::lock_guard lock(mMutex);
+    mState.budget = budget;
+}
+
+void RenderSlot::continueRefinement(std::uint32_t pass) {
+    {
+        std::lock_guard lock(mMutex);
+        if (mClosed || mDirty || mOnce || !mContinuous) return;
+        mRefinePass = pass;
     }
     changed();
 }
@@ -141,6 +157,7 @@ void RenderSlot::changed() {
 
 void RenderSlot::markChanged() {
     if (!mDirty && !mOnce) mChangedAt = Clock::now(); // the oldest undrawn change
+    mRefinePass = 0;                                  // what it refined has changed
 }
 
 // ---- RenderSlot: the render side -----------------------------------------------------------
@@ -150,7 +167,7 @@ std::optional<Clock::time_point> RenderSlot::readyAt(std::uint32_t restMs) const
     if (mClosed || !mState.volume || !mState.camera || !mState.tf) return std::nullopt;
     // frameDone() wakes us; one frame larger than the byte limit still goes, alone
     if (mInFlight >= mQueueFrames || mBytesInFlight >= mQueueBytes) return std::nullopt;
-    if (mOnce || (mContinuous && mDirty)) return Clock::time_point::min();
+    if (mOnce || (mContinuous && (mDirty || mRefinePass > 0))) return Clock::time_point::min();
     if (mContinuous && mNeedsRefine) return mLastCamera + std::chrono::milliseconds(restMs);
     return std::nullopt;
 }
@@ -160,12 +177,23 @@ RenderSlot::Job RenderSlot::take(Clock::time_point now, std::uint32_t restMs) {
     Job job;
     job.state = mState;
     const auto quality = mState.options.quality;
-    const bool resting = now - mLastCamera >= std::chrono::milliseconds(restMs);
+    // A camera not drawn yet is a moving camera's, however long it waited for the render
+    // thread (a slow frame of this or another session): its frame is interactive, and the
+    // refined one follows rest_ms after it. Otherwise a frame that runs longer than rest_ms
+    // would make every next camera's frame a refined one.
+    const bool resting = !mCameraMoved && now - mLastCamera >= std::chrono::milliseconds(restMs);
+    mCameraMoved = false;
     job.refined = quality == protocol::Quality::Refined ||
                   (quality == protocol::Quality::Adaptive && (resting || !mContinuous));
     job.requested = mOnce;
     job.requestId = mOnce ? mOnceRequest : 0;
     job.queuedAt = mChangedAt;
+    if (mRefinePass > 0 && !mDirty && !mOnce) { // nothing changed since the pass before
+        job.refined = true;
+        job.pass = mRefinePass;
+        job.queuedAt = now;
+    }
+    mRefinePass = 0;
     mNeedsRefine = !job.refined && quality == protocol::Quality::Adaptive;
     mDirty = mOnce = false;
     ++mInFlight;
@@ -234,6 +262,10 @@ struct FrameDrawing {
     std::uint32_t divisor = 1;
     /// Sessions drawing interactive frames now, this one included: they share the budget.
     std::uint32_t sharers = 1;
+    bool budgeted = false; ///< an interactive frame whose level and scale a time budget chose
+    /// A refined frame's estimated PSNR against the converged image (render/
+    /// RefinementEstimate.h); negative: none.
+    double estimatedPsnrDb = -1;
     double drawMs = 0; ///< drawing its slices, not waiting for other sessions' turns
 
     /// A refined frame drawn because an adaptive session's camera came to rest.
@@ -263,6 +295,10 @@ struct SessionRenderers {
     std::optional<Prefetch> prefetch;
     /// When its last interactive frame started (budget sharing, InteractiveBudget::choose).
     std::optional<Clock::time_point> lastInteractive;
+    /// The last refinement pass drawn under an error bound (8-bit RGBA), which the next pass is
+    /// estimated against; empty once any other frame is drawn.
+    std::vector<std::uint8_t> lastPass;
+    std::uint32_t lastPassIndex = 0;
 };
 
 struct RenderService::Renderers {
@@ -393,9 +429,8 @@ const char* rendererName(protocol::Renderer r) {
 RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog, Log& log,
                              VolumeFailed volumeFailed)
     : mConfig(config), mCatalog(catalog), mLog(log), mVolumeFailed(std::move(volumeFailed)),
-      mBudget(config.interactiveMs > 0
-                  ? std::make_unique<InteractiveBudget>(double(config.interactiveMs))
-                  : nullptr),
+      mBudget(std::make_unique<InteractiveBudget>(
+          double(std::max<std::uint32_t>(config.interactiveMs, 1)))),
       mClassifications(std::make_unique<render::ClassificationCache>(
           render::ClassificationCacheConfig{config.classificationBudgetBytes})),
       mFrames(std::make_unique<FrameCache>(FrameCacheConfig{config.frameCacheBytes})),
@@ -928,13 +963,20 @@ void RenderService::prepare(FrameDrawing& d) {
     if (d.kind->needsGl) makeContext();
     // An interactive frame: drawn smaller, and at the level, its budget allows (half size at
     // the level asked for without one).
+    // The session's target (SetFrameBudget), else the server's (frames.interactive_ms).
     std::optional<InteractiveChoice> budgeted;
-    if (!d.job.refined && mBudget)
+    const double targetMs =
+        s.budget.interactiveMs > 0 ? double(s.budget.interactiveMs) : double(mConfig.interactiveMs);
+    if (!d.job.refined && targetMs > 0)
         budgeted = mBudget->choose(s.volume->name, d.kind->name, o.width, o.height,
-                                   interactiveLevels(*s.volume, o), d.sharers);
+                                   interactiveLevels(*s.volume, o), d.sharers, targetMs);
+    d.budgeted = budgeted.has_value();
     if (!d.job.refined) d.divisor = budgeted ? budgeted->divisor : InteractiveBudget::kFirstDivisor;
     d.options = toRenderOptions(o, d.divisor);
     if (budgeted) d.options.level = std::int32_t(budgeted->level);
+    // A refinement pass at rest under an error bound: the session's step over 2^pass.
+    if (d.job.pass > 0)
+        d.options.stepVoxels = float(render::refinementStep(d.options.stepVoxels, d.job.pass));
     d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
     d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
@@ -1151,6 +1193,7 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
     const std::string volume = d.job.state.volume->name;
     const std::uint32_t requestId = d.job.requestId;
     std::vector<std::uint8_t> bytes;
+    std::uint32_t nextPass = 0; ///< > 0: the refinement pass to draw after this frame
     try {
         std::optional<protocol::Frame> cached;
         if (job) {
@@ -1158,6 +1201,20 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
             cached = fromCache(slot, d);
         }
         if (!cached && !drawSlice(slotPtr, d)) return; // more slices: the other sessions' turn
+        // At rest under an error bound: each pass after the first is estimated against the
+        // one before, and another follows at half the step until the estimate meets the bound.
+        const double boundDb = d.job.state.budget.restPsnrDb;
+        if (!cached && d.refinement() && boundDb > 0) {
+            if (d.job.pass > 0 && mine.lastPassIndex + 1 == d.job.pass &&
+                mine.lastPass.size() == d.rgba8.size())
+                d.estimatedPsnrDb = render::estimatedPsnrDb(d.rgba8, mine.lastPass);
+            mine.lastPass = d.rgba8;
+            mine.lastPassIndex = d.job.pass;
+            if (render::refineFurther(d.estimatedPsnrDb, boundDb, d.options.stepVoxels))
+                nextPass = d.job.pass + 1;
+        } else {
+            mine.lastPass.clear();
+        }
         FrameRecord rec;
         const protocol::Frame frame = cached ? std::move(*cached) : finish(slot, d, rec);
         protocol::encode(frame, requestId, bytes);
@@ -1192,6 +1249,7 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
         deliver(std::move(bytes));
     else
         slot.frameDone(bytes.size());
+    if (nextPass > 0) slot.continueRefinement(nextPass);
 }
 
 protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRecord& rec) {
@@ -1209,10 +1267,10 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
         rgba8 = upscaleBy(rgba8, d.options.width, d.options.height, o.width, o.height, d.divisor);
     protocol::Frame frame;
     frame.header.renderMs = float(msSince(d.start));
-    if (mBudget && !d.job.refined)
+    if (d.budgeted)
         mBudget->record(s.volume->name, d.kind->name, stats.level,
                         std::uint64_t(d.options.width) * d.options.height, d.drawMs,
-                        stats.uploadMs);
+                        stats.uploadMs + stats.octreeRebuildMs + stats.cellBuildMs);
     // A refined frame may have its own codec (lossless at rest, JPEG while moving), at that
     // codec's default quality: codecQuality is `codec`'s.
     const bool ownCodec = d.job.refined && o.refinedCodec;
@@ -1235,6 +1293,10 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     h.bricksSkipped = std::uint32_t(stats.bricksSkipped);
     h.bytesUploaded = stats.bytesUploaded;
     h.occlusionUsed = stats.occlusionUsed;
+    h.scale = std::uint8_t(d.divisor);
+    if (d.estimatedPsnrDb >= 0)
+        h.estimatedPsnrDb = std::uint8_t(
+            std::clamp(std::floor(d.estimatedPsnrDb), 0.0, double(protocol::kMaxRestPsnrDb)));
     // A frame drawn at a coarser level than asked for (level 0 over the GPU pool's share,
     // which changes with the sessions) depends on more than its key: not kept.
     if (d.cacheKey && stats.level == std::uint32_t(d.options.level)) {
@@ -1284,7 +1346,10 @@ FrameKey keyOf(const FrameDrawing& d) {
 std::optional<protocol::Frame> RenderService::fromCache(RenderSlot& slot, FrameDrawing& d) {
     // Under a time budget an interactive frame's size follows the machine's speed as well as
     // its request: neither served from the cache nor kept in it.
-    if (!mFrames->enabled() || (mBudget && !d.job.refined)) return std::nullopt;
+    // Nor is a refined frame under an error bound: its passes are estimated from each other's
+    // pixels, and passes after the first have a step of their own.
+    if (!mFrames->enabled() || d.budgeted || (d.job.refined && d.job.state.budget.restPsnrDb > 0))
+        return std::nullopt;
     FrameKey key = keyOf(d);
     const std::shared_ptr<const CachedFrame> kept = mFrames->find(key);
     if (!kept) {

@@ -76,6 +76,9 @@ class RenderSlot {
                              const protocol::SetTransferFunction& message);
     /// New options; the next delta frame is a keyframe (how a client asks for one).
     void setOptions(const protocol::RenderOptions& options);
+    /// The session's frame-time target and error bound at rest; from the next frame on (it
+    /// draws nothing by itself).
+    void setFrameBudget(const protocol::SetFrameBudget& budget);
     void request(protocol::FrameMode mode, std::uint32_t requestId);
     /// A frame this slot delivered (`bytes` long) has been written or dropped: room for the next.
     void frameDone(std::uint64_t bytes);
@@ -91,6 +94,7 @@ class RenderSlot {
         std::shared_ptr<const render::TransferFunction> tf;
         protocol::SetTransferFunction tfMessage;
         protocol::RenderOptions options;
+        protocol::SetFrameBudget budget;
     };
     /// A frame to draw: the state and whether it is the refined one.
     struct Job {
@@ -99,6 +103,9 @@ class RenderSlot {
         bool requested = false; ///< a RequestFrame(Once): owed an answer, never superseded
         std::uint32_t requestId = 0;
         Clock::time_point queuedAt{}; ///< the oldest change this frame answers
+        /// Refinement pass at rest under an error bound: 0 the first refined frame, k drawn at
+        /// the session's step over 2^k (render/RefinementEstimate.h).
+        std::uint32_t pass = 0;
     };
     /// When the slot can next be drawn (nullopt: not until something changes).
     std::optional<Clock::time_point> readyAt(std::uint32_t restMs) const;
@@ -109,6 +116,9 @@ class RenderSlot {
     bool closed() const;
     /// `bytes` are on their way to the session (render thread, before delivering).
     void delivering(std::uint64_t bytes);
+    /// Refinement pass `pass` is to be drawn next, unless anything has changed since the pass
+    /// before it was taken (render thread, after delivering that pass).
+    void continueRefinement(std::uint32_t pass);
     void changed();
     void markChanged(); ///< with mMutex held
 
@@ -120,7 +130,9 @@ class RenderSlot {
     State mState;
     bool mClosed = false, mContinuous = false, mDirty = false, mNeedsRefine = false;
     bool mOnce = false, mResetDelta = false;
+    bool mCameraMoved = false; ///< a SetCamera since the last frame was taken
     std::uint32_t mOnceRequest = 0, mInFlight = 0;
+    std::uint32_t mRefinePass = 0;    ///< > 0: that refinement pass is due (continueRefinement)
     std::uint64_t mBytesInFlight = 0; ///< delivered, not yet written
     Clock::time_point mLastCamera{}, mChangedAt{};
     // render thread only

@@ -224,6 +224,8 @@ void Session::handle(protocol::Message& message, std::uint32_t request) {
                     onRequestFrame(m, request);
                 } else if constexpr (std::is_same_v<M, protocol::RequestStats>) {
                     onRequestStats(request);
+                } else if constexpr (std::is_same_v<M, protocol::SetFrameBudget>) {
+                    mSlot->setFrameBudget(m); // the decoder checked its ranges
                 } else if constexpr (std::is_same_v<M, protocol::RequestHistogram>) {
                     onRequestHistogram(request);
                 } else if constexpr (std::is_same_v<M, protocol::Bye>) {

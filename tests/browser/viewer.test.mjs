@@ -313,6 +313,30 @@ test('the page lists volumes, opens one and shows what the daemon renders (PNG e
   });
 });
 
+test('an error bound at rest brings refined passes until the estimate reaches it, and the overlay shows it', { timeout: 60000 }, async () => {
+  await withDaemon({}, async ({ open }) => {
+    const v = await open();
+    const { page } = v;
+    await waitReady(page);
+    await chooseVolume(page, 'phantom');
+    await settleRefined(page);
+    assert.equal(await page.evaluate(() => document.getElementById('rest-psnr').disabled), false,
+      'the error-bound control is disabled on a server that takes SetFrameBudget');
+    const sent = await page.evaluate(() => window.brickcast.setFrameBudget({ restPsnrDb: 45 }));
+    assert.deepEqual(sent, { interactiveMs: 0, restPsnrDb: 45 });
+    const id = await fence(page); // a new camera: its refinement passes follow at rest
+    await page.waitForFunction((cid) => {
+      const f = window.brickcast.lastFrame;
+      return f && f.cameraId === cid && f.refined && f.estimatedPsnrDb >= 45;
+    }, id, { timeout: FRAME_TIMEOUT });
+    const f = await page.evaluate(() => window.brickcast.lastFrame);
+    assert.equal(f.scale, 1, 'a refined pass is drawn at full size');
+    const overlay = await page.textContent('#overlay');
+    assert.match(overlay, new RegExp(`PSNR ≈ ${f.estimatedPsnrDb} dB`), `the overlay does not show the estimate: ${overlay}`);
+    await assertHealthy(v);
+  });
+});
+
 test('a mouse drag on the canvas orbits the camera and a frame of the new camera arrives', { timeout: 60000 }, async () => {
   await withDaemon({}, async ({ open }) => {
     const v = await open();

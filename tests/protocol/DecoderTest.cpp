@@ -2,6 +2,7 @@
 // feeds, several messages per feed, non-fatal errors that skip one message, fatal errors that
 // stick, bounded buffering.
 #include "protocol/Decoder.h"
+#include "protocol/Error.h"
 #include "protocol/Messages.h"
 
 #include <gtest/gtest.h>
@@ -537,9 +538,29 @@ TEST(DecoderRejects, ReservedBytesThatAreNotZero) {
                    "SetRenderOptions.flags");
     expectRejected(patched<std::uint8_t>(SetRenderOptions{}, 23, 1), ErrorCode::OutOfRange,
                    "SetRenderOptions.flags");
-    for (std::size_t at : {54, 55})
-        expectRejected(patched<std::uint8_t>(sampleFrame(), at, 1), ErrorCode::OutOfRange,
-                       "Frame.reserved");
+}
+
+TEST(DecoderRejects, FrameScaleAndEstimateOutOfRange) {
+    // The two bytes were reserved until 2026-12-06: 0 stays valid (older servers).
+    for (const std::uint8_t scale : {0, 1, 8})
+        expectAccepted(patched<std::uint8_t>(sampleFrame(), 54, scale));
+    expectRejected(patched<std::uint8_t>(sampleFrame(), 54, 9), ErrorCode::OutOfRange,
+                   "Frame.scale");
+    for (const std::uint8_t db : {0, 20, 50})
+        expectAccepted(patched<std::uint8_t>(sampleFrame(), 55, db));
+    expectRejected(patched<std::uint8_t>(sampleFrame(), 55, 51), ErrorCode::OutOfRange,
+                   "Frame.estimatedPsnrDb");
+}
+
+TEST(DecoderRejects, FrameBudgetsOutOfRange) {
+    for (const auto& [ms, db] : {std::pair<int, int>{0, 0}, {1, 20}, {10000, 50}, {66, 40}})
+        expectAccepted(encode(SetFrameBudget{std::uint16_t(ms), std::uint8_t(db)}, 9));
+    expectRejected(patched<std::uint16_t>(SetFrameBudget{}, 0, 10001), ErrorCode::OutOfRange,
+                   "SetFrameBudget.interactiveMs");
+    for (const std::uint8_t db : {1, 19, 51, 255})
+        expectRejected(patched<std::uint8_t>(SetFrameBudget{}, 2, db), ErrorCode::OutOfRange,
+                       "SetFrameBudget.restPsnrDb");
+    EXPECT_THROW(encode(SetFrameBudget{0, 60}), ProtocolError);
 }
 
 // ---- SetCamera ----------------------------------------------------------------------------

@@ -281,6 +281,8 @@ TEST(Messages, FrameGoldenBytesRoundTrip) {
     h.bytesUploaded = 65536;
     h.occlusionUsed = true;
     h.cached = true;
+    h.scale = 3;
+    h.estimatedPsnrDb = 41;
     m.image = {0xFF, 0x00, 0x00, 0xFF, 0x00, 0x80, 0x00, 0x80};
     const Bytes golden = {
         BC_HEADER(0x0C, 68, 7),
@@ -301,7 +303,7 @@ TEST(Messages, FrameGoldenBytesRoundTrip) {
         0x00, 0x00, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00, // bytesUploaded 65536
         0x01,                                           // occlusionUsed
         0x01,                                           // cached
-        0x00, 0x00,                                     // reserved
+        0x03, 0x29,                                     // scale 3, estimatedPsnrDb 41
         0x08, 0x00, 0x00, 0x00,                         // imageBytes 8
         0xFF, 0x00, 0x00, 0xFF, 0x00, 0x80, 0x00, 0x80, // 2 x 1 RGBA pixels
     };
@@ -371,6 +373,11 @@ TEST(Messages, HistogramGoldenBytesRoundTrip) {
     expectGolden(m, 4, golden);
 }
 
+TEST(Messages, SetFrameBudgetGoldenBytesRoundTrip) {
+    expectGolden(SetFrameBudget{66, 40}, 4,
+                 Bytes{BC_HEADER(0x13, 3, 4), 0x42, 0x00 /* interactiveMs 66 */, 0x28 /* 40 dB */});
+}
+
 TEST(Messages, ByeGoldenBytesRoundTrip) {
     expectGolden(Bye{ByeReason::IdleTimeout}, 0,
                  Bytes{BC_HEADER(0x10, 2, 0), 0x02, 0x00 /* reason: idle timeout */});
@@ -400,6 +407,8 @@ TEST(Messages, TypeOfNamesEveryAlternative) {
     EXPECT_EQ(typeOf(Frame{}), MessageType::Frame);
     EXPECT_EQ(typeOf(Bye{}), MessageType::Bye);
     EXPECT_EQ(typeOf(Histogram{}), MessageType::Histogram);
+    EXPECT_EQ(typeOf(SetFrameBudget{}), MessageType::SetFrameBudget);
+    EXPECT_STREQ(typeName(0x13), "SetFrameBudget");
     EXPECT_STREQ(typeName(0x11), "RequestHistogram");
     EXPECT_STREQ(typeName(0x0A), "SetRenderOptions");
     EXPECT_STREQ(typeName(0x42), "unknown");

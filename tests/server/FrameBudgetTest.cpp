@@ -8,8 +8,10 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <thread>
 #include <vector>
 
 namespace bc::server {
@@ -137,10 +139,37 @@ TEST(FrameBudget, ALevelNotDrawnYetIsExpectedFromTheNearestDrawnOne) {
     EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1, 1000), 10.0);
     EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 0, 1000), 20.0); // twice a level finer
     EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 3, 1000), 2.5);  // half a level coarser
-    budget.record("v", "cpu", 3, 1000, 4.0);                        // level 3 measured
+    // Level 3 measured slower than expected (4 ms, not 2.5): believed at once, and level 1
+    // moves by the same factor, 1.6.
+    budget.record("v", "cpu", 3, 1000, 4.0);
     EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 3, 1000), 4.0);
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 1, 1000), 16.0);
     EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 4, 1000), 2.0);
-    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 2, 1000), 5.0); // level 1 and 3 as near: 1
+    EXPECT_DOUBLE_EQ(budget.expectedMs("v", "cpu", 2, 1000), 8.0); // level 1 and 3 as near: 1
+    // Faster than expected: half way, and the others by the same factor (3 -> 2 ms: 0.5).
+    budget.record("v", "cpu", 4, 1000, 0.0);
+    EXPECT_NEAR(budget.expectedMs("v", "cpu", 4, 1000), 1.0, 1e-2);
+    EXPECT_NEAR(budget.expectedMs("v", "cpu", 3, 1000), 2.0, 1e-2);
+    EXPECT_NEAR(budget.expectedMs("v", "cpu", 1, 1000), 8.0, 1e-2);
+}
+
+TEST(FrameBudget, AfterASlowFrameTheBudgetComesBackToTheLevelItLeft) {
+    // 512^2 at level 0 in 100 ms: half size meets 66 ms. One frame runs 5 s (caches gone cold,
+    // the machine busy) and the budget drops to coarser levels; their fast frames bring every
+    // level's rate down again, and within eight frames it is back at level 0, half size.
+    const LevelRange four{0, 3, {}};
+    const Cost cost{0.0, 100.0 / (512.0 * 512.0)};
+    InteractiveBudget budget(66);
+    auto frames = fly(budget, "v", cost, 6, 512, four);
+    ASSERT_EQ(frames.back().level, 0u);
+    ASSERT_EQ(frames.back().divisor, 2u);
+    const InteractiveChoice c = budget.choose("v", "cpu", 512, 512, four);
+    const std::uint64_t e = InteractiveBudget::drawnEdge(512, c.divisor);
+    budget.record("v", "cpu", c.level, e * e, 5000.0);
+    EXPECT_GT(budget.choose("v", "cpu", 512, 512, four).level, 0u) << "the slow frame is believed";
+    frames = fly(budget, "v", cost, 8, 512, four);
+    EXPECT_EQ(frames.back().level, 0u);
+    EXPECT_EQ(frames.back().divisor, 2u);
 }
 
 TEST(FrameBudget, TimeWaitingForBricksIsNotTakenForTheRays) {
@@ -213,14 +242,17 @@ TEST(FrameBudget, UpscaleReplicatesEachDrawnPixel) {
     EXPECT_EQ(upscaleBy(drawn, dw, dh, 10, 6, 2), interactiveUpscale(drawn, dw, dh, 10, 6));
 }
 
-/// Interactive frames of a session at 65x47, sent as drawn: their drawn sizes.
-std::vector<std::pair<int, int>> drawnSizes(std::uint32_t interactiveMs, int frames) {
+/// Interactive frames of a session at 65x47, sent as drawn: their drawn sizes, under the
+/// server's `interactiveMs` and the session's own `sessionMs` (0: none sent).
+std::vector<std::pair<int, int>> drawnSizes(std::uint32_t interactiveMs, int frames,
+                                            std::uint16_t sessionMs = 0) {
     const test::TempDir dir;
     DaemonConfig c = test::generatedConfig(dir, {{"phantom", 32}});
     c.interactiveMs = interactiveMs;
     test::TestDaemon daemon(std::move(c));
     client::Client client(daemon.clientConfig());
     const auto info = client.openVolume("phantom");
+    if (sessionMs > 0) client.setFrameBudget({sessionMs, 0});
     protocol::RenderOptions o = test::smallCpuFrames(65);
     o.height = 47;
     o.quality = protocol::Quality::Interactive;
@@ -249,6 +281,91 @@ TEST(FrameBudget, TheDaemonDrawsInteractiveFramesAtTheScaleItsBudgetAllows) {
     EXPECT_EQ(sizes.front(), std::make_pair(33, 24));
     for (std::size_t i = 1; i < sizes.size(); ++i)
         EXPECT_EQ(sizes[i], std::make_pair(65, 47)) << "frame " << i;
+    // A session's own target (SetFrameBudget) where the server has none.
+    const auto own = drawnSizes(0, 4, 10000);
+    EXPECT_EQ(own.front(), std::make_pair(33, 24));
+    for (std::size_t i = 1; i < own.size(); ++i)
+        EXPECT_EQ(own[i], std::make_pair(65, 47)) << "frame " << i;
+}
+
+double counter(const std::vector<std::pair<std::string, double>>& stats, const std::string& name) {
+    for (const auto& [n, v] : stats)
+        if (n == name) return v;
+    return -1;
+}
+
+/// A continuous adaptive session's frames after one camera, until `last` says stop (at most
+/// `most` frames).
+template <typename Last>
+std::vector<client::ReceivedFrame> framesAtRest(client::Client& c, const protocol::VolumeInfo& v,
+                                                Last last, std::size_t most = 12) {
+    c.requestFrame(protocol::FrameMode::ContinuousOn);
+    c.setCamera(test::orbitCamera(v, 30, 1));
+    std::vector<client::ReceivedFrame> frames;
+    while (frames.size() < most) {
+        frames.push_back(c.nextFrame());
+        if (last(frames.back())) break;
+    }
+    return frames;
+}
+
+TEST(FrameBudget, AtRestTheDaemonRefinesUntilTheEstimateMeetsTheBound) {
+    const test::TempDir dir;
+    test::TestDaemon daemon(test::generatedConfig(dir, {{"phantom", 48}}));
+    client::Client c(daemon.clientConfig());
+    EXPECT_TRUE(c.server().capabilities & protocol::kCapFrameBudget);
+    const auto v = c.openVolume("phantom");
+    protocol::RenderOptions o = test::smallCpuFrames(64);
+    o.quality = protocol::Quality::Adaptive;
+    c.setRenderOptions(o);
+    c.setFrameBudget({0, 45});
+    const auto frames = framesAtRest(c, v, [](const client::ReceivedFrame& f) {
+        return f.header.refined && f.header.estimatedPsnrDb >= 45;
+    });
+    std::vector<client::ReceivedFrame> refined;
+    for (const auto& f : frames)
+        if (f.header.refined) refined.push_back(f);
+    ASSERT_GE(refined.size(), 2u);
+    EXPECT_EQ(refined.front().header.estimatedPsnrDb, 0) << "the first pass has no estimate";
+    for (std::size_t i = 1; i < refined.size(); ++i) {
+        EXPECT_GT(refined[i].header.estimatedPsnrDb, 0) << "pass " << i;
+        EXPECT_EQ(refined[i].header.cameraId, 1u);
+        EXPECT_EQ(refined[i].header.scale, 1);
+        EXPECT_GT(refined[i].header.samples, refined[i - 1].header.samples) << "a finer step";
+    }
+    ASSERT_GE(refined.back().header.estimatedPsnrDb, 45);
+    // The pass that met the bound was the last: no refined frame follows it.
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    EXPECT_EQ(counter(c.stats(), "frames_refined_total"), double(refined.size()));
+}
+
+TEST(FrameBudget, WithoutABoundOneRefinedFrameAndACameraThatMovesStopsTheRefinement) {
+    const test::TempDir dir;
+    test::TestDaemon daemon(test::generatedConfig(dir, {{"phantom", 48}}));
+    client::Client c(daemon.clientConfig());
+    const auto v = c.openVolume("phantom");
+    protocol::RenderOptions o = test::smallCpuFrames(64);
+    o.quality = protocol::Quality::Adaptive;
+    c.setRenderOptions(o);
+    framesAtRest(c, v, [](const client::ReceivedFrame& f) { return f.header.refined; });
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    EXPECT_EQ(counter(c.stats(), "frames_refined_total"), 1.0);
+    // Under the highest bound, the camera moves as soon as the first estimate arrives: the
+    // passes stop there, and the new view is drawn.
+    c.setFrameBudget({0, 50});
+    c.setCamera(test::orbitCamera(v, 60, 2));
+    client::ReceivedFrame f = c.nextFrame();
+    while (!(f.header.refined && f.header.estimatedPsnrDb > 0 && f.header.cameraId == 2))
+        f = c.nextFrame();
+    c.setCamera(test::orbitCamera(v, 90, 3));
+    do
+        f = c.nextFrame();
+    while (f.header.cameraId != 3);
+    // From camera 3's first frame on, no pass of camera 2 comes: its refinement stopped.
+    for (int i = 0; i < 12 && !(f.header.refined && f.header.estimatedPsnrDb >= 50); ++i) {
+        f = c.nextFrame();
+        EXPECT_EQ(f.header.cameraId, 3u);
+    }
 }
 
 } // namespace

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <vector>
 
 namespace bc::server::test {
 namespace {
@@ -40,7 +41,7 @@ TEST(LoadtestCli, FliesEveryPathAndReportsLatencyAndTheCacheTiers) {
     std::getline(f, line);
     EXPECT_EQ(line,
               "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_drawn,"
-              "cached");
+              "cached,refined,level,scale");
     std::set<std::string> paths;
     int frames = 0;
     while (std::getline(f, line)) {
@@ -65,6 +66,39 @@ TEST(LoadtestCli, ClientsSharingAPathAskForViewsOfTheirOwn) {
     EXPECT_NE(out.find("Server: 9 frames, 0 from the frame cache"), std::string::npos) << out;
 }
 
+// Frames on a budget (issue 22): clients fly in continuous mode under a frame-time target, then
+// rest until a refined pass's estimate reaches the bound, and each such pass is measured
+// against the true image the server draws.
+TEST(LoadtestCli, AdaptiveClientsRestUntilTheBoundAndThePassIsMeasured) {
+    TempDir dir;
+    TestDaemon d(generatedConfig(dir, {{"lt", 48}}));
+    const auto [status, out] =
+        run(std::string(BC_BRICKCAST_EXE) + " loadtest --port " + std::to_string(d.port) +
+            " --volume lt --paths orbit --clients 2 --frames 6 --warmup 1 --size 48,48 "
+            "--quality adaptive --interactive-ms 66 --rest-psnr 40 --truth-step 0.125");
+    ASSERT_EQ(status, 0) << out;
+    EXPECT_NE(out.find("| orbit | 2 | 10 |"), std::string::npos) << out;
+    const auto table = out.find("### Moving, then at rest under a 40 dB bound");
+    ASSERT_NE(table, std::string::npos) << out;
+    std::istringstream rows(out.substr(table));
+    std::string line;
+    int clients = 0;
+    while (std::getline(rows, line)) {
+        if (!line.starts_with("| 0 |") && !line.starts_with("| 1 |")) continue;
+        ++clients;
+        std::vector<std::string> cells;
+        std::istringstream cellsIn(line.substr(1));
+        for (std::string cell; std::getline(cellsIn, cell, '|');)
+            cells.push_back(cell);
+        ASSERT_GE(cells.size(), 8u) << line;
+        EXPECT_NE(cells[5].find_first_of("0123456789"), std::string::npos)
+            << "the bound was not reached: " << line;
+        EXPECT_GE(std::stod(cells[6]), 40.0) << "estimate: " << line;
+        EXPECT_GE(std::stod(cells[7]), 40.0) << "measured: " << line;
+    }
+    EXPECT_EQ(clients, 2) << out;
+}
+
 TEST(LoadtestCli, BadOptionsAndServersOffLoopbackAreNamed) {
     const std::string exe = std::string(BC_BRICKCAST_EXE) + " loadtest";
     const auto [hostStatus, host] = run(exe + " --host 10.1.2.3 --port 1");
@@ -73,11 +107,22 @@ TEST(LoadtestCli, BadOptionsAndServersOffLoopbackAreNamed) {
     const auto [pathStatus, path] = run(exe + " --paths orbit,spiral --port 1");
     EXPECT_NE(pathStatus, 0);
     EXPECT_NE(path.find("'spiral'"), std::string::npos) << path;
-    const auto [qualityStatus, quality] = run(exe + " --quality adaptive --port 1");
+    const auto [qualityStatus, quality] = run(exe + " --quality steady --port 1");
     EXPECT_NE(qualityStatus, 0);
-    EXPECT_NE(quality.find("--quality: 'adaptive' is not refined or interactive"),
+    EXPECT_NE(quality.find("--quality: 'steady' is not refined, interactive or adaptive"),
               std::string::npos)
         << quality;
+    for (const auto& [options, message] : std::vector<std::pair<std::string, std::string>>{
+             {"--quality adaptive --rest-psnr 60", "--rest-psnr: 0 (none) or 20..50 dB"},
+             {"--quality adaptive --rest-psnr 19", "--rest-psnr: 0 (none) or 20..50 dB"},
+             {"--rest-psnr 40", "--rest-psnr: needs --quality adaptive"},
+             {"--interactive-ms 10001", "--interactive-ms: 0..10000"},
+             {"--frames 5 --warmup 5", "--warmup: fewer than --frames"},
+             {"--quality adaptive --rest-psnr 40 --truth-step 0", "--truth-step: 0.01..1"}}) {
+        const auto [status, text] = run(exe + " " + options + " --port 1");
+        EXPECT_NE(status, 0) << options;
+        EXPECT_NE(text.find(message), std::string::npos) << options << ": " << text;
+    }
     const auto [clientsStatus, clients] = run(exe + " --clients 0 --port 1");
     EXPECT_NE(clientsStatus, 0);
     EXPECT_NE(clients.find("--clients"), std::string::npos) << clients;

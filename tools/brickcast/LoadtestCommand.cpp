@@ -15,9 +15,18 @@
 // change: host and GPU hit rates, bytes read from disk and uploaded, re-fetches, and bytes
 // uploaded over bytes of distinct bricks (uploads that were not re-fetches). Per path and
 // overall: frames, frames/s, latency p50/p99, bytes a frame. --csv writes every frame.
+//
+// Frames on a budget (issue 22): --quality adaptive flies in continuous mode, each camera's
+// frame awaited before the next camera is sent, as a viewer's drag; --interactive-ms sets the
+// session's frame-time target (SetFrameBudget). With --rest-psnr DB each client, after its
+// flight, rests: the time from its last camera to the refined pass whose estimated PSNR
+// reaches DB is measured, and that frame is compared with the true image, which the same
+// server draws at that camera with the CPU raycaster at --truth-step voxels, without jitter or
+// early termination. The first --warmup frames of each client are left out of the report.
 #include "client/Client.h"
 #include "client/Error.h"
 #include "client/Orbit.h"
+#include "render/RefinementEstimate.h"
 #include "server/DaemonConfig.h"
 #include "tools/Parse.h"
 #include "tools/brickcast/Commands.h"
@@ -44,8 +53,20 @@ struct LoadtestOptions {
     std::string host = "127.0.0.1", token, volume = "phantom", paths = "orbit,zoom,jumps,tf-sweep",
                 size = "128,128", renderer = "auto", codec = "zstd", quality = "refined", csv;
     std::uint16_t port = 7411;
-    std::uint32_t clients = 4, frames = 60, tfEvery = 10;
-    double durationS = 0, timeoutS = 600, step = 1.0;
+    std::uint32_t clients = 4, frames = 60, tfEvery = 10, warmup = 0;
+    std::uint32_t interactiveMs = 0, restPsnrDb = 0;
+    double durationS = 0, timeoutS = 600, step = 1.0, truthStep = 1.0 / 32.0;
+};
+
+/// A client's rest after its flight (--rest-psnr).
+struct RestRow {
+    std::uint32_t client = 0;
+    double movingFps = 0, intervalP50 = 0, intervalP99 = 0; ///< its flight, warm-up left out
+    bool reached = false;                                   ///< a pass's estimate reached the bound
+    double restMs = 0;                                      ///< from its last camera to that pass
+    std::uint32_t passes = 0;
+    std::string passMs; ///< each pass's render ms, "a+b+..."
+    double estimatedDb = 0, measuredDb = 0;
 };
 
 const std::vector<std::string> kPaths = {"orbit", "zoom", "jumps", "tf-sweep"};
@@ -56,6 +77,8 @@ struct FrameRow {
     double latencyMs = 0, renderMs = 0, queueMs = 0;
     std::uint64_t bytes = 0, bytesUploaded = 0, bricksDrawn = 0;
     bool cached = false; ///< answered from the server's frame cache
+    bool refined = false;
+    std::uint32_t level = 0, scale = 0; ///< drawn at; scale 0 from servers before 2026-12-06
 };
 
 protocol::Renderer rendererOf(const std::string& name) {
@@ -80,7 +103,9 @@ protocol::Codec codecOf(const std::string& name) {
 protocol::Quality qualityOf(const std::string& name) {
     if (name == "refined") return protocol::Quality::Refined;
     if (name == "interactive") return protocol::Quality::Interactive;
-    throw std::invalid_argument("--quality: '" + name + "' is not refined or interactive");
+    if (name == "adaptive") return protocol::Quality::Adaptive;
+    throw std::invalid_argument("--quality: '" + name +
+                                "' is not refined, interactive or adaptive");
 }
 
 /// A window ramp over fractions [lo, lo + 0.25] of the value range.
@@ -211,6 +236,68 @@ void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, do
                 tools::formatBytes(d.of("frame_bytes_total", "")).c_str(), failures);
 }
 
+/// After a client's flight: waits, with the camera at rest, for the refinement pass whose estimate
+/// reaches --rest-psnr (or the last pass the server draws), then has the server draw the true
+/// image at that camera and measures the pass against it.
+RestRow restAndCompare(const LoadtestOptions& o, const protocol::RenderOptions& ro,
+                       client::Client& c, std::uint32_t index, std::uint32_t camera,
+                       Clock::time_point lastSent) {
+    RestRow rest;
+    rest.client = index;
+    // The passes the server draws: the session's step, halved while not finer than 1/16.
+    std::uint32_t most = 1;
+    while (render::refineFurther(-1, o.restPsnrDb, render::refinementStep(ro.stepVoxels, most - 1)))
+        ++most;
+    client::ReceivedFrame pass;
+    while (rest.passes < most) {
+        client::ReceivedFrame f = c.nextFrame();
+        if (!f.header.refined || f.header.cameraId != camera) continue;
+        pass = std::move(f);
+        ++rest.passes;
+        rest.passMs += (rest.passMs.empty() ? "" : "+") +
+                       std::to_string(int(std::lround(pass.header.renderMs)));
+        rest.restMs = std::chrono::duration<double, std::milli>(Clock::now() - lastSent).count();
+        rest.estimatedDb = pass.header.estimatedPsnrDb;
+        if (pass.header.estimatedPsnrDb >= o.restPsnrDb) {
+            rest.reached = true;
+            break;
+        }
+    }
+    c.requestFrame(protocol::FrameMode::ContinuousOff);
+    protocol::RenderOptions truth = ro;
+    truth.quality = protocol::Quality::Refined;
+    truth.renderer = protocol::Renderer::CpuRaycaster;
+    truth.stepVoxels = float(o.truthStep);
+    truth.techniques =
+        protocol::kTechAll & ~(protocol::kTechJitter | protocol::kTechEarlyTermination);
+    truth.codec = protocol::Codec::Zstd;
+    truth.codecQuality = 0;
+    truth.refinedCodec.reset();
+    c.setRenderOptions(truth);
+    const std::uint32_t id = c.requestFrame();
+    client::ReceivedFrame t;
+    do
+        t = c.nextFrame();
+    while (t.request != id);
+    rest.measuredDb = render::psnrRgb8(pass.rgba, t.rgba);
+    return rest;
+}
+
+void printRests(const LoadtestOptions& o, const std::vector<RestRow>& rests) {
+    std::printf("\n### Moving, then at rest under a %u dB bound (true image: the CPU raycaster at "
+                "%.4g voxel, no jitter or early termination; %u warm-up frames left out)\n\n",
+                unsigned(o.restPsnrDb), o.truthStep, o.warmup);
+    std::printf(
+        "| Client | Moving frames/s | Interval p50 ms | p99 ms | Passes at rest (render ms) | "
+        "Bound "
+        "reached after ms | Estimated dB | Measured dB |\n|---|---|---|---|---|---|---|---|\n");
+    for (const RestRow& r : rests)
+        std::printf("| %u | %.1f | %.1f | %.1f | %u (%s) | %s | %.0f | %.1f |\n", r.client,
+                    r.movingFps, r.intervalP50, r.intervalP99, r.passes, r.passMs.c_str(),
+                    r.reached ? std::to_string(int(std::lround(r.restMs))).c_str() : "not reached",
+                    r.estimatedDb, r.measuredDb);
+}
+
 void runLoadtest(const LoadtestOptions& o) {
     if (!server::isLoopback(o.host))
         throw std::invalid_argument("--host: '" + o.host +
@@ -222,6 +309,16 @@ void runLoadtest(const LoadtestOptions& o) {
     if (!(o.timeoutS > 0 && o.timeoutS <= 86400))
         throw std::invalid_argument("--timeout-s: (0, 86400]");
     if (o.tfEvery < 1) throw std::invalid_argument("--tf-every: at least 1");
+    if (o.warmup >= o.frames) throw std::invalid_argument("--warmup: fewer than --frames");
+    if (o.interactiveMs > protocol::kMaxInteractiveMs)
+        throw std::invalid_argument("--interactive-ms: 0..10000 (0: the server's)");
+    if (o.restPsnrDb != 0 &&
+        (o.restPsnrDb < protocol::kMinRestPsnrDb || o.restPsnrDb > protocol::kMaxRestPsnrDb))
+        throw std::invalid_argument("--rest-psnr: 0 (none) or 20..50 dB");
+    if (o.restPsnrDb != 0 && o.quality != "adaptive")
+        throw std::invalid_argument("--rest-psnr: needs --quality adaptive (a camera that rests)");
+    if (!(o.truthStep >= 0.01 && o.truthStep <= 1))
+        throw std::invalid_argument("--truth-step: 0.01..1 voxels");
     const auto paths = tools::splitList(o.paths);
     if (paths.empty()) throw std::invalid_argument("--paths: none given");
     for (const auto& p : paths)
@@ -257,6 +354,7 @@ void runLoadtest(const LoadtestOptions& o) {
                                        : deadline;
     std::mutex mutex;
     std::vector<FrameRow> rows;
+    std::vector<RestRow> rests;
     std::vector<std::string> errors;
     std::vector<std::thread> threads;
     for (std::uint32_t i = 0; i < o.clients; ++i)
@@ -267,31 +365,67 @@ void runLoadtest(const LoadtestOptions& o) {
                 client::Client c(cc);
                 const auto v = c.openVolume(o.volume);
                 c.setRenderOptions(ro);
+                if (o.interactiveMs > 0 || o.restPsnrDb > 0)
+                    c.setFrameBudget({std::uint16_t(o.interactiveMs), std::uint8_t(o.restPsnrDb)});
+                const bool adaptive = ro.quality == protocol::Quality::Adaptive;
+                if (adaptive) c.requestFrame(protocol::FrameMode::ContinuousOn);
                 std::mt19937 rng(20261201u + i);
+                std::uint32_t lastCamera = 0;
+                Clock::time_point lastSent{}, lastArrival{}, flightStart{};
+                std::vector<double> intervals;
                 for (std::uint32_t f = 0; f < o.frames; ++f) {
                     const auto now = Clock::now();
                     if (now >= endBy || now >= deadline) break;
                     if (path == "tf-sweep" && f % o.tfEvery == 0)
                         c.setTransferFunction(
                             windowTf(0.1 + 0.6 * std::fmod(double(f / o.tfEvery) * 0.15, 1.0)));
-                    c.setCamera(
-                        cameraOf(path, v, f, o.frames, std::uint32_t(i / paths.size()), rng));
-                    const auto sent = Clock::now();
-                    c.requestFrame();
-                    const auto frame = c.nextFrame();
+                    const auto camera =
+                        cameraOf(path, v, f, o.frames, std::uint32_t(i / paths.size()), rng);
+                    c.setCamera(camera);
+                    lastCamera = camera.cameraId;
+                    const auto sent = lastSent = Clock::now();
+                    client::ReceivedFrame frame;
+                    if (adaptive) { // continuous: the frame answering this camera
+                        do
+                            frame = c.nextFrame();
+                        while (frame.header.cameraId != camera.cameraId);
+                    } else {
+                        c.requestFrame();
+                        frame = c.nextFrame();
+                    }
+                    const auto arrival = Clock::now();
+                    if (f == o.warmup) flightStart = sent;
+                    if (f > o.warmup)
+                        intervals.push_back(
+                            std::chrono::duration<double, std::milli>(arrival - lastArrival)
+                                .count());
+                    lastArrival = arrival;
+                    if (f < o.warmup) continue;
                     FrameRow r;
                     r.client = i;
                     r.frame = f;
                     r.path = path;
-                    r.latencyMs =
-                        std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
+                    r.latencyMs = std::chrono::duration<double, std::milli>(arrival - sent).count();
                     r.renderMs = frame.header.renderMs;
                     r.queueMs = frame.header.queueMs;
                     r.bytes = frame.wireBytes;
                     r.bytesUploaded = frame.header.bytesUploaded;
                     r.bricksDrawn = frame.header.bricksDrawn;
                     r.cached = frame.header.cached;
+                    r.refined = frame.header.refined;
+                    r.level = frame.header.level;
+                    r.scale = frame.header.scale;
                     mine.push_back(r);
+                }
+                if (adaptive && o.restPsnrDb > 0 && lastCamera > 0) {
+                    RestRow rest = restAndCompare(o, ro, c, i, lastCamera, lastSent);
+                    const double flightS =
+                        std::chrono::duration<double>(lastArrival - flightStart).count();
+                    rest.movingFps = flightS > 0 ? double(intervals.size()) / flightS : 0.0;
+                    rest.intervalP50 = quantile(intervals, 0.5);
+                    rest.intervalP99 = quantile(intervals, 0.99);
+                    std::lock_guard lock(mutex);
+                    rests.push_back(rest);
                 }
                 c.bye();
             } catch (const std::exception& e) {
@@ -312,14 +446,16 @@ void runLoadtest(const LoadtestOptions& o) {
         return a.client != b.client ? a.client < b.client : a.frame < b.frame;
     });
     printReport(o, rows, wallS, delta, std::uint32_t(errors.size()));
+    if (!rests.empty()) printRests(o, rests);
     if (!o.csv.empty()) {
         std::ofstream out(o.csv);
         out << "client,path,frame,latency_ms,render_ms,queue_ms,bytes,bytes_uploaded,bricks_"
-               "drawn,cached\n";
+               "drawn,cached,refined,level,scale\n";
         for (const auto& r : rows)
             out << r.client << ',' << r.path << ',' << r.frame << ',' << r.latencyMs << ','
                 << r.renderMs << ',' << r.queueMs << ',' << r.bytes << ',' << r.bytesUploaded << ','
-                << r.bricksDrawn << ',' << int(r.cached) << '\n';
+                << r.bricksDrawn << ',' << int(r.cached) << ',' << int(r.refined) << ',' << r.level
+                << ',' << r.scale << '\n';
         if (!out) throw std::runtime_error(o.csv + ": cannot write the CSV");
     }
     if (!errors.empty())
@@ -358,10 +494,26 @@ void addLoadtestCommand(CLI::App& app) {
     cmd->add_option("--codec", o->codec, "raw, zstd, delta or jpeg")->capture_default_str();
     cmd->add_option("--step", o->step, "Sample step, voxels")->capture_default_str();
     cmd->add_option("--quality", o->quality,
-                    "refined (every frame at full quality) or interactive (every frame as a "
-                    "moving camera's: half size, or the server's frame-time budget)")
+                    "refined (every frame at full quality), interactive (every frame as a "
+                    "moving camera's: half size, or the server's frame-time budget) or adaptive "
+                    "(continuous mode: interactive frames while moving, refined at rest)")
         ->capture_default_str();
     cmd->add_option("--csv", o->csv, "Write every frame as CSV");
+    cmd->add_option("--warmup", o->warmup, "Frames of each client left out of the report")
+        ->capture_default_str();
+    cmd->add_option("--interactive-ms", o->interactiveMs,
+                    "The session's frame-time target for interactive frames (SetFrameBudget; 0: "
+                    "the server's frames.interactive_ms)")
+        ->capture_default_str();
+    cmd->add_option("--rest-psnr", o->restPsnrDb,
+                    "With --quality adaptive: after its flight each client rests until a refined "
+                    "pass's estimated PSNR reaches this (20..50 dB), and that pass is measured "
+                    "against the true image")
+        ->capture_default_str();
+    cmd->add_option("--truth-step", o->truthStep,
+                    "--rest-psnr: the true image's step (voxels), CPU raycaster, no jitter or "
+                    "early termination")
+        ->capture_default_str();
     cmd->callback([o] { runLoadtest(*o); });
 }
 

@@ -64,6 +64,30 @@ export function isInteractiveSizeOf(fw, fh, width, height) {
   return INTERACTIVE_DIVISORS.some((d) => fw === Math.ceil(width / d) && fh === Math.ceil(height / d));
 }
 
+/**
+ * A FrameHeader's scale for people: 'full' for 1, '1/n' for an interactive frame drawn at each
+ * edge over n, '' for 0 (a server from before 2026-12-06 does not say).
+ */
+export function scaleLabel(scale) {
+  if (!scale) return '';
+  return scale === 1 ? 'full' : `1/${scale}`;
+}
+
+/** A FrameHeader's estimatedPsnrDb for people: '≈ 43 dB', or '—' when the server has no estimate (0). */
+export function psnrLabel(db) {
+  return db > 0 ? `≈ ${db} dB` : '—';
+}
+
+/**
+ * The overlay's words for a frame's level, scale and estimated PSNR against the converged image
+ * (its error: higher is closer): 'level 1  scale 1/2  PSNR ≈ 43 dB', 'level 0  scale full  PSNR —'.
+ * A server from before 2026-12-06 sends scale 0 (the two bytes were reserved): no scale then.
+ */
+export function frameDetailLabel(f) {
+  const scale = scaleLabel(f.scale);
+  return [`level ${f.level}`, ...(scale ? [`scale ${scale}`] : []), `PSNR ${psnrLabel(f.estimatedPsnrDb)}`].join('  ');
+}
+
 const MIB = 1024 * 1024;
 
 function mib(bytes) {

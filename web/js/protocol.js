@@ -16,7 +16,7 @@ export const Type = Object.freeze({
   Hello: 0x01, Auth: 0x02, AuthOk: 0x03, ListVolumes: 0x04, VolumeList: 0x05,
   OpenVolume: 0x06, VolumeOpened: 0x07, SetCamera: 0x08, SetTransferFunction: 0x09,
   SetRenderOptions: 0x0a, RequestFrame: 0x0b, Frame: 0x0c, RequestStats: 0x0d, Stats: 0x0e,
-  Error: 0x0f, Bye: 0x10, RequestHistogram: 0x11, Histogram: 0x12,
+  Error: 0x0f, Bye: 0x10, RequestHistogram: 0x11, Histogram: 0x12, SetFrameBudget: 0x13,
 });
 
 const typeNames = new Map(Object.entries(Type).map(([name, t]) => [t, name]));
@@ -39,7 +39,8 @@ export function errorName(code) {
   return errorNames.get(code) ?? `error ${code}`;
 }
 
-export const Capability = Object.freeze({ AuthRequired: 1, CpuRenderer: 2, GpuRenderer: 4, Continuous: 8 });
+// FrameBudget (bit 4, since 2026-12-06): the server takes SetFrameBudget; older servers answer it UnknownType.
+export const Capability = Object.freeze({ AuthRequired: 1, CpuRenderer: 2, GpuRenderer: 4, Continuous: 8, FrameBudget: 16 });
 export const Codec = Object.freeze({ Raw: 0, Zstd: 1, ZstdDelta: 2, Jpeg: 3, Png: 4 });
 // Auto (5, since 2026-12-03): the server picks the GPU raycaster on a hardware GPU, else the CPU raycaster.
 export const Renderer = Object.freeze({ GpuRaycaster: 0, CpuRaycaster: 1, Reference: 2, Splatter: 3, GpuSplatter: 4, Auto: 5 });
@@ -52,6 +53,18 @@ export const LEVEL_AUTOMATIC = 255;
 /** RenderOptions flags (u16 at offset 22): bit 0 unscaled interactive frames (half size, rounded up). */
 export const RenderFlags = Object.freeze({ UnscaledInteractive: 1 });
 export const RENDER_FLAGS_ALL = 0x1;
+/** SetFrameBudget.interactiveMs: 0 (the server's default) or 1..MAX_INTERACTIVE_MS. */
+export const MAX_INTERACTIVE_MS = 10000;
+/** SetFrameBudget.restPsnrDb: 0 (no error bound) or REST_PSNR_MIN_DB..REST_PSNR_MAX_DB. */
+export const REST_PSNR_MIN_DB = 20;
+export const REST_PSNR_MAX_DB = 50;
+/**
+ * FrameHeader.scale: at most this. 0 from servers before 2026-12-06, 1 refined, 1, 2, 3, 4, 6 or
+ * 8 interactive; checked as 0..8, as the server's own decoder does (protocol/MessageRules.cpp).
+ */
+export const MAX_FRAME_SCALE = 8;
+/** FrameHeader.estimatedPsnrDb: 0 (no estimate) up to this, whole dB. */
+export const MAX_ESTIMATED_PSNR_DB = 50;
 
 /** Thrown for malformed input; `code` is the ErrorCode name the server would answer with. */
 export class ProtocolError extends Error {
@@ -258,6 +271,21 @@ function validateRenderOptions(o) {
     throw new ProtocolError('OutOfRange', `flags: 0x${(o.flags).toString(16)} has bits other than 0x${RENDER_FLAGS_ALL.toString(16)}`);
 }
 
+function validateFrameBudget(b, code) {
+  if (!Number.isInteger(b.interactiveMs) || b.interactiveMs < 0 || b.interactiveMs > MAX_INTERACTIVE_MS)
+    throw new ProtocolError(code, `interactiveMs: ${b.interactiveMs} is not an integer in 0..${MAX_INTERACTIVE_MS}`);
+  const db = b.restPsnrDb;
+  if (!Number.isInteger(db) || !(db === 0 || (db >= REST_PSNR_MIN_DB && db <= REST_PSNR_MAX_DB)))
+    throw new ProtocolError(code, `restPsnrDb: ${db} is neither 0 nor an integer in ${REST_PSNR_MIN_DB}..${REST_PSNR_MAX_DB}`);
+}
+
+function validateFrameScale(scale, estimatedPsnrDb, code, what) {
+  if (!Number.isInteger(scale) || scale < 0 || scale > MAX_FRAME_SCALE)
+    throw new ProtocolError(code, `${what}scale: ${scale} is not an integer in 0..${MAX_FRAME_SCALE}`);
+  if (!Number.isInteger(estimatedPsnrDb) || estimatedPsnrDb < 0 || estimatedPsnrDb > MAX_ESTIMATED_PSNR_DB)
+    throw new ProtocolError(code, `${what}estimatedPsnrDb: ${estimatedPsnrDb} is not an integer in 0..${MAX_ESTIMATED_PSNR_DB}`);
+}
+
 function validateCamera(c) {
   checkInt(c.cameraId, 0, 0xffffffff, 'cameraId');
   checkVec3(c.eye, 'eye');
@@ -436,7 +464,10 @@ const codecs = {
       w.u64(m.bytesUploaded, 'bytesUploaded');
       w.bool(m.occlusionUsed, 'occlusionUsed');
       w.bool(m.cached ?? false, 'cached');
-      w.raw(new Uint8Array(2));
+      // The two bytes were reserved (0) before 2026-12-06: 0 is still a valid scale and estimate.
+      validateFrameScale(m.scale ?? 0, m.estimatedPsnrDb ?? 0, 'OutOfRange', '');
+      w.u8(m.scale ?? 0, 'scale');
+      w.u8(m.estimatedPsnrDb ?? 0, 'estimatedPsnrDb');
       w.u32(m.image.length, 'imageBytes');
       w.raw(m.image);
     },
@@ -448,9 +479,9 @@ const codecs = {
         renderMs: r.f32('renderMs'), encodeMs: r.f32('encodeMs'), samples: r.u64('samples'),
         bricksDrawn: r.u32('bricksDrawn'), bricksSkipped: r.u32('bricksSkipped'),
         bytesUploaded: r.u64('bytesUploaded'), occlusionUsed: r.bool('occlusionUsed'),
-        cached: r.bool('cached'),
+        cached: r.bool('cached'), scale: r.u8('scale'), estimatedPsnrDb: r.u8('estimatedPsnrDb'),
       };
-      r.bytes(2, 'reserved');
+      validateFrameScale(m.scale, m.estimatedPsnrDb, 'BadPayload', 'Frame: ');
       const imageBytes = r.u32('imageBytes');
       if (imageBytes !== r.left())
         throw new ProtocolError('BadPayload', `Frame: imageBytes ${imageBytes} but ${r.left()} bytes follow`);
@@ -496,6 +527,19 @@ const codecs = {
     read(r) { return { reason: r.u16('reason') }; },
   },
   [Type.RequestHistogram]: empty(),
+  [Type.SetFrameBudget]: {
+    write(m, w) {
+      validateFrameBudget(m, 'OutOfRange');
+      w.u16(m.interactiveMs, 'interactiveMs');
+      w.u8(m.restPsnrDb, 'restPsnrDb');
+    },
+    read(r) {
+      const m = { interactiveMs: r.u16('interactiveMs'), restPsnrDb: r.u8('restPsnrDb') };
+      // As the server: a value outside its range is out of range, not malformed.
+      validateFrameBudget(m, 'OutOfRange');
+      return m;
+    },
+  },
   [Type.Histogram]: {
     write(m, w) {
       const n = m.counts.length;
@@ -614,6 +658,11 @@ export const encodeRequestFrame = (mode, request) => encode(Type.RequestFrame, {
 export const encodeRequestStats = (request) => encode(Type.RequestStats, {}, request);
 /** RequestHistogram (empty). */
 export const encodeRequestHistogram = (request) => encode(Type.RequestHistogram, {}, request);
+/**
+ * SetFrameBudget: {interactiveMs (u16: 0 the server's default, 1..10000 ms), restPsnrDb (u8: 0 no
+ * error bound, 20..50 dB)}. Only for a server whose Hello has Capability.FrameBudget.
+ */
+export const encodeSetFrameBudget = (m, request) => encode(Type.SetFrameBudget, m, request);
 /** Error the client sends before it closes: {code, fatal, offendingType, message}. */
 export const encodeError = (m, request = 0) => encode(Type.Error, m, request);
 /** Bye with reason 0 normal, 1 shutting down, 2 idle timeout. */

@@ -5,12 +5,14 @@
 import { Connection, ServerError, DisconnectedError, socketUrl } from './connection.js';
 import {
   Type, Capability, Codec, Renderer, Quality, FrameMode, ErrorCode, TECHNIQUES_ALL, LEVEL_AUTOMATIC,
-  MAX_IMAGE_EDGE, ProtocolError, RenderFlags,
+  MAX_IMAGE_EDGE, ProtocolError, RenderFlags, encodeSetFrameBudget,
 } from './protocol.js';
 import { Trackball } from './trackball.js';
 import { attachControls } from './controls.js';
 import { TfEditor } from './tfeditor.js';
-import { FrameStats, autoRendererOf, formatBytes, frameSize, isInteractiveSizeOf, residencyLine, volumeLabel } from './frames.js';
+import {
+  FrameStats, autoRendererOf, formatBytes, frameDetailLabel, frameSize, isInteractiveSizeOf, residencyLine, volumeLabel,
+} from './frames.js';
 
 const STATS_INTERVAL_MS = 3000;
 const RENDERER_NAMES = {
@@ -20,13 +22,17 @@ const RENDERER_NAMES = {
 };
 const CODEC_NAMES = ['raw', 'zstd', 'zstd delta', 'JPEG', 'PNG'];
 const IMAGE_TYPES = { [Codec.Jpeg]: 'image/jpeg', [Codec.Png]: 'image/png' };
+const FRAME_TARGET_TITLE = 'time to draw a frame while the camera moves: the server picks the pyramid level and image scale to meet it';
+const REST_PSNR_TITLE = 'at rest, refine until the estimated PSNR against the converged image reaches this';
+const NO_FRAME_BUDGET = 'this server does not support frame budgets (SetFrameBudget, Hello capability bit 4)';
 
 const $ = (id) => document.getElementById(id);
 const els = {
   volume: $('volume'), connection: $('connection'), reconnect: $('reconnect'), view: $('view'),
   overlay: $('overlay'), placeholder: $('placeholder'), renderer: $('renderer'), quality: $('quality'),
   step: $('step'), jpegQuality: $('jpeg-quality'), jpegQualityValue: $('jpeg-quality-value'),
-  maxSize: $('max-size'), stats: $('stats'), status: $('status'), statusText: $('status-text'),
+  maxSize: $('max-size'), frameTarget: $('frame-target'), restPsnr: $('rest-psnr'), stats: $('stats'),
+  status: $('status'), statusText: $('status-text'),
   statusDismiss: $('status-dismiss'), auth: $('auth'), authForm: $('auth-form'),
   authMessage: $('auth-message'), token: $('token'), tokenRemember: $('token-remember'),
 };
@@ -53,6 +59,10 @@ const state = {
     // and send; the canvas scales them up smoothly (draw()).
     flags: RenderFlags.UnscaledInteractive,
   },
+  // SetFrameBudget as the controls say (0 and 0: the server's defaults), and as this session's
+  // server has it: a session starts with both 0; null when unknown (after an Error).
+  frameBudget: { interactiveMs: 0, restPsnrDb: 0 },
+  lastFrameBudget: null,
   maxEdge: 1024,
   deviceSize: { width: 0, height: 0 },
   lastDrawnCameraId: 0,
@@ -152,6 +162,19 @@ function sendRenderOptions() {
 }
 const scheduleRenderOptions = coalesced(sendRenderOptions);
 
+/**
+ * Sends SetFrameBudget with both values when the server takes it (Capability.FrameBudget) and
+ * they differ from what the session has (or always, with `force`); returns what was sent or null.
+ */
+function sendFrameBudget(force = false) {
+  if (conn.state !== 'ready' || !conn.can(Capability.FrameBudget)) return null;
+  const b = state.frameBudget, last = state.lastFrameBudget;
+  if (!force && last && last.interactiveMs === b.interactiveMs && last.restPsnrDb === b.restPsnrDb) return null;
+  if (!trySend(Type.SetFrameBudget, b)) return null;
+  state.lastFrameBudget = { ...b };
+  return { ...b };
+}
+
 // ---- connection --------------------------------------------------------------------------
 
 conn.addEventListener('state', (e) => {
@@ -234,6 +257,12 @@ conn.addEventListener('error', (e) => {
     sendRenderOptions();
     return;
   }
+  if (err.offendingType === Type.SetFrameBudget) {
+    // The session's budget is as it was before, which we may not know: send it again next time.
+    state.lastFrameBudget = null;
+    if (err.code === ErrorCode.UnknownType) showFrameBudgetControls(false);
+    return;
+  }
   if (err.code === ErrorCode.UnknownVolume && err.request === 0 && state.volume) {
     // The volume we view was removed or changed shape by a catalog reload.
     closeVolume();
@@ -251,6 +280,10 @@ function onReady() {
   o.codecQuality = o.codec === Codec.Jpeg ? Number(els.jpegQuality.value) : 0;
   o.refinedCodec = conn.hasCodec(Codec.Png) ? Codec.Png + 1 : 0;
   els.jpegQuality.disabled = o.codec !== Codec.Jpeg;
+  // A new session starts with both budgets 0: a budget chosen before is sent again once the
+  // volume is (re)opened (onVolumeOpened), or when a control changes.
+  state.lastFrameBudget = { interactiveMs: 0, restPsnrDb: 0 };
+  showFrameBudgetControls(conn.can(Capability.FrameBudget));
   conn.request(Type.ListVolumes, {}, Type.VolumeList).catch(report);
   const reopen = state.volume?.name ?? state.opening;
   if (reopen) openVolume(reopen).catch(report);
@@ -273,6 +306,13 @@ function fillRenderers() {
   if (!state.rendererChosen || !allowed.includes(state.options.renderer)) state.options.renderer = allowed[0];
   state.rendererChosen = true;
   els.renderer.value = String(state.options.renderer);
+}
+
+/** The frame-budget controls work only with a server that takes SetFrameBudget; older ones answer UnknownType. */
+function showFrameBudgetControls(supported) {
+  els.frameTarget.disabled = els.restPsnr.disabled = !supported;
+  els.frameTarget.title = supported ? FRAME_TARGET_TITLE : NO_FRAME_BUDGET;
+  els.restPsnr.title = supported ? REST_PSNR_TITLE : NO_FRAME_BUDGET;
 }
 
 // ---- volumes -----------------------------------------------------------------------------
@@ -331,6 +371,8 @@ function onVolumeOpened(info) {
   const tf = tfEditor.current();
   if (tf) sendTransferFunction(tf);
   sendRenderOptions();
+  // Only when the user chose a budget: a session starts with both 0.
+  sendFrameBudget();
   trySend(Type.RequestFrame, { mode: FrameMode.ContinuousOn });
 }
 
@@ -442,6 +484,31 @@ els.maxSize.addEventListener('change', () => {
   state.maxEdge = Number(els.maxSize.value);
   applySize();
 });
+
+function frameBudgetChanged() {
+  state.frameBudget = { interactiveMs: Number(els.frameTarget.value), restPsnrDb: Number(els.restPsnr.value) };
+  sendFrameBudget();
+}
+els.frameTarget.addEventListener('change', frameBudgetChanged);
+els.restPsnr.addEventListener('change', frameBudgetChanged);
+
+/** Selects `value` in a select, adding an option labelled `label` when it has none for it (values the test API sets). */
+function selectValue(select, value, label) {
+  const v = String(value);
+  if (![...select.options].some((o) => o.value === v)) select.add(new Option(label, v));
+  select.value = v;
+}
+
+/** Merges a partial {interactiveMs, restPsnrDb} into the budget, shows it in the controls and sends it now. */
+function setFrameBudget(partial) {
+  const b = { ...state.frameBudget, ...partial };
+  // Checked before the controls change: encode() would refuse it after.
+  encodeSetFrameBudget(b);
+  state.frameBudget = b;
+  selectValue(els.frameTarget, b.interactiveMs, b.interactiveMs ? `${b.interactiveMs} ms` : 'server default');
+  selectValue(els.restPsnr, b.restPsnrDb, b.restPsnrDb ? `${b.restPsnrDb} dB` : 'off');
+  return sendFrameBudget(true);
+}
 
 function applySize() {
   const { width, height } = frameSize(state.deviceSize.width, state.deviceSize.height, Math.min(MAX_IMAGE_EDGE, state.maxEdge));
@@ -601,6 +668,7 @@ function draw(f, bitmap) {
   state.lastFrame = {
     cameraId: f.cameraId, frameId: f.frameId, codec: f.codec, refined: f.refined,
     width: f.width, height: f.height, bytes: f.image.length, drawnAt,
+    level: f.level, scale: f.scale, estimatedPsnrDb: f.estimatedPsnrDb,
     canvasWidth: c.width, canvasHeight: c.height,
   };
   state.lastFrameHeader = f;
@@ -619,7 +687,7 @@ function drawOverlay() {
     ? ` → ${shown.canvasWidth}×${shown.canvasHeight}` : '';
   const lines = [
     `${s.fps(performance.now()).toFixed(1)} fps   latency ${s.latencyMs === null ? '—' : `${Math.round(s.latencyMs)} ms`}`,
-    `${f.refined ? 'refined' : 'interactive'} ${f.width}×${f.height}${scaled}  level ${f.level}  ${CODEC_NAMES[f.codec] ?? f.codec} ${formatBytes(f.image.length)}`,
+    `${f.refined ? 'refined' : 'interactive'} ${f.width}×${f.height}${scaled}  ${frameDetailLabel(f)}  ${CODEC_NAMES[f.codec] ?? f.codec} ${formatBytes(f.image.length)}`,
     `render ${f.renderMs.toFixed(1)} ms  encode ${f.encodeMs.toFixed(1)} ms  queue ${f.queueMs.toFixed(1)} ms`,
     // (no "cache" in it: the residency line is the overlay's one line that says cache)
     f.cached ? 'reused: the server drew this view before, nothing drawn now'
@@ -645,7 +713,10 @@ window.brickcast = {
   transferFunction: () => clone(state.lastTf),
   /** The last RenderOptions sent, or null. */
   renderOptions: () => clone(state.lastOptions),
-  /** The last frame drawn: {cameraId, frameId, codec, refined, width, height (the frame's own), bytes, drawnAt, canvasWidth, canvasHeight (the size shown at)}, or null. */
+  /**
+   * The last frame drawn: {cameraId, frameId, codec, refined, width, height (the frame's own), bytes, drawnAt,
+   * level, scale, estimatedPsnrDb (FrameHeader; scale 0 from older servers), canvasWidth, canvasHeight (the size shown at)}, or null.
+   */
   get lastFrame() { return clone(state.lastFrame); },
   /**
    * The last frame drawn as decoded, before any scaling (an interactive frame at the size the
@@ -685,6 +756,14 @@ window.brickcast = {
   },
   /** Merges and sends render options now; returns what was sent. */
   setRenderOptions: (partial) => setRenderOptions(partial),
+  /** The last SetFrameBudget sent on this session ({interactiveMs, restPsnrDb}; both 0 before any), or null when unknown. */
+  frameBudget: () => clone(state.lastFrameBudget),
+  /**
+   * Merges {interactiveMs, restPsnrDb} into the frame budget, shows it in the controls and sends it
+   * now; returns what was sent, or null when the server does not take SetFrameBudget (or is not
+   * connected). Throws ProtocolError on a value out of range.
+   */
+  setFrameBudget: (partial) => setFrameBudget(partial),
 };
 
 conn.connect();

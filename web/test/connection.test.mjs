@@ -47,6 +47,14 @@ test('sends the web client\'s Hello first and is ready when no auth is needed', 
   assert.deepEqual(states, ['connecting', 'ready']);
   assert.ok(c.hasCodec(4) && !c.hasCodec(1));
   assert.ok(c.can(Capability.CpuRenderer) && !c.can(Capability.GpuRenderer));
+  assert.ok(!c.can(Capability.FrameBudget), 'a server without bit 4 does not take SetFrameBudget');
+});
+
+test('the frame-budget capability is Hello bit 4', () => {
+  const { c, ws } = connect();
+  assert.ok(!c.can(Capability.FrameBudget), 'nothing is known before the server\'s Hello');
+  ws.receive(Type.Hello, serverHello(Capability.CpuRenderer | (1 << 4)), ws.sent[0].request);
+  assert.ok(c.can(Capability.FrameBudget) && c.can(Capability.CpuRenderer));
 });
 
 test('request ids increase and replies resolve their request; Errors reject it', async () => {

@@ -1,6 +1,9 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { frameSize, formatBytes, volumeLabel, FrameStats, isInteractiveSizeOf, residencyLine, autoRendererOf } from '../js/frames.js';
+import {
+  frameSize, formatBytes, volumeLabel, FrameStats, isInteractiveSizeOf, residencyLine, autoRendererOf,
+  scaleLabel, psnrLabel, frameDetailLabel,
+} from '../js/frames.js';
 
 test('frame size follows the canvas, capped by the configured max and 4096, aspect kept', () => {
   assert.deepEqual(frameSize(800, 600, 1024), { width: 800, height: 600 });
@@ -78,4 +81,17 @@ test("the server's auto renderer and why, from its Stats counters", () => {
   assert.ok(got.reason.startsWith('auto: gpu (GL_RENDERER') && got.reason.endsWith('…'));
   assert.deepEqual(autoRendererOf([{ name: 'auto_renderer{renderer="cpu",reason="say \\"hi\\""}', value: 1 }]),
     { renderer: 'cpu', reason: 'say "hi"' });
+});
+
+test("a frame's scale, estimated PSNR and level for the overlay", () => {
+  assert.equal(scaleLabel(1), 'full');
+  assert.equal(scaleLabel(2), '1/2');
+  assert.equal(scaleLabel(8), '1/8');
+  assert.equal(scaleLabel(0), '', 'a server before 2026-12-06 does not say');
+  assert.equal(psnrLabel(43), '≈ 43 dB');
+  assert.equal(psnrLabel(50), '≈ 50 dB');
+  assert.equal(psnrLabel(0), '—', 'no estimate');
+  assert.equal(frameDetailLabel({ level: 1, scale: 3, estimatedPsnrDb: 0 }), 'level 1  scale 1/3  PSNR —');
+  assert.equal(frameDetailLabel({ level: 0, scale: 1, estimatedPsnrDb: 41 }), 'level 0  scale full  PSNR ≈ 41 dB');
+  assert.equal(frameDetailLabel({ level: 2, scale: 0, estimatedPsnrDb: 0 }), 'level 2  PSNR —', 'an older server: no scale');
 });

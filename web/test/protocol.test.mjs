@@ -6,7 +6,7 @@ import {
   Type, ErrorCode, ProtocolError, encode, decode, decodeHeader, encodeHello, encodeSetCamera,
   encodeSetRenderOptions, encodeSetTransferFunction, encodeAuth, encodeOpenVolume,
   encodeRequestHistogram, encodeRequestFrame, encodeListVolumes, encodeRequestStats, encodeBye,
-  encodeError, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags, Renderer,
+  encodeError, encodeSetFrameBudget, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags, Renderer, Capability,
 } from '../js/protocol.js';
 
 const header = (type, length, request) => [
@@ -227,7 +227,7 @@ test('Frame: decodes a hand-built frame (golden bytes of MessagesTest.cpp)', () 
   assert.deepEqual(h, {
     frameId: 42, cameraId: 7, width: 2, height: 1, codec: 0, level: 1, refined: true, keyframe: false,
     queueMs: 0.5, renderMs: 12.5, encodeMs: 0.25, samples: 1000, bricksDrawn: 3, bricksSkipped: 5,
-    bytesUploaded: 65536, occlusionUsed: true, cached: true,
+    bytesUploaded: 65536, occlusionUsed: true, cached: true, scale: 0, estimatedPsnrDb: 0,
   });
   assert.deepEqual(Array.from(image), [0xff, 0, 0, 0xff, 0, 0x80, 0, 0x80]);
   assert.deepEqual(bytes(encode(Type.Frame, m.body, 7)), frameBytes);
@@ -240,6 +240,87 @@ test('Frame: imageBytes must equal what is left of the payload', () => {
   const bad = frameBytes.slice();
   bad[16 + 14] = 2; // refined = 2 is no bool
   throwsCode(() => decode(buf(bad)), 'BadPayload', /refined/);
+});
+
+test('Frame: scale (byte 54) and estimatedPsnrDb (byte 55), 0 from servers before 2026-12-06', () => {
+  // The golden frame has 0 in both, as the two reserved bytes of an older server.
+  const old = decode(buf(frameBytes)).body;
+  assert.equal(old.scale, 0);
+  assert.equal(old.estimatedPsnrDb, 0);
+  const withBudget = frameBytes.slice();
+  withBudget[16 + 54] = 2;
+  withBudget[16 + 55] = 43;
+  const m = decode(buf(withBudget)).body;
+  assert.equal(m.scale, 2);
+  assert.equal(m.estimatedPsnrDb, 43);
+  assert.equal(m.cached, true, 'cached (byte 53) is unchanged');
+  assert.equal(m.image.length, 8, 'imageBytes (bytes 56..59) is unchanged');
+  assert.deepEqual(bytes(encode(Type.Frame, m, 7)), withBudget);
+  // Every scale of the protocol, and the estimate's bounds.
+  for (const scale of [0, 1, 2, 3, 4, 6, 8]) {
+    const b = withBudget.slice();
+    b[16 + 54] = scale;
+    assert.equal(decode(buf(b)).body.scale, scale);
+  }
+  for (const db of [0, 1, 50]) {
+    const b = withBudget.slice();
+    b[16 + 55] = db;
+    assert.equal(decode(buf(b)).body.estimatedPsnrDb, db);
+  }
+  // Encoding without the fields writes 0 and 0, as an older server did.
+  const { scale, estimatedPsnrDb, ...noFields } = m;
+  assert.deepEqual(bytes(encode(Type.Frame, noFields, 7)).slice(16 + 54, 16 + 56), [0, 0]);
+});
+
+test('Frame: a scale or estimatedPsnrDb outside the protocol is refused', () => {
+  // 0..8, as the server's own decoder checks (PROTOCOL.md names 1, 2, 3, 4, 6 and 8).
+  for (const scale of [9, 16, 255]) {
+    const b = frameBytes.slice();
+    b[16 + 54] = scale;
+    throwsCode(() => decode(buf(b)), 'BadPayload', /scale/);
+  }
+  for (const db of [51, 255]) {
+    const b = frameBytes.slice();
+    b[16 + 55] = db;
+    throwsCode(() => decode(buf(b)), 'BadPayload', /estimatedPsnrDb/);
+  }
+  const m = decode(buf(frameBytes)).body;
+  throwsCode(() => encode(Type.Frame, { ...m, scale: 9 }), 'OutOfRange', /scale/);
+  throwsCode(() => encode(Type.Frame, { ...m, scale: 1.5 }), 'OutOfRange', /scale/);
+  throwsCode(() => encode(Type.Frame, { ...m, estimatedPsnrDb: 51 }), 'OutOfRange', /estimatedPsnrDb/);
+  throwsCode(() => encode(Type.Frame, { ...m, estimatedPsnrDb: 40.5 }), 'OutOfRange', /estimatedPsnrDb/);
+});
+
+test('SetFrameBudget: type 0x13, u16 interactiveMs then u8 restPsnrDb, little-endian', () => {
+  const got = encodeSetFrameBudget({ interactiveMs: 66, restPsnrDb: 40 }, 9);
+  assert.deepEqual(bytes(got), [...header(0x13, 3, 9), 0x42, 0x00, 0x28]);
+  assert.deepEqual(decode(got), { type: Type.SetFrameBudget, name: 'SetFrameBudget', flags: 0, request: 9, body: { interactiveMs: 66, restPsnrDb: 40 } });
+  assert.deepEqual(bytes(encodeSetFrameBudget({ interactiveMs: 0, restPsnrDb: 0 }, 1)), [...header(0x13, 3, 1), 0x00, 0x00, 0x00]);
+  assert.deepEqual(bytes(encodeSetFrameBudget({ interactiveMs: 10000, restPsnrDb: 50 }, 2)), [...header(0x13, 3, 2), 0x10, 0x27, 0x32]);
+  assert.deepEqual(bytes(encodeSetFrameBudget({ interactiveMs: 1, restPsnrDb: 20 }, 3)), [...header(0x13, 3, 3), 0x01, 0x00, 0x14]);
+  assert.deepEqual(bytes(encodeSetFrameBudget({ interactiveMs: 1000, restPsnrDb: 0 }, 4)).slice(16), [0xe8, 0x03, 0x00]);
+  assert.equal(Type.SetFrameBudget, 0x13);
+  assert.equal(typeName(0x13), 'SetFrameBudget');
+  assert.equal(Capability.FrameBudget, 1 << 4);
+});
+
+test('SetFrameBudget: values out of range are refused, naming the field', () => {
+  const ok = { interactiveMs: 66, restPsnrDb: 0 };
+  for (const interactiveMs of [10001, 65535, -1, 33.5, NaN, Infinity, '66', undefined, null]) {
+    throwsCode(() => encodeSetFrameBudget({ ...ok, interactiveMs }), 'OutOfRange', /interactiveMs/);
+  }
+  for (const restPsnrDb of [1, 10, 19, 51, 100, 255, 256, -1, 40.5, NaN, '40', undefined]) {
+    throwsCode(() => encodeSetFrameBudget({ ...ok, restPsnrDb }), 'OutOfRange', /restPsnrDb/);
+  }
+  for (const restPsnrDb of [0, 20, 30, 35, 40, 45, 50]) {
+    assert.equal(decode(encodeSetFrameBudget({ ...ok, restPsnrDb })).body.restPsnrDb, restPsnrDb);
+  }
+  // Decoding as the server does: out of range, not malformed; a payload of another size is malformed.
+  throwsCode(() => decode(buf([...header(0x13, 3, 0), 0x11, 0x27, 0x00])), 'OutOfRange', /interactiveMs/);
+  throwsCode(() => decode(buf([...header(0x13, 3, 0), 0x42, 0x00, 0x13])), 'OutOfRange', /restPsnrDb/);
+  throwsCode(() => decode(buf([...header(0x13, 3, 0), 0x42, 0x00, 0x33])), 'OutOfRange', /restPsnrDb/);
+  throwsCode(() => decode(buf([...header(0x13, 2, 0), 0x42, 0x00])), 'BadPayload', /too short/);
+  throwsCode(() => decode(buf([...header(0x13, 4, 0), 0x42, 0x00, 0x28, 0x00])), 'BadPayload', /left over/);
 });
 
 test('Stats: decodes the golden bytes of MessagesTest.cpp', () => {
@@ -275,6 +356,7 @@ test('round trips: every type decodes to what was encoded', () => {
   const cases = [
     [Type.AuthOk, {}], [Type.ListVolumes, {}], [Type.RequestStats, {}], [Type.RequestHistogram, {}],
     [Type.Auth, { token: 'tøken' }], [Type.RequestFrame, { mode: 2 }], [Type.Bye, { reason: 1 }],
+    [Type.SetFrameBudget, { interactiveMs: 200, restPsnrDb: 45 }],
     [Type.Stats, { counters: [{ name: 'bricks resident', value: 3 }] }],
     [Type.Histogram, { valueMin: 0, valueMax: 255, counts: new Float64Array([1, 2, 3, 4]) }],
     [Type.Error, { code: 13, fatal: false, offendingType: 0x0b, message: 'no OpenGL' }],

@@ -1,0 +1,41 @@
+#pragma once
+// The error of a frame at rest, estimated as it is refined (issue 22). A frame at rest is
+// refined by halving the step: the session's step, then half of it, a quarter... Each pass
+// after the first is compared with the one before, and that difference estimates the pass's
+// own error against the converged image (render/ConvergedReference.h): where halving the step
+// halves the error (first-order quadrature: e(s) = 2 e(s/2)), |f(s) - f(s/2)| = e(s/2), so the
+// PSNR of the pass against the previous one is the pass's own PSNR; the estimate adds 6.02 dB
+// (a factor of 2) since on the shared scans each halving gains 7-10 dB while far from
+// converged, which keeps the estimate on the safe side of the truth. Near convergence the
+// 8-bit frames stop improving (the CPU raycaster's frames agree with the converged image to
+// 52-67 dB at their finest steps on the shared scans), so no estimate exceeds kMaxEstimateDb.
+// What was measured: README "Frames on a budget"; the test: tests/render/RefinementEstimateTest.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+namespace bc::render {
+
+/// The highest PSNR an estimate claims, and so the highest bound a client may ask for.
+inline constexpr double kMaxEstimateDb = 50.0;
+/// No refinement pass samples finer than this (voxels).
+inline constexpr double kFinestRefinementStep = 1.0 / 16.0;
+
+/// PSNR (dB) of `a` against `b`, both 8-bit RGBA of the same size, over R, G and B (the
+/// colours composited over black when premultiplied); +infinity when they are equal.
+/// @throw std::invalid_argument when the sizes differ or are not whole pixels.
+double psnrRgb8(std::span<const std::uint8_t> a, std::span<const std::uint8_t> b);
+
+/// The estimated PSNR against the converged image of refinement pass `finer`, given the pass
+/// before it at twice its step, `coarser`: psnrRgb8(finer, coarser) + 6.02 dB, at most
+/// kMaxEstimateDb.
+double estimatedPsnrDb(std::span<const std::uint8_t> finer, std::span<const std::uint8_t> coarser);
+
+/// The step of refinement pass `pass` (0: the session's `step`): step / 2^pass.
+double refinementStep(double step, std::uint32_t pass);
+
+/// Whether a pass at `step` that reached `estimateDb` (negative: no estimate yet, the first
+/// pass) is followed by another at half the step under a bound of `boundDb` dB (> 0).
+bool refineFurther(double estimateDb, double boundDb, double step);
+
+} // namespace bc::render
