@@ -84,10 +84,13 @@ max_unsliced_gsamples = 4
 # ms); sessions take turns between slices, and a frame whose session has gone or whose camera
 # has moved on is dropped at the next slice.
 slice_ms = 50
-# While a camera moves, the time a frame should take (0..10000 ms): each such frame is drawn
-# at the requested size divided by 1, 2, 3, 4, 6 or 8, whichever the frames drawn so far of
-# the volume and renderer predict to fit, and scaled back up. 0: half size, whatever it takes.
-interactive_ms = 0
+# While a camera moves, the time a frame should take (0..10000 ms; a session may ask for its
+# own, SetFrameBudget): each such frame is drawn at the finest pyramid level whose bricks fit
+# the volume's host cache share, then the requested size divided by 1, 2, 3, 4, 6 or 8,
+# whichever the frames drawn so far predict to fit (sessions moving at once share it), and
+# scaled back up. 66 ms (15 frames/s) is what the README's measurements chose. 0: half size,
+# whatever it takes.
+interactive_ms = 66
 # While the render thread is idle, upload the bricks of each GPU session's next view (its
 # camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick
 # of its last frame.

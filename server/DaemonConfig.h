@@ -59,8 +59,8 @@ struct DaemonConfig {
     std::uint64_t maxUnslicedSamples = 4ull << 30; ///< for renderers that cannot slice
     std::uint32_t sliceMs = 50;                    ///< target length of one slice of a long frame
     /// While a camera moves, the time a frame should take (server/FrameBudget.h); 0: frames
-    /// are drawn at half size, whatever they take.
-    std::uint32_t interactiveMs = 0;
+    /// are drawn at half size, whatever they take. 66 ms: README, "Frames on a budget".
+    std::uint32_t interactiveMs = 66;
     bool prefetch = true; ///< bricks of each GPU session's predicted next view, while idle
     /// Encoded frames kept for identical requests of any session (server/FrameCache.h); 0: off.
     std::uint64_t frameCacheBytes = 64ull << 20;

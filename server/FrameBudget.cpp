@@ -42,7 +42,8 @@ InteractiveChoice InteractiveBudget::choose(const std::string& volume, const std
         (targetMs > 0 ? targetMs : mTargetMs) / double(std::max<std::uint32_t>(sharers, 1));
     InteractiveChoice chosen{tried.front(), kFirstDivisor, -1};
     if (expectedMs(volume, renderer, chosen.level, 1) < 0) return chosen;
-    for (const std::uint32_t level : tried)
+    const auto last = mLastLevel.find({volume, renderer});
+    for (const std::uint32_t level : tried) {
         for (const std::uint32_t d : kDivisors) {
             // Past the smallest edge allowed, a larger divisor draws no smaller an image.
             if (d > 1 && std::min(drawnEdge(width, d), drawnEdge(height, d)) < kMinEdge) break;
@@ -50,6 +51,13 @@ InteractiveChoice InteractiveBudget::choose(const std::string& volume, const std
             chosen = {level, d, expectedMs(volume, renderer, level, pixels)};
             if (chosen.expectedMs <= target) return chosen;
         }
+        // The level drawn last is left for a coarser one only when its smallest image is
+        // expected over kLevelStickiness x the target: the first frames of a level whose bricks
+        // are not resident yet load them, which costs more than a frame a little late.
+        if (last != mLastLevel.end() && level == last->second &&
+            chosen.expectedMs <= kLevelStickiness * target)
+            return chosen;
+    }
     return chosen;
 }
 
@@ -57,6 +65,7 @@ void InteractiveBudget::record(const std::string& volume, const std::string& ren
                                std::uint32_t level, std::uint64_t pixels, double ms,
                                double loadMs) {
     if (pixels == 0 || !(ms >= 0)) return;
+    mLastLevel[{volume, renderer}] = level;
     const double rays = std::max(ms - std::clamp(loadMs, 0.0, ms), 0.0);
     const double rate = std::max(rays, 1e-3) / double(pixels);
     // What was expected of the level: its own rate, or the nearest drawn level's scaled.

@@ -8,7 +8,9 @@
 // level 0 is both faster and closer to the converged image than a full-size frame of level 1
 // (README, "Frames on a budget"): a coarser level moves the surfaces the transfer function
 // picks out, a smaller image only blurs them. So the candidates are tried level by level, finest
-// first, and within a level largest image first; the first expected within the target is drawn.
+// first, and within a level largest image first; the first expected within the target is drawn,
+// except that the level drawn last is kept, at its smallest image, while that is expected within
+// twice the target (a level switch loads the new level's bricks: a long frame for every session).
 // A level is passed over when its bricks do not fit the volume's share of the host cache whole
 // (LevelRange::fits): every frame of it then reloads bricks from the store, and loading, which
 // does not shrink with the image, bounds it (the 2.36 GiB mosaic's level 0 under 1 GiB takes
@@ -55,6 +57,9 @@ class InteractiveBudget {
     static constexpr std::uint32_t kFirstDivisor = 2;
     /// No drawn edge is made shorter than this (unless the request's is).
     static constexpr std::uint32_t kMinEdge = 16;
+    /// The level drawn last is kept while its smallest image is expected within this many
+    /// times the target (choose()).
+    static constexpr double kLevelStickiness = 2.0;
 
     /// `targetMs` > 0: the time an interactive frame should take, unless choose() is told
     /// another (a session's own target, SetFrameBudget).
@@ -92,6 +97,7 @@ class InteractiveBudget {
     using Key = std::tuple<std::string, std::string, std::uint32_t>;
     double mTargetMs;
     std::map<Key, double> mMsPerPixel;
+    std::map<std::pair<std::string, std::string>, std::uint32_t> mLastLevel;
 };
 
 } // namespace bc::server

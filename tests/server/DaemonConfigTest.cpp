@@ -92,7 +92,7 @@ rest_ms = 0
 write_queue = 16
 prefetch = false
 cache_mb = 0
-interactive_ms = 66
+interactive_ms = 40
 )") + kVolume + "description = \"d\"\n");
     EXPECT_EQ(c.listenHost, "::1");
     EXPECT_EQ(c.listenPort, 0);
@@ -111,7 +111,7 @@ interactive_ms = 66
     EXPECT_EQ(c.writeQueueFrames, 16u);
     EXPECT_FALSE(c.prefetch);
     EXPECT_EQ(c.frameCacheBytes, 0u);
-    EXPECT_EQ(c.interactiveMs, 66u);
+    EXPECT_EQ(c.interactiveMs, 40u);
     EXPECT_EQ(c.volumes.at(0).description, "d");
 }
 

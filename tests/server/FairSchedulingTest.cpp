@@ -36,6 +36,7 @@ class FairScheduling : public ::testing::Test {
     }
     static DaemonConfig config() {
         DaemonConfig c;
+        c.interactiveMs = 0; // interactive frames at half size, as the tests compare
         c.source = "<test>";
         CatalogEntry e;
         e.name = "cthead";

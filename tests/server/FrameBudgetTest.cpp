@@ -172,6 +172,30 @@ TEST(FrameBudget, AfterASlowFrameTheBudgetComesBackToTheLevelItLeft) {
     EXPECT_EQ(frames.back().divisor, 2u);
 }
 
+TEST(FrameBudget, TheLevelDrawnLastIsKeptWhileItsSmallestImageIsWithinTwiceTheTarget) {
+    const LevelRange two{0, 1, {}};
+    const double pixels64 = 64.0 * 64.0; // 512^2 over 8
+    // Level 0's smallest image at 1.5 x the target: kept (level 1 would have to load its
+    // bricks); at 2.5 x: level 1.
+    for (const auto& [times, level] : {std::pair<double, std::uint32_t>{1.5, 0}, {2.5, 1}}) {
+        InteractiveBudget budget(66);
+        budget.record("v", "cpu", 0, 4096, times * 66.0);
+        const InteractiveChoice c = budget.choose("v", "cpu", 512, 512, two);
+        EXPECT_EQ(c.level, level) << times << " x the target";
+        if (level == 0) {
+            EXPECT_EQ(c.divisor, 8u);
+            EXPECT_NEAR(c.expectedMs, times * 66.0 * pixels64 / 4096.0, 1e-9);
+        }
+    }
+    // Not drawn last: a level is taken only within the target.
+    InteractiveBudget budget(66);
+    budget.record("v", "cpu", 0, 4096, 1.5 * 66.0);
+    // Level 1 drawn last, as fast as level 0 predicts (nothing moves): level 0 must now meet
+    // the target, and does not.
+    budget.record("v", "cpu", 1, 4096, 1.5 * 66.0 / 2.0);
+    EXPECT_EQ(budget.choose("v", "cpu", 512, 512, two).level, 1u);
+}
+
 TEST(FrameBudget, TimeWaitingForBricksIsNotTakenForTheRays) {
     InteractiveBudget budget(66);
     budget.record("v", "cpu", 0, 1000, 500.0, 490.0); // a cold frame: 490 ms of loading

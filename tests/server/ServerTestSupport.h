@@ -62,6 +62,9 @@ inline DaemonConfig generatedConfig(const TempDir& dir,
     DaemonConfig c;
     c.source = "<test>";
     c.storeDir = dir.path().string();
+    // Interactive frames at half size, exactly (tests that compare them with direct renders);
+    // tests of the frame-time budget set their own.
+    c.interactiveMs = 0;
     for (auto& [name, edge] : phantoms) {
         CatalogEntry e;
         e.name = name;

@@ -22,7 +22,8 @@
 // flight, rests: the time from its last camera to the refined pass whose estimated PSNR
 // reaches DB is measured, and that frame is compared with the true image, which the same
 // server draws at that camera with the CPU raycaster at --truth-step voxels, without jitter or
-// early termination. The first --warmup frames of each client are left out of the report.
+// early termination, once every client has rested (it would take turns with their passes).
+// The first --warmup frames of each client are left out of the report.
 #include "client/Client.h"
 #include "client/Error.h"
 #include "client/Orbit.h"
@@ -39,6 +40,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <latch>
 #include <map>
 #include <mutex>
 #include <random>
@@ -236,12 +238,33 @@ void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, do
                 tools::formatBytes(d.of("frame_bytes_total", "")).c_str(), failures);
 }
 
+/// Each client's one turn at a latch, whatever happens to it: arrive() waits for the others;
+/// a client that never gets there (it failed, or does not rest) counts down as it ends.
+class LatchTurn {
+  public:
+    explicit LatchTurn(std::latch& latch) : mLatch(latch) {}
+    ~LatchTurn() {
+        if (!mDone) mLatch.count_down();
+    }
+    LatchTurn(const LatchTurn&) = delete;
+    LatchTurn& operator=(const LatchTurn&) = delete;
+    void arrive() {
+        if (mDone) return;
+        mDone = true;
+        mLatch.arrive_and_wait();
+    }
+
+  private:
+    std::latch& mLatch;
+    bool mDone = false;
+};
+
 /// After a client's flight: waits, with the camera at rest, for the refinement pass whose estimate
 /// reaches --rest-psnr (or the last pass the server draws), then has the server draw the true
 /// image at that camera and measures the pass against it.
 RestRow restAndCompare(const LoadtestOptions& o, const protocol::RenderOptions& ro,
                        client::Client& c, std::uint32_t index, std::uint32_t camera,
-                       Clock::time_point lastSent) {
+                       Clock::time_point lastSent, LatchTurn& rested) {
     RestRow rest;
     rest.client = index;
     // The passes the server draws: the session's step, halved while not finer than 1/16.
@@ -264,6 +287,9 @@ RestRow restAndCompare(const LoadtestOptions& o, const protocol::RenderOptions& 
         }
     }
     c.requestFrame(protocol::FrameMode::ContinuousOff);
+    // The true images (long frames) only once every client has rested: they would take turns
+    // with the others' frames at rest.
+    rested.arrive();
     protocol::RenderOptions truth = ro;
     truth.quality = protocol::Quality::Refined;
     truth.renderer = protocol::Renderer::CpuRaycaster;
@@ -357,10 +383,12 @@ void runLoadtest(const LoadtestOptions& o) {
     std::vector<RestRow> rests;
     std::vector<std::string> errors;
     std::vector<std::thread> threads;
+    std::latch rested(o.clients);
     for (std::uint32_t i = 0; i < o.clients; ++i)
         threads.emplace_back([&, i] {
             const std::string path = paths[i % paths.size()];
             std::vector<FrameRow> mine;
+            LatchTurn turn(rested);
             try {
                 client::Client c(cc);
                 const auto v = c.openVolume(o.volume);
@@ -418,7 +446,7 @@ void runLoadtest(const LoadtestOptions& o) {
                     mine.push_back(r);
                 }
                 if (adaptive && o.restPsnrDb > 0 && lastCamera > 0) {
-                    RestRow rest = restAndCompare(o, ro, c, i, lastCamera, lastSent);
+                    RestRow rest = restAndCompare(o, ro, c, i, lastCamera, lastSent, turn);
                     const double flightS =
                         std::chrono::duration<double>(lastArrival - flightStart).count();
                     rest.movingFps = flightS > 0 ? double(intervals.size()) / flightS : 0.0;
