@@ -926,10 +926,7 @@ LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions
         const std::uint32_t l = std::min<std::uint32_t>(o.level, levels - 1);
         return {l, l, {}};
     }
-    const brickstore::BrickGeometry& g = layout.geometry();
-    const double edge = double(g.brickVoxels + 2 * g.apronVoxels);
-    const double brickBytes =
-        edge * edge * edge * double(brickstore::voxelBytes(volume.store->info().volume.type));
+    const double brickBytes = double(volume.store->brickBytes());
     const double share = double(volume.cache->stats().budgetBytes);
     LevelRange range{0, levels - 1, {}};
     for (std::uint32_t l = 0; l < levels; ++l)

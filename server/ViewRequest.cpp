@@ -85,12 +85,6 @@ bool shadingFor(const protocol::RenderOptions& options,
     return tf.shading().value_or(true);
 }
 
-std::vector<std::uint8_t> interactiveUpscale(const std::vector<std::uint8_t>& half,
-                                             std::uint32_t halfWidth, std::uint32_t halfHeight,
-                                             std::uint32_t width, std::uint32_t height) {
-    return upscaleBy(half, halfWidth, halfHeight, width, height, 2);
-}
-
 std::vector<std::uint8_t> upscaleBy(const std::vector<std::uint8_t>& drawn,
                                     std::uint32_t drawnWidth, std::uint32_t drawnHeight,
                                     std::uint32_t width, std::uint32_t height,

@@ -43,12 +43,6 @@ toTransferFunction(const protocol::SetTransferFunction& message,
 bool shadingFor(const protocol::RenderOptions& options,
                 const protocol::SetTransferFunction& tfMessage, const render::TransferFunction& tf);
 
-/// An interactive frame (8-bit RGBA, halfWidth x halfHeight) brought back to the requested
-/// size (pixel replication, exact): upscaleBy(..., 2).
-std::vector<std::uint8_t> interactiveUpscale(const std::vector<std::uint8_t>& half,
-                                             std::uint32_t halfWidth, std::uint32_t halfHeight,
-                                             std::uint32_t width, std::uint32_t height);
-
 /// A frame drawn at ceil(width / divisor) x ceil(height / divisor) (8-bit RGBA, `drawnWidth` x
 /// `drawnHeight`) brought back to width x height: each drawn pixel replicated divisor x divisor
 /// times (the last row and column clipped).

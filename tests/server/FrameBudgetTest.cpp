@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 namespace bc::server {
@@ -247,23 +248,26 @@ TEST(FrameBudget, NoDrawnEdgeBelowTheMinimum) {
 }
 
 TEST(FrameBudget, UpscaleReplicatesEachDrawnPixel) {
-    // 5x3 drawn at divisor 3 for a 13x7 request: pixel (x, y) is drawn (x / 3, y / 3), the
-    // last row and column clipped to the drawn image.
-    const std::uint32_t dw = 5, dh = 3, w = 13, h = 7;
+    // 5x3 drawn at divisor 3 for a 13x7 request, and at divisor 2 (the half-size frames) for a
+    // 10x6 one: pixel (x, y) is drawn (x / d, y / d), the last row and column clipped to the
+    // drawn image.
+    const std::uint32_t dw = 5, dh = 3;
     std::vector<std::uint8_t> drawn(dw * dh * 4);
     for (std::uint32_t i = 0; i < dw * dh; ++i)
         for (int c = 0; c < 4; ++c)
             drawn[4 * i + c] = std::uint8_t(10 * i + c);
-    const std::vector<std::uint8_t> out = upscaleBy(drawn, dw, dh, w, h, 3);
-    ASSERT_EQ(out.size(), std::size_t(w) * h * 4);
-    for (std::uint32_t y = 0; y < h; ++y)
-        for (std::uint32_t x = 0; x < w; ++x) {
-            const std::uint32_t from = std::min(y / 3, dh - 1) * dw + std::min(x / 3, dw - 1);
-            for (int c = 0; c < 4; ++c)
-                ASSERT_EQ(out[(y * w + x) * 4 + c], drawn[4 * from + c]) << x << "," << y;
-        }
-    // Divisor 2 is the half-size frames' upscale, unchanged.
-    EXPECT_EQ(upscaleBy(drawn, dw, dh, 10, 6, 2), interactiveUpscale(drawn, dw, dh, 10, 6));
+    for (const auto& [d, w, h] :
+         {std::tuple<std::uint32_t, std::uint32_t, std::uint32_t>{3, 13, 7}, {2, 10, 6}}) {
+        const std::vector<std::uint8_t> out = upscaleBy(drawn, dw, dh, w, h, d);
+        ASSERT_EQ(out.size(), std::size_t(w) * h * 4);
+        for (std::uint32_t y = 0; y < h; ++y)
+            for (std::uint32_t x = 0; x < w; ++x) {
+                const std::uint32_t from = std::min(y / d, dh - 1) * dw + std::min(x / d, dw - 1);
+                for (int c = 0; c < 4; ++c)
+                    ASSERT_EQ(out[(y * w + x) * 4 + c], drawn[4 * from + c])
+                        << "divisor " << d << ": " << x << "," << y;
+            }
+    }
 }
 
 /// Interactive frames of a session at 65x47, sent as drawn: their drawn sizes, under the
