@@ -60,9 +60,8 @@ CacheEntry& CacheCore::load(std::unique_lock<std::mutex>& lock, const BrickKey& 
     ++mStats.misses; // a load that then fails was still a miss
     std::vector<std::byte> data;
     if (!mSpare.empty()) { // an evicted brick's buffer: no allocation, no allocator growth
-        data = std::move(mSpare.back());
+        data = std::move(mSpare.back()); // its old bytes: the loader overwrites them
         mSpare.pop_back();
-        data.clear();
     }
     lock.unlock();
     try {
@@ -98,12 +97,21 @@ CacheEntry* CacheCore::tryPin(const BrickKey& key) {
     return &it->second;
 }
 
-void CacheCore::unpin(CacheEntry& entry) {
+bool CacheCore::resident(const BrickKey& key) const {
+    std::lock_guard lock(mMutex);
+    auto it = mEntries.find(key);
+    return it != mEntries.end() && it->second.state == EntryState::Ready;
+}
+
+void CacheCore::unpin(CacheEntry& entry, bool cold) {
     std::lock_guard lock(mMutex);
     assert(entry.pinCount > 0);
     if (--entry.pinCount > 0) return;
     mStats.pinnedBytes -= entry.data.size();
-    lruPushBack(entry);
+    if (cold)
+        lruPushFront(entry);
+    else
+        lruPushBack(entry);
     evictToBudget();
 }
 
@@ -136,6 +144,14 @@ void CacheCore::lruPushBack(CacheEntry& entry) {
     entry.lruNext = nullptr;
     (mLruTail ? mLruTail->lruNext : mLruHead) = &entry;
     mLruTail = &entry;
+    entry.inLru = true;
+}
+
+void CacheCore::lruPushFront(CacheEntry& entry) {
+    entry.lruPrev = nullptr;
+    entry.lruNext = mLruHead;
+    (mLruHead ? mLruHead->lruPrev : mLruTail) = &entry;
+    mLruHead = &entry;
     entry.inLru = true;
 }
 
@@ -204,6 +220,13 @@ void BrickPin::release() {
     mEntry = nullptr;
 }
 
+void BrickPin::releaseCold() {
+    if (mEntry == nullptr) return;
+    mCore->unpin(*mEntry, true);
+    mCore = nullptr;
+    mEntry = nullptr;
+}
+
 // --- BrickCache ---
 
 BrickCache::BrickCache(Loader loader, BrickCacheConfig config)
@@ -227,6 +250,10 @@ std::optional<BrickPin> BrickCache::tryPin(const BrickKey& key) {
     detail::CacheEntry* entry = mCore->tryPin(key);
     if (entry == nullptr) return std::nullopt;
     return BrickPin(mCore.get(), entry);
+}
+
+bool BrickCache::resident(const BrickKey& key) const {
+    return mCore->resident(key);
 }
 
 void BrickCache::setBudgetBytes(std::uint64_t budgetBytes) {

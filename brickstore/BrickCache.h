@@ -61,6 +61,11 @@ class BrickPin {
     /// The brick's stored voxels ((B+2A)^3, native type, x fastest).
     std::span<const std::byte> data() const;
     explicit operator bool() const { return mEntry != nullptr; }
+    /// Unpins now, the brick going to the front of the eviction order rather than the back
+    /// (once no other pin holds it): the first to go when the cache needs room. How a reader
+    /// streaming more bricks than the budget holds keeps the ones it read first, which its
+    /// next pass reads first, instead of evicting each just before it is wanted again.
+    void releaseCold();
 
   private:
     friend class BrickCache;
@@ -72,7 +77,9 @@ class BrickPin {
 
 class BrickCache {
   public:
-    /// Sizes `out` and fills it with brick `key`; may throw (StoreCorrupt).
+    /// Sizes `out` and fills it with brick `key`; may throw (StoreCorrupt). `out` may be an
+    /// evicted brick's buffer, sized and holding its bytes: the loader writes every byte (not
+    /// clearing it first spares a memset of each brick loaded).
     using Loader = std::function<void(const BrickKey& key, std::vector<std::byte>& out)>;
 
     BrickCache(Loader loader, BrickCacheConfig config);
@@ -87,6 +94,9 @@ class BrickCache {
     BrickPin pin(const BrickKey& key);
     /// The brick only if resident (counts a hit), else nullopt (counts nothing).
     std::optional<BrickPin> tryPin(const BrickKey& key);
+    /// Whether the brick is loaded now (pinning it would not load it). Counts nothing and
+    /// leaves its place in the LRU order; another thread may evict it right after.
+    bool resident(const BrickKey& key) const;
     /// Changes the budget; evicts unpinned bricks down to it.
     void setBudgetBytes(std::uint64_t budgetBytes);
     BrickCacheStats stats() const;

@@ -99,7 +99,7 @@ enum Technique : std::uint32_t {
     kTechEarlyTermination = 1u << 2,
     kTechOcclusionFrustums = 1u << 3, ///< needs kTechBrickSkipping
     kTechShading = 1u << 4,
-    kTechRayGuided = 1u << 5, ///< GPU raycaster: defer bricks behind saturated rays
+    kTechRayGuided = 1u << 5, ///< raycasters: load no brick behind saturated rays
     /// Raycasters: jittered ray starts (render::RenderOptions::jitter): fine noise instead of a
     /// fixed lattice's wood-grain rings; on by default (bench/frontier/README.md says why).
     kTechJitter = 1u << 6,

@@ -247,15 +247,26 @@ BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometr
 
 std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,
                                      std::uint64_t budgetBytes) {
+    return planBatches(plan, brickBytes, budgetBytes, {}, 0);
+}
+
+std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,
+                                     std::uint64_t budgetBytes,
+                                     const std::vector<std::uint8_t>& missing,
+                                     std::uint64_t loadBytes) {
     std::vector<std::size_t> ends;
-    std::uint64_t bytes = 0;
+    std::uint64_t bytes = 0, loads = 0;
     for (std::size_t i = 0; i < plan.drawn.size(); ++i) {
         if (plan.drawn[i].draw != BrickDraw::Sampled) continue;
-        if (bytes > 0 && bytes + brickBytes > budgetBytes) {
+        const bool load = i < missing.size() && missing[i] != 0;
+        if (bytes > 0 && (bytes + brickBytes > budgetBytes ||
+                          (load && loadBytes > 0 && loads + brickBytes > loadBytes))) {
             ends.push_back(i);
             bytes = 0;
+            loads = 0;
         }
         bytes += brickBytes;
+        if (load) loads += brickBytes;
     }
     ends.push_back(plan.drawn.size());
     return ends;

@@ -86,6 +86,15 @@ BrickPlan planEveryBrick(const brickstore::BrickStore& store, const LevelGeometr
 /// so a ray meets the bricks of batch b before those of batch b + 1.
 std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,
                                      std::uint64_t budgetBytes);
+/// planBatches, and a batch also ends once it holds `loadBytes` of bricks to load
+/// (`missing[i]` for plan.drawn[i]; 0 = no such limit). Between two batches a renderer learns
+/// which rays are still marching, and can leave out the later bricks that none of them can
+/// reach (the CPU raycaster's ray guidance): the smaller the steps its loads come in, the
+/// more of them it can leave out.
+std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickBytes,
+                                     std::uint64_t budgetBytes,
+                                     const std::vector<std::uint8_t>& missing,
+                                     std::uint64_t loadBytes);
 
 /// The plan's brick counts and `level` into a frame's stats.
 void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats);

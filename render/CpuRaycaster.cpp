@@ -30,6 +30,11 @@
 namespace bc::render {
 namespace {
 
+/// Ray guidance: the bricks a frame loads come in about this many batches, of at least
+/// kGuidedStepBricks bricks each (fewer batches cost fewer passes over the rays).
+constexpr std::uint64_t kGuidedSteps = 16;
+constexpr std::uint64_t kGuidedStepBricks = 16;
+
 using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
@@ -291,17 +296,20 @@ Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height,
     return image;
 }
 
-/// Pins plan.drawn[first, end) (decompressing misses on every core) and points their refs at
-/// the voxels; the pins are the batch's and go when it is drawn.
+/// Pins plan.drawn[first, end) but those `unreached` marks (decompressing misses on every
+/// core) and points their refs at the voxels; the pins are the batch's and go when it is
+/// drawn.
 std::vector<brickstore::BrickPin> pinBatch(const BrickPlan& plan, std::size_t first,
-                                           std::size_t end, brickstore::BrickCache& cache,
+                                           std::size_t end,
+                                           const std::vector<std::uint8_t>& unreached,
+                                           brickstore::BrickCache& cache,
                                            std::vector<BrickRef>& bricks) {
     std::vector<brickstore::BrickPin> pins(end - first);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(first, end),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t i = r.begin(); i != r.end(); ++i) {
                               const PlannedBrick& b = plan.drawn[i];
-                              if (b.draw != BrickDraw::Sampled) continue;
+                              if (b.draw != BrickDraw::Sampled || unreached[i]) continue;
                               pins[i - first] = cache.pin(b.key);
                               bricks[b.index].voxels = pins[i - first].data().data();
                           }
@@ -311,7 +319,8 @@ std::vector<brickstore::BrickPin> pinBatch(const BrickPlan& plan, std::size_t fi
 
 /// The distance maps (FineOccupancy) of the batch's sampled bricks, built from their pinned
 /// voxels where a frame has not yet; their offsets into the pool go to their refs.
-void cellsOfBatch(const BrickPlan& plan, std::size_t first, std::size_t end, FineOccupancy& fine,
+void cellsOfBatch(const BrickPlan& plan, std::size_t first, std::size_t end,
+                  const std::vector<std::uint8_t>& unreached, FineOccupancy& fine,
                   brickstore::VoxelType type, const Frame& f, std::vector<BrickRef>& bricks,
                   FrameStats& stats) {
     const FineOccupancyStats before = fine.stats();
@@ -320,13 +329,124 @@ void cellsOfBatch(const BrickPlan& plan, std::size_t first, std::size_t end, Fin
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t i = r.begin(); i != r.end(); ++i) {
                               const PlannedBrick& b = plan.drawn[i];
-                              if (b.draw != BrickDraw::Sampled) continue;
+                              if (b.draw != BrickDraw::Sampled || unreached[i]) continue;
                               BrickRef& ref = bricks[b.index];
                               ref.fine = fine.offsetOf(b.index, ref.voxels, type, f.brick, f.apron);
                               if (ref.fine != 0) ++withCells;
                           }
                       });
     fine.addFrameCost(before, withCells, stats);
+}
+
+/// The rays still marching (waiting for a later batch) after a pass, for ray guidance: a
+/// summed-area table of them over `marched` (image coordinates), so that whether a rectangle
+/// holds any takes four reads, and then which of them meet a box.
+class MarchingRays {
+  public:
+    MarchingRays(const RayStates& rays, const PixelRect& region, const PixelRect& marched)
+        : mRays(rays), mRegion(region), mRect(marched), mStride(std::size_t(marched.width) + 1),
+          mSum(mStride * (std::size_t(marched.height) + 1), 0) {
+        for (std::uint32_t y = 0; y < marched.height; ++y) {
+            std::uint32_t line = 0;
+            for (std::uint32_t x = 0; x < marched.width; ++x) {
+                line += marching(marched.x + x, marched.y + y) ? 1u : 0u;
+                mSum[(y + 1) * mStride + x + 1] = mSum[y * mStride + x + 1] + line;
+            }
+        }
+    }
+
+    /// Whether a ray still marching, of a pixel of `r` (image coordinates), passes within a
+    /// voxel of the box [lo, hi] (voxels of the level): the ray as RayWalk::begin sets it up,
+    /// the voxel of margin for the floats of its walk.
+    bool anyMeets(const Frame& f, const PixelRect& r, glm::vec3 lo, glm::vec3 hi) const {
+        const std::optional<PixelRect> in = overlap(r, mRect);
+        if (!in || !any(*in)) return false;
+        lo -= 1.0f;
+        hi += 1.0f;
+        for (std::uint32_t y = in->y; y < in->y + in->height; ++y)
+            for (std::uint32_t x = in->x; x < in->x + in->width; ++x) {
+                if (!marching(x, y)) continue;
+                const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
+                const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
+                const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
+                const glm::vec3 d =
+                    f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
+                if (meets(o * f.invSpacing, d * f.invSpacing, lo, hi)) return true;
+            }
+        return false;
+    }
+
+  private:
+    bool marching(std::uint32_t x, std::uint32_t y) const {
+        const std::size_t i = std::size_t(y - mRegion.y) * mRegion.width + (x - mRegion.x);
+        return mRays[i].phase == detail::RayPhase::Waiting;
+    }
+    /// `in` lies within mRect.
+    bool any(const PixelRect& in) const {
+        const std::size_t x0 = in.x - mRect.x, y0 = in.y - mRect.y;
+        const std::size_t x1 = x0 + in.width, y1 = y0 + in.height;
+        return mSum[y1 * mStride + x1] + mSum[y0 * mStride + x0] !=
+               mSum[y0 * mStride + x1] + mSum[y1 * mStride + x0];
+    }
+    /// Whether the ray o + t dv, t >= 0, meets the box [lo, hi] (slabs).
+    static bool meets(glm::vec3 o, glm::vec3 dv, glm::vec3 lo, glm::vec3 hi) {
+        float t0 = 0.0f, t1 = 3.0e38f;
+        for (int a = 0; a < 3; ++a) {
+            if (dv[a] == 0.0f) {
+                if (o[a] < lo[a] || o[a] > hi[a]) return false;
+                continue;
+            }
+            const float inv = 1.0f / dv[a];
+            const float ta = (lo[a] - o[a]) * inv, tb = (hi[a] - o[a]) * inv;
+            t0 = std::max(t0, std::min(ta, tb));
+            t1 = std::min(t1, std::max(ta, tb));
+        }
+        return t0 <= t1;
+    }
+
+    const RayStates& mRays;
+    PixelRect mRegion, mRect;
+    std::size_t mStride;
+    std::vector<std::uint32_t> mSum;
+};
+
+/// Ray guidance (RenderOptions::rayGuided): marks in `unreached` the sampled bricks of
+/// plan.drawn[first, end) that no ray still marching meets (every ray of their footprint has
+/// terminated early, left the volume or misses the brick). A ray meets the bricks of later
+/// batches only after those it waits for, so no ray would sample them: they are not loaded.
+/// Returns how many it marked.
+std::uint64_t markUnreached(const LevelGeometry& g, const BrickPlan& plan, std::size_t first,
+                            std::size_t end, const View& view, const Frame& f,
+                            const MarchingRays& marching, std::vector<std::uint8_t>& unreached) {
+    std::atomic<std::uint64_t> n{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(first, end, 8), [&](const tbb::blocked_range<
+                                                                          std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            const PlannedBrick& b = plan.drawn[i];
+            if (b.draw != BrickDraw::Sampled) continue;
+            const auto& p = b.key.pos;
+            const Footprint fp = footprint(g, BrickBox{p, {p[0] + 1, p[1] + 1, p[2] + 1}}, view);
+            const glm::vec3 lo = glm::vec3(p[0], p[1], p[2]) * float(f.brick);
+            if (fp.visible && marching.anyMeets(f, fp.rect, lo, lo + float(f.brick))) continue;
+            unreached[i] = 1;
+            ++n;
+        }
+    });
+    return n;
+}
+
+/// Ray guidance's batches: plan.drawn's sampled bricks that are not resident now.
+std::vector<std::uint8_t> missingBricks(const BrickPlan& plan, const brickstore::BrickCache& cache,
+                                        std::uint64_t& count) {
+    std::vector<std::uint8_t> missing(plan.drawn.size(), 0);
+    count = 0;
+    for (std::size_t i = 0; i < plan.drawn.size(); ++i) {
+        const PlannedBrick& b = plan.drawn[i];
+        if (b.draw != BrickDraw::Sampled || cache.resident(b.key)) continue;
+        missing[i] = 1;
+        ++count;
+    }
+    return missing;
 }
 
 } // namespace
@@ -370,7 +490,27 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
 
     // Batches of the front-to-back order whose bricks fit the host budget, drawn one after
     // the other, each pinned only while it is drawn (the cache can then evict behind it).
-    const auto ends = planBatches(plan, store.brickBytes(), cache.stats().budgetBytes);
+    // Ray guidance: the bricks to load come in about kGuidedSteps batches, and a later batch's
+    // bricks that no ray still marching can enter are left out (markUnreached).
+    std::uint64_t toLoad = 0;
+    const std::vector<std::uint8_t> missing =
+        options.rayGuided ? missingBricks(plan, cache, toLoad) : std::vector<std::uint8_t>{};
+    const std::uint64_t loadStep =
+        options.rayGuided
+            ? std::max(toLoad / kGuidedSteps, std::uint64_t(kGuidedStepBricks)) * store.brickBytes()
+            : 0;
+    const auto ends =
+        planBatches(plan, store.brickBytes(), cache.stats().budgetBytes, missing, loadStep);
+    std::vector<std::uint8_t> unreached(plan.drawn.size(), 0);
+    // A frame whose bricks outgrow the budget streams them: it keeps its front bricks (with
+    // its earlier slices'), as many as leave room for two batches of loads, and lets the
+    // others go first when the cache needs room. The next pass of this view (or of one near
+    // it) then starts on resident bricks; under plain LRU each brick would be evicted just
+    // before that pass wanted it.
+    const std::uint64_t budget = cache.stats().budgetBytes;
+    const std::uint64_t room = 2 * std::max(loadStep, kGuidedStepBricks * store.brickBytes());
+    const std::uint64_t keepBytes = budget - std::min(budget, room);
+    std::uint64_t keptBytes = options.hostKeptBefore;
     stats.batches = std::uint32_t(ends.size());
     std::vector<BrickRef> bricks = brickRefs(plan, ends, g.brickCount());
     Frame f = frameOf(g, view.basis, options, table);
@@ -404,18 +544,33 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     std::vector<detail::Front> fronts(f.pre ? region.pixels() : 0);
     RayCount count;
     for (std::size_t batch = 0, first = 0; batch < ends.size(); first = ends[batch++]) {
+        if (options.rayGuided && batch > 0 && marched.visible)
+            stats.bricksUnreached +=
+                markUnreached(g, plan, first, ends[batch], view, f,
+                              MarchingRays(rays, region, marched.rect), unreached);
         const auto loadStart = Clock::now();
-        std::vector<brickstore::BrickPin> pins = pinBatch(plan, first, ends[batch], cache, bricks);
+        std::vector<brickstore::BrickPin> pins =
+            pinBatch(plan, first, ends[batch], unreached, cache, bricks);
         stats.uploadMs += msSince(loadStart);
         if (fine)
-            cellsOfBatch(plan, first, ends[batch], *fine, store.info().volume.type, f, bricks,
-                         stats);
+            cellsOfBatch(plan, first, ends[batch], unreached, *fine, store.info().volume.type, f,
+                         bricks, stats);
         const auto renderStart = Clock::now();
         f.batch = std::uint32_t(batch);
         if (marched.visible)
             marchPassOfType(store.info().volume.type, f, region, marched.rect, rays, fronts, count);
         stats.renderMs += msSince(renderStart);
+        for (brickstore::BrickPin& pin : pins) {
+            if (!pin) continue;
+            if (keptBytes + store.brickBytes() <= keepBytes) {
+                keptBytes += store.brickBytes();
+                pin = {};
+            } else {
+                pin.releaseCold();
+            }
+        }
     }
+    stats.hostKeptBytes = keptBytes - options.hostKeptBefore;
     stats.samples = count.samples;
     stats.octreeLeaps = count.leaps;
     stats.occlusionReason = "not on the CPU raycaster";

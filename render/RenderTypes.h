@@ -86,10 +86,12 @@ struct RenderOptions {
     /// Start rays at the previous frame's occlusion frustums (same raycaster, same scene).
     bool occlusionFrustums = true;
     OcclusionConfig occlusion;
-    /// GPU only: ray-guided residency (render/RESIDENCY.md). Bricks the last frame of the same
+    /// Ray-guided residency (render/RESIDENCY.md). GPU: bricks the last frame of the same
     /// scene planned but no unsaturated ray entered are not uploaded while the pool lacks them;
-    /// a ray that reaches one stops there and goes on in a further pass once it is loaded.
-    /// Images are those without it; only uploads and passes change.
+    /// a ray that reaches one stops there and goes on in a further pass once it is loaded. CPU
+    /// raycaster: the bricks to load come in smaller batches, and a batch's bricks that no ray
+    /// still marching meets are not loaded. Images are those without it; only loads, uploads
+    /// and passes change.
     bool rayGuided = true;
     /// Sort-last scale-out (render/Partition.h, render/SCALEOUT.md): with parts > 1, draw only
     /// the samples that lie in bricks of part `part` of the level's brick grid split into
@@ -101,6 +103,13 @@ struct RenderOptions {
     /// exactly the one-part frame's. The CPU raycaster draws parts; other renderers refuse.
     std::uint32_t parts = 1;
     std::uint32_t part = 0;
+    /// CPU raycaster: bytes of bricks this frame's earlier slices kept in the host cache
+    /// (their FrameStats::hostKeptBytes summed; 0 for a whole frame or its first slice). A
+    /// frame keeps the bricks it pins at the back of the eviction order until it has kept the
+    /// budget less two batches of loads, and lets the later ones go first: when its bricks
+    /// outgrow the budget, the next pass over the view then starts on resident bricks instead
+    /// of evicting each just before it is wanted (render/RESIDENCY.md).
+    std::uint64_t hostKeptBefore = 0;
 
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;
@@ -150,6 +159,13 @@ struct FrameStats {
     std::uint64_t bricksRequested = 0;
     std::uint32_t resumePasses = 0;
     bool guidedFallback = false;
+    /// CPU raycaster, rayGuided: planned bricks not loaded because no ray of their footprint
+    /// was still marching when their batch came (each had terminated early, left the volume or
+    /// been drawn); they would not have been sampled.
+    std::uint64_t bricksUnreached = 0;
+    /// CPU raycaster: bytes of the bricks it pinned that it left at the back of the host
+    /// cache's eviction order (RenderOptions::hostKeptBefore); the others went to the front.
+    std::uint64_t hostKeptBytes = 0;
     std::uint64_t octreeLeaps = 0;         ///< empty octree nodes leapt by rays
     std::uint64_t octreeBricksRebuilt = 0; ///< octrees rebuilt for this frame's TF (0: reused)
     double octreeRebuildMs = 0.0;

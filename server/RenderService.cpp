@@ -906,6 +906,8 @@ void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool
     total.bricksUploaded += slice.bricksUploaded;
     total.bytesUploaded += slice.bytesUploaded;
     total.batches += slice.batches;
+    total.bricksUnreached += slice.bricksUnreached;
+    total.hostKeptBytes += slice.hostKeptBytes;
     total.bricksCulled = std::min(total.bricksCulled, slice.bricksCulled);
     total.bricksSkipped = std::max(total.bricksSkipped, slice.bricksSkipped);
     total.bricksVisited = std::max(total.bricksVisited, slice.bricksVisited);
@@ -1061,6 +1063,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     double cost = 0;
     render::RenderOptions options = d.options;
     options.region = nextSlice(d, d.sliceTargetMs * perMs, cost);
+    options.hostKeptBefore = d.stats.hostKeptBytes; // the slices keep one frame's bricks
     render::FrameStats stats;
     const render::Image part = drawRegion(renderer, d, options, stats);
     paste(d.rgba8, d.options.width, part, options.region);

@@ -41,8 +41,10 @@ class CacheCore {
     CacheEntry& pin(const BrickKey& key);
     /// A ready entry with one more pin, or nullptr when `key` is not resident.
     CacheEntry* tryPin(const BrickKey& key);
-    /// Drops one pin; an entry left unpinned becomes the most recently used.
-    void unpin(CacheEntry& entry);
+    bool resident(const BrickKey& key) const;
+    /// Drops one pin; an entry left unpinned becomes the most recently used, or with `cold`
+    /// the least.
+    void unpin(CacheEntry& entry, bool cold = false);
     void setBudgetBytes(std::uint64_t budgetBytes);
     BrickCacheStats stats() const;
     void resetPinnedPeak();
@@ -51,6 +53,7 @@ class CacheCore {
     CacheEntry& load(std::unique_lock<std::mutex>& lock, const BrickKey& key);
     void addPin(CacheEntry& entry);
     void lruPushBack(CacheEntry& entry);
+    void lruPushFront(CacheEntry& entry);
     void lruRemove(CacheEntry& entry);
     /// Evicts unpinned entries, least recently used first, until resident <= budget.
     void evictToBudget();

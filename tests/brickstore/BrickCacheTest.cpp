@@ -146,6 +146,57 @@ TEST(BrickCacheTest, EvictsLeastRecentlyUsedUnpinnedBrick) {
     EXPECT_EQ(fake.calls, 5);
 }
 
+// A brick let go cold is the first to go, ahead of older ones; resident() says what is
+// loaded without counting or moving anything.
+TEST(BrickCacheTest, ColdReleasedBrickIsEvictedFirstAndResidentCountsNothing) {
+    FakeLoader fake;
+    BrickCache cache(fake.loader(), budgetOf(3));
+    {
+        BrickPin a = cache.pin(keyOf(0));
+        BrickPin b = cache.pin(keyOf(1));
+        BrickPin c = cache.pin(keyOf(2));
+        a = {};          // order, least recent first: 0
+        b.releaseCold(); // 1 0
+        EXPECT_FALSE(b); // released
+        b.releaseCold(); // a second time does nothing
+    }                    // 1 0 2
+    const BrickCacheStats before = cache.stats();
+    for (std::uint32_t i : {0u, 1u, 2u})
+        EXPECT_TRUE(cache.resident(keyOf(i)));
+    EXPECT_FALSE(cache.resident(keyOf(3)));
+    EXPECT_EQ(cache.stats().hits, before.hits);
+    EXPECT_EQ(cache.stats().misses, before.misses);
+    cache.pin(keyOf(3)); // evicts 1, the cold one, though 0 is older
+    EXPECT_FALSE(cache.resident(keyOf(1)));
+    EXPECT_TRUE(cache.resident(keyOf(0)));
+    cache.pin(keyOf(4)); // then the least recent: 0 (resident() did not move it)
+    EXPECT_FALSE(cache.resident(keyOf(0)));
+    EXPECT_TRUE(cache.resident(keyOf(2)));
+    // A brick pinned twice goes cold only when its last pin goes, and as that pin says.
+    {
+        BrickPin x = cache.pin(keyOf(2));
+        BrickPin y = cache.pin(keyOf(2));
+        x.releaseCold();
+        y = {}; // the last pin: to the most recent end
+    }           // order: 3 4 2
+    cache.pin(keyOf(5));
+    EXPECT_FALSE(cache.resident(keyOf(3)));
+    EXPECT_TRUE(cache.resident(keyOf(2)));
+}
+
+// A reused buffer reaches the loader with an evicted brick's bytes; the brick loaded into it
+// holds its own bytes only.
+TEST(BrickCacheTest, BrickLoadedIntoAnEvictedBricksBufferHoldsOnlyItsOwnBytes) {
+    FakeLoader fake;
+    fake.variableSize = true; // a smaller brick into a larger brick's buffer, and back
+    BrickCache cache(fake.loader(), budgetOf(2));
+    for (std::uint32_t i : {9u, 1u, 8u, 2u, 7u}) {
+        BrickPin pin = cache.pin(keyOf(i));
+        EXPECT_TRUE(holdsBytesOf(pin.data(), keyOf(i), kBrickBytes + 16 * i)) << i;
+    }
+    EXPECT_GE(cache.stats().evictions, 3u);
+}
+
 // A scripted path whose misses can be counted by hand: a cycle over four bricks through a
 // cache of three thrashes LRU (every access misses, and each brick's second load is a
 // re-fetch); the same cycle through a cache of four misses only the first time round.

@@ -51,8 +51,8 @@ struct RenderCliOptions {
                                ert = "0.99", skip = "all", statsPath, renderer = "auto";
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32, cells = render::RenderOptions{}.cellVoxels;
-    bool ortho = false, noShading = false, noSimd = false, noPackets = false, jitter = false,
-         preintegrate = false, reference = false, interactive = false, mpi = false,
+    bool ortho = false, noShading = false, noSimd = false, noPackets = false, noRayGuided = false,
+         jitter = false, preintegrate = false, reference = false, interactive = false, mpi = false,
          mpiBarrier = false;
     double mpiTimeoutS = 60.0;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
@@ -104,6 +104,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.shading = !o.noShading;
     r.simd = !o.noSimd;
     r.packets = !o.noPackets;
+    r.rayGuided = !o.noRayGuided;
     r.jitter = o.jitter;
     r.preintegrate = o.preintegrate;
     r.level = o.level;
@@ -138,6 +139,7 @@ nlohmann::json statsJson(const render::FrameStats& s, const std::string& rendere
             {"bricksDeferred", s.bricksDeferred},
             {"bricksRequested", s.bricksRequested},
             {"resumePasses", s.resumePasses},
+            {"bricksUnreached", s.bricksUnreached},
             {"guidedFallback", s.guidedFallback},
             {"octreeLeaps", s.octreeLeaps},
             {"octreeBricksRebuilt", s.octreeBricksRebuilt},
@@ -612,6 +614,10 @@ void addRenderCommand(CLI::App& app) {
                   "CPU raycaster: the scalar sample loop instead of the SIMD one (same image)");
     cmd->add_flag("--no-packets", o->noPackets,
                   "CPU raycaster: SIMD across one ray's samples instead of across rays (same "
+                  "image)");
+    cmd->add_flag("--no-ray-guided", o->noRayGuided,
+                  "Load every planned brick: the GPU raycaster uploads those the last frame "
+                  "found hidden, the CPU raycaster those no ray still marching can enter (same "
                   "image)");
     cmd->add_flag("--jitter", o->jitter,
                   "Start each ray's samples at a per-pixel offset (noise instead of rings)");

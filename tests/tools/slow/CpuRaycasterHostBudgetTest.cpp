@@ -17,9 +17,10 @@ namespace {
 // Measured on this store at 512^2 with a 1 MiB budget (one brick per batch): 72 MiB = the
 // process with the store's index (9 MiB), the classification's octree tables (46 MiB: 5184
 // bricks x 512 leaves x 17 B), the rays' state between batches and the image (17 MiB: 52 +
-// 16 B per pixel), the cache's spare buffers (at most 8 bricks, 5 MiB) and the rest. Stated
-// with room for other builds.
-constexpr long kFixedOverheadMiB = 80;
+// 16 B per pixel), the cache's spare buffers (at most 8 bricks, 5 MiB) and the rest; since
+// issue 21 also the classification's cell maps (FineOccupancy's pool, at most 64 MiB: 324 MiB
+// peak with --cells 0, 374-395 MiB with them at 256 MiB). Stated with room for other builds.
+constexpr long kFixedOverheadMiB = 160;
 // Bricks the cache evicts are reused for its next loads (CacheCore::mSpare): freed, they stayed
 // in glibc's per-thread arenas, 77 to 133 MiB over budget + fixed at 256 MiB.
 constexpr long kBudgetMiB = 256;
