@@ -491,12 +491,17 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     // Batches of the front-to-back order whose bricks fit the host budget, drawn one after
     // the other, each pinned only while it is drawn (the cache can then evict behind it).
     // Ray guidance: the bricks to load come in about kGuidedSteps batches, and a later batch's
-    // bricks that no ray still marching can enter are left out (markUnreached).
+    // bricks that no ray still marching can enter are left out (markUnreached). Only where the
+    // level outgrows the budget: where it fits, a brick loaded stays, and the next frames of a
+    // moving camera reach the bricks this frame's rays did not (left out, each would be loaded
+    // by a later frame of the flight instead of this one).
+    const bool guided =
+        options.rayGuided && g.brickCount() * store.brickBytes() > cache.stats().budgetBytes;
     std::uint64_t toLoad = 0;
     const std::vector<std::uint8_t> missing =
-        options.rayGuided ? missingBricks(plan, cache, toLoad) : std::vector<std::uint8_t>{};
+        guided ? missingBricks(plan, cache, toLoad) : std::vector<std::uint8_t>{};
     const std::uint64_t loadStep =
-        options.rayGuided
+        guided
             ? std::max(toLoad / kGuidedSteps, std::uint64_t(kGuidedStepBricks)) * store.brickBytes()
             : 0;
     const auto ends =
@@ -544,7 +549,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     std::vector<detail::Front> fronts(f.pre ? region.pixels() : 0);
     RayCount count;
     for (std::size_t batch = 0, first = 0; batch < ends.size(); first = ends[batch++]) {
-        if (options.rayGuided && batch > 0 && marched.visible)
+        if (guided && batch > 0 && marched.visible)
             stats.bricksUnreached +=
                 markUnreached(g, plan, first, ends[batch], view, f,
                               MarchingRays(rays, region, marched.rect), unreached);
