@@ -213,18 +213,15 @@ std::span<const std::byte> BrickPin::data() const {
     return mEntry->data;
 }
 
-void BrickPin::release() {
+void BrickPin::release(bool cold) {
     if (mEntry == nullptr) return;
-    mCore->unpin(*mEntry);
+    mCore->unpin(*mEntry, cold);
     mCore = nullptr;
     mEntry = nullptr;
 }
 
 void BrickPin::releaseCold() {
-    if (mEntry == nullptr) return;
-    mCore->unpin(*mEntry, true);
-    mCore = nullptr;
-    mEntry = nullptr;
+    release(true);
 }
 
 // --- BrickCache ---

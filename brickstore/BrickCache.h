@@ -70,7 +70,7 @@ class BrickPin {
   private:
     friend class BrickCache;
     BrickPin(detail::CacheCore* core, detail::CacheEntry* entry) : mCore(core), mEntry(entry) {}
-    void release();
+    void release(bool cold = false);
     detail::CacheCore* mCore = nullptr;
     detail::CacheEntry* mEntry = nullptr;
 };

@@ -26,6 +26,10 @@
 
 namespace bc::server {
 
+// The highest bound a client may ask for at rest is the highest estimate a pass can carry: the
+// protocol cannot see the estimator (the module rules), so the two are checked here.
+static_assert(double(protocol::kMaxRestPsnrDb) == render::kMaxEstimateDb);
+
 namespace {
 
 double msSince(Clock::time_point t) {
