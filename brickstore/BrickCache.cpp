@@ -82,6 +82,8 @@ CacheEntry& CacheCore::load(std::unique_lock<std::mutex>& lock, const BrickKey& 
     }
     mStats.residentBytes += entry.data.size();
     ++mStats.residentBricks;
+    if (key.level >= mLevelBytes.size()) mLevelBytes.resize(key.level + 1, 0);
+    mLevelBytes[key.level] += entry.data.size();
     addPin(entry);
     evictToBudget();
     mLoadDone.notify_all();
@@ -101,6 +103,11 @@ bool CacheCore::resident(const BrickKey& key) const {
     std::lock_guard lock(mMutex);
     auto it = mEntries.find(key);
     return it != mEntries.end() && it->second.state == EntryState::Ready;
+}
+
+std::uint64_t CacheCore::residentBytes(std::uint32_t level) const {
+    std::lock_guard lock(mMutex);
+    return level < mLevelBytes.size() ? mLevelBytes[level] : 0;
 }
 
 void CacheCore::unpin(CacheEntry& entry, bool cold) {
@@ -171,6 +178,7 @@ void CacheCore::evictToBudget() {
         lruRemove(victim);
         const std::uint64_t bytes = victim.data.size();
         mStats.residentBytes -= bytes;
+        mLevelBytes[victim.key.level] -= bytes;
         mStats.bytesEvicted += bytes;
         --mStats.residentBricks;
         ++mStats.evictions;
@@ -251,6 +259,10 @@ std::optional<BrickPin> BrickCache::tryPin(const BrickKey& key) {
 
 bool BrickCache::resident(const BrickKey& key) const {
     return mCore->resident(key);
+}
+
+std::uint64_t BrickCache::residentBytes(std::uint32_t level) const {
+    return mCore->residentBytes(level);
 }
 
 void BrickCache::setBudgetBytes(std::uint64_t budgetBytes) {

@@ -97,6 +97,8 @@ class BrickCache {
     /// Whether the brick is loaded now (pinning it would not load it). Counts nothing and
     /// leaves its place in the LRU order; another thread may evict it right after.
     bool resident(const BrickKey& key) const;
+    /// Bytes of `level`'s bricks loaded now (how warm a pyramid level is).
+    std::uint64_t residentBytes(std::uint32_t level) const;
     /// Changes the budget; evicts unpinned bricks down to it.
     void setBudgetBytes(std::uint64_t budgetBytes);
     BrickCacheStats stats() const;

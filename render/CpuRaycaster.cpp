@@ -495,8 +495,8 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     // level outgrows the budget: where it fits, a brick loaded stays, and the next frames of a
     // moving camera reach the bricks this frame's rays did not (left out, each would be loaded
     // by a later frame of the flight instead of this one).
-    const bool guided =
-        options.rayGuided && g.brickCount() * store.brickBytes() > cache.stats().budgetBytes;
+    const std::uint64_t budget = cache.stats().budgetBytes; // one read: the daemon may change it
+    const bool guided = options.rayGuided && g.brickCount() * store.brickBytes() > budget;
     std::uint64_t toLoad = 0;
     const std::vector<std::uint8_t> missing =
         guided ? missingBricks(plan, cache, toLoad) : std::vector<std::uint8_t>{};
@@ -504,15 +504,13 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         guided
             ? std::max(toLoad / kGuidedSteps, std::uint64_t(kGuidedStepBricks)) * store.brickBytes()
             : 0;
-    const auto ends =
-        planBatches(plan, store.brickBytes(), cache.stats().budgetBytes, missing, loadStep);
+    const auto ends = planBatches(plan, store.brickBytes(), budget, missing, loadStep);
     std::vector<std::uint8_t> unreached(plan.drawn.size(), 0);
     // A frame whose bricks outgrow the budget streams them: it keeps its front bricks (with
     // its earlier slices'), as many as leave room for two batches of loads, and lets the
     // others go first when the cache needs room. The next pass of this view (or of one near
     // it) then starts on resident bricks; under plain LRU each brick would be evicted just
     // before that pass wanted it.
-    const std::uint64_t budget = cache.stats().budgetBytes;
     const std::uint64_t room = 2 * std::max(loadStep, kGuidedStepBricks * store.brickBytes());
     const std::uint64_t keepBytes = budget - std::min(budget, room);
     std::uint64_t keptBytes = options.hostKeptBefore;

@@ -209,6 +209,7 @@ struct Daemon::Impl {
         log.info("listening on " + config.listenHost + ":" + std::to_string(port()) + " (" +
                  std::to_string(catalog.size()) + " volumes, " +
                  (config.token.empty() ? "no token" : "token required") + ")");
+        log.info("host brick budget: " + describeHostBudget(config));
     }
 
     std::uint16_t port() const { return acceptor.local_endpoint().port(); }

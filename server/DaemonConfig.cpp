@@ -1,5 +1,6 @@
 #include "server/DaemonConfig.h"
 
+#include "brickstore/HostMemory.h"
 #include "brickstore/Readers.h"
 #include "protocol/Wire.h"
 #include "render/Error.h"
@@ -10,6 +11,7 @@
 #include <arpa/inet.h>
 #include <cctype>
 #include <cerrno>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -59,8 +61,10 @@ idle_ms = 300000
 write_ms = 10000
 
 [budgets]
-# Host memory for decompressed bricks, shared by all sessions (MiB, 1..1048576).
-host_mb = 1024
+# Host memory for decompressed bricks, shared by all sessions (MiB, 1..1048576), or "auto":
+# a quarter of the memory the daemon may use (physical memory, or its control group's limit
+# where lower), at least 256 MiB. The log's first lines say what "auto" came to.
+host_mb = "auto"
 # GPU memory for the brick atlas (MiB, 1..1048576); bounds the automatic level choice.
 gpu_mb = 512
 
@@ -379,8 +383,17 @@ void Reader::readTimeouts(const toml::table& root, DaemonConfig& c) const {
 void Reader::readLimits(const toml::table& root, DaemonConfig& c) const {
     if (const toml::table* t = section(root, "budgets")) {
         checkKeys(*t, "budgets.", {"host_mb", "gpu_mb"});
-        if (auto mb = integer(*t, "budgets.", "host_mb", 1, kMaxBudgetMb))
+        if (const toml::node* node = t->get("host_mb"); node && node->is_string()) {
+            if (node->as_string()->get() != "auto")
+                fail(node->source(), "budgets.host_mb",
+                     "expected an integer (MiB) or \"auto\", got \"" + node->as_string()->get() +
+                         "\"");
+            c.hostBudgetBytes = autoHostBudgetBytes();
+            c.hostBudgetAuto = true;
+        } else if (auto mb = integer(*t, "budgets.", "host_mb", 1, kMaxBudgetMb)) {
             c.hostBudgetBytes = std::uint64_t(*mb) << 20;
+            c.hostBudgetAuto = false;
+        }
         if (auto mb = integer(*t, "budgets.", "gpu_mb", 1, kMaxBudgetMb))
             c.gpuBudgetBytes = std::uint64_t(*mb) << 20;
     }
@@ -637,6 +650,30 @@ bool isLoopback(const std::string& hostText) {
     in6_addr v6{};
     if (inet_pton(AF_INET6, host.c_str(), &v6) != 1) return false;
     return IN6_IS_ADDR_LOOPBACK(&v6) || (IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127);
+}
+
+std::uint64_t autoHostBudgetBytes() {
+    static const std::uint64_t bytes =
+        brickstore::autoHostBudgetBytes(brickstore::hostMemory().perProcessBytes());
+    return bytes;
+}
+
+std::string describeHostBudget(const DaemonConfig& config) {
+    const std::string mib = std::to_string(config.hostBudgetBytes >> 20) + " MiB";
+    if (!config.hostBudgetAuto) return mib + " (budgets.host_mb)";
+    const auto memory = brickstore::hostMemory();
+    char gib[32];
+    std::snprintf(gib, sizeof gib, "%.1f GiB", double(memory.usableBytes()) / double(1ull << 30));
+    if (memory.usableBytes() == 0) return mib + " (auto: the machine's memory is unknown)";
+    const bool limited = memory.cgroupLimitBytes && *memory.cgroupLimitBytes < memory.physicalBytes;
+    return mib + " (auto: a quarter of " + gib +
+           (limited ? ", the limit of " + memory.cgroupFile : " of physical memory") +
+           (memory.localRanks > 1
+                ? " over the job's " + std::to_string(memory.localRanks) + " ranks on this machine"
+                : "") +
+           (config.hostBudgetBytes == brickstore::kMinAutoHostBudgetBytes ? ", at least 256 MiB"
+                                                                          : "") +
+           ")";
 }
 
 std::string_view DaemonConfig::defaultToml() {

@@ -34,6 +34,10 @@ struct PresetEntry {
     bool operator==(const PresetEntry&) const = default;
 };
 
+/// The "auto" host budget of this machine: brickstore::autoHostBudgetBytes of the memory the
+/// process may use (brickstore::hostMemory(), read once and kept).
+std::uint64_t autoHostBudgetBytes();
+
 struct DaemonConfig {
     std::string source = "<embedded default>"; ///< what it was read from
     std::string file; ///< the file load() read (what SIGHUP re-reads); empty otherwise
@@ -50,7 +54,10 @@ struct DaemonConfig {
     std::uint32_t readTimeoutMs = 10000;
     std::uint32_t idleTimeoutMs = 300000;
     std::uint32_t writeTimeoutMs = 10000;
-    std::uint64_t hostBudgetBytes = 1024ull << 20;
+    /// Host memory for decompressed bricks, all volumes together. [budgets] host_mb = "auto"
+    /// (the default) is resolved when the configuration is read: autoHostBudgetBytes().
+    std::uint64_t hostBudgetBytes = autoHostBudgetBytes();
+    bool hostBudgetAuto = true; ///< hostBudgetBytes came from "auto" (for the log)
     std::uint64_t gpuBudgetBytes = 512ull << 20;
     std::uint32_t restMs = 150;                    ///< camera at rest this long -> a refined frame
     std::uint32_t writeQueueFrames = 2;            ///< per session; older frames are dropped
@@ -105,6 +112,10 @@ struct DaemonConfig {
 
 /// 127.0.0.0/8, ::1 (also v4-mapped) or localhost.
 bool isLoopback(const std::string& host);
+
+/// How "auto" came out, for the daemon's log: "6144 MiB (a quarter of 24.0 GiB of physical
+/// memory)" or "... of the 2.0 GiB limit of /sys/fs/cgroup/...".
+std::string describeHostBudget(const DaemonConfig& config);
 
 /// The default store folder: $XDG_CACHE_HOME/brickcast, or /tmp/brickcast-<uid> without it.
 std::string defaultStoreDir();

@@ -29,28 +29,29 @@ double InteractiveBudget::expectedMs(const std::string& volume, const std::strin
     return rate * std::ldexp(1.0, int(nearest) - int(level)) * double(pixels);
 }
 
-InteractiveChoice InteractiveBudget::choose(const std::string& volume, const std::string& renderer,
+InteractiveChoice InteractiveBudget::bestAt(const std::string& volume, const std::string& renderer,
                                             std::uint32_t width, std::uint32_t height,
-                                            const LevelRange& levels, std::uint32_t sharers,
-                                            double targetMs) const {
-    // The levels tried: those whose bricks stay resident, or the coarsest when none does.
-    std::vector<std::uint32_t> tried;
-    for (std::uint32_t l = levels.first; l <= levels.last; ++l)
-        if (levels.fitting(l)) tried.push_back(l);
-    if (tried.empty()) tried.push_back(levels.last);
-    const double target =
-        (targetMs > 0 ? targetMs : mTargetMs) / double(std::max<std::uint32_t>(sharers, 1));
-    InteractiveChoice chosen{tried.front(), kFirstDivisor, -1};
-    if (expectedMs(volume, renderer, chosen.level, 1) < 0) return chosen;
+                                            std::uint32_t level, double target) const {
+    InteractiveChoice chosen{level, kFirstDivisor, -1};
+    for (const std::uint32_t d : kDivisors) {
+        // Past the smallest edge allowed, a larger divisor draws no smaller an image.
+        if (d > 1 && std::min(drawnEdge(width, d), drawnEdge(height, d)) < kMinEdge) break;
+        const std::uint64_t pixels = std::uint64_t(drawnEdge(width, d)) * drawnEdge(height, d);
+        chosen = {level, d, expectedMs(volume, renderer, level, pixels)};
+        if (chosen.expectedMs <= target) return chosen;
+    }
+    return chosen;
+}
+
+InteractiveChoice InteractiveBudget::wanted(const std::string& volume, const std::string& renderer,
+                                            std::uint32_t width, std::uint32_t height,
+                                            const std::vector<std::uint32_t>& tried,
+                                            double target) const {
     const auto last = mLastLevel.find({volume, renderer});
+    InteractiveChoice chosen{tried.front(), kFirstDivisor, -1};
     for (const std::uint32_t level : tried) {
-        for (const std::uint32_t d : kDivisors) {
-            // Past the smallest edge allowed, a larger divisor draws no smaller an image.
-            if (d > 1 && std::min(drawnEdge(width, d), drawnEdge(height, d)) < kMinEdge) break;
-            const std::uint64_t pixels = std::uint64_t(drawnEdge(width, d)) * drawnEdge(height, d);
-            chosen = {level, d, expectedMs(volume, renderer, level, pixels)};
-            if (chosen.expectedMs <= target) return chosen;
-        }
+        chosen = bestAt(volume, renderer, width, height, level, target);
+        if (chosen.expectedMs <= target) return chosen;
         // The level drawn last is left for a coarser one only when its smallest image is
         // expected over kLevelStickiness x the target: the first frames of a level whose bricks
         // are not resident yet load them, which costs more than a frame a little late.
@@ -59,6 +60,37 @@ InteractiveChoice InteractiveBudget::choose(const std::string& volume, const std
             return chosen;
     }
     return chosen;
+}
+
+InteractiveChoice InteractiveBudget::choose(const std::string& volume, const std::string& renderer,
+                                            std::uint32_t width, std::uint32_t height,
+                                            const LevelRange& levels, std::uint32_t sharers,
+                                            double targetMs) {
+    // The levels tried: those whose bricks stay resident, or the coarsest when none does.
+    std::vector<std::uint32_t> tried;
+    for (std::uint32_t l = levels.first; l <= levels.last; ++l)
+        if (levels.fitting(l)) tried.push_back(l);
+    if (tried.empty()) tried.push_back(levels.last);
+    const double target =
+        (targetMs > 0 ? targetMs : mTargetMs) / double(std::max<std::uint32_t>(sharers, 1));
+    if (expectedMs(volume, renderer, tried.front(), 1) < 0)
+        return {tried.front(), kFirstDivisor, -1};
+    const InteractiveChoice want = wanted(volume, renderer, width, height, tried, target);
+    ColdStreak& streak = mColdStreak[{volume, renderer}];
+    const auto last = mLastLevel.find({volume, renderer});
+    const bool lastTried = last != mLastLevel.end() &&
+                           std::find(tried.begin(), tried.end(), last->second) != tried.end();
+    if (!lastTried || want.level == last->second || levels.warming(want.level)) {
+        streak = {};
+        return want;
+    }
+    // A cold level: entered once kColdEntryFrames choices in a row have wanted it.
+    streak = {want.level, streak.level == want.level ? streak.count + 1 : 1};
+    if (streak.count >= kColdEntryFrames) {
+        streak = {};
+        return want;
+    }
+    return bestAt(volume, renderer, width, height, last->second, target);
 }
 
 void InteractiveBudget::record(const std::string& volume, const std::string& renderer,

@@ -14,7 +14,11 @@
 // A level is passed over when its bricks do not fit the volume's share of the host cache whole
 // (LevelRange::fits): every frame of it then reloads bricks from the store, and loading, which
 // does not shrink with the image, bounds it (the 2.36 GiB mosaic's level 0 under 1 GiB takes
-// over a second a frame at any size).
+// over a second a frame at any size). A level whose bricks are not resident (LevelRange::warm)
+// costs a long first frame to enter (its view's bricks loaded: 1.1-1.3 s for the mosaic's level
+// 1 on the dev VM), so it is entered only when kColdEntryFrames frames in a row chose it; until
+// then the level drawn last is drawn, at its best image. One late frame (another session's
+// load, a busy machine) then costs a few small frames, not a second-long stall of every session.
 //
 // The model: per (volume, renderer, level), the ms per drawn pixel of the rays alone (a frame's
 // drawing time less the time it waited for bricks to load, which is transient for a level that
@@ -39,7 +43,14 @@ struct LevelRange {
     std::uint32_t first = 0, last = 0;
     /// Per level: whether its bricks fit the volume's host cache share whole. Empty: all do.
     std::vector<bool> fits;
+    /// Per level: whether enough of its bricks are resident that a frame of it draws mostly
+    /// from memory (LevelRange::kWarmShare). Empty: all are.
+    std::vector<bool> warm;
     bool fitting(std::uint32_t level) const { return level >= fits.size() || fits[level]; }
+    bool warming(std::uint32_t level) const { return level >= warm.size() || warm[level]; }
+    /// A level is warm with this share of its bricks' bytes resident (of the host cache share
+    /// where the level is larger): a flight's view holds about half of a level's bricks.
+    static constexpr double kWarmShare = 0.25;
 };
 
 /// What an interactive frame is drawn at.
@@ -60,6 +71,9 @@ class InteractiveBudget {
     /// The level drawn last is kept while its smallest image is expected within this many
     /// times the target (choose()).
     static constexpr double kLevelStickiness = 2.0;
+    /// A level not warm (LevelRange::warm) other than the level drawn last is entered when this
+    /// many choices in a row wanted it (choose()).
+    static constexpr std::uint32_t kColdEntryFrames = 4;
 
     /// `targetMs` > 0: the time an interactive frame should take, unless choose() is told
     /// another (a session's own target, SetFrameBudget).
@@ -72,10 +86,13 @@ class InteractiveBudget {
     /// interactive frames: the first candidate (finest fitting level, then largest image)
     /// expected within targetMs / sharers, else the coarsest fitting level's smallest image.
     /// Nothing known of the volume and renderer: the finest fitting level at kFirstDivisor.
+    /// A level not warm other than the level drawn last is chosen only when the last
+    /// kColdEntryFrames - 1 choices wanted it too: until then the level drawn last, its first
+    /// image expected within the target, else its smallest.
     /// `targetMs` > 0 replaces targetMs() for this frame.
     InteractiveChoice choose(const std::string& volume, const std::string& renderer,
                              std::uint32_t width, std::uint32_t height, const LevelRange& levels,
-                             std::uint32_t sharers = 1, double targetMs = 0) const;
+                             std::uint32_t sharers = 1, double targetMs = 0);
 
     /// An interactive frame of `volume` by `renderer` at `level`, `pixels` drawn, took `ms`, of
     /// which `loadMs` went to loading bricks and building what a new transfer function needs
@@ -95,9 +112,23 @@ class InteractiveBudget {
 
   private:
     using Key = std::tuple<std::string, std::string, std::uint32_t>;
+    /// The choice without the cold-level rule: the first candidate within `target` at the
+    /// fitting levels, finest first, with the last level's stickiness.
+    InteractiveChoice wanted(const std::string& volume, const std::string& renderer,
+                             std::uint32_t width, std::uint32_t height,
+                             const std::vector<std::uint32_t>& tried, double target) const;
+    /// At one level: the first image expected within `target`, else the smallest.
+    InteractiveChoice bestAt(const std::string& volume, const std::string& renderer,
+                             std::uint32_t width, std::uint32_t height, std::uint32_t level,
+                             double target) const;
+    /// Choices in a row that wanted a cold level (which one, how many).
+    struct ColdStreak {
+        std::uint32_t level = 0, count = 0;
+    };
     double mTargetMs;
     std::map<Key, double> mMsPerPixel;
     std::map<std::pair<std::string, std::string>, std::uint32_t> mLastLevel;
+    std::map<std::pair<std::string, std::string>, ColdStreak> mColdStreak;
 };
 
 } // namespace bc::server

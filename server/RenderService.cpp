@@ -930,13 +930,18 @@ LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions
     const auto levels = std::uint32_t(layout.levels().size());
     if (o.level != protocol::kLevelAutomatic) {
         const std::uint32_t l = std::min<std::uint32_t>(o.level, levels - 1);
-        return {l, l, {}};
+        return {l, l, {}, {}};
     }
     const double brickBytes = double(volume.store->brickBytes());
     const double share = double(volume.cache->stats().budgetBytes);
-    LevelRange range{0, levels - 1, {}};
-    for (std::uint32_t l = 0; l < levels; ++l)
-        range.fits.push_back(double(layout.levels()[l].brickCount()) * brickBytes <= share);
+    LevelRange range{0, levels - 1, {}, {}};
+    for (std::uint32_t l = 0; l < levels; ++l) {
+        const double levelBytes = double(layout.levels()[l].brickCount()) * brickBytes;
+        range.fits.push_back(levelBytes <= share);
+        // Stored bricks only are loaded (constant ones are not): the level's bytes bound them.
+        range.warm.push_back(double(volume.cache->residentBytes(l)) >=
+                             LevelRange::kWarmShare * std::min(levelBytes, share));
+    }
     return range;
 }
 

@@ -42,6 +42,7 @@ class CacheCore {
     /// A ready entry with one more pin, or nullptr when `key` is not resident.
     CacheEntry* tryPin(const BrickKey& key);
     bool resident(const BrickKey& key) const;
+    std::uint64_t residentBytes(std::uint32_t level) const;
     /// Drops one pin; an entry left unpinned becomes the most recently used, or with `cold`
     /// the least.
     void unpin(CacheEntry& entry, bool cold = false);
@@ -75,6 +76,7 @@ class CacheCore {
     static constexpr std::size_t kSpareBuffers = 8;
     std::vector<std::vector<std::byte>> mSpare;
     BrickCacheStats mStats;
+    std::vector<std::uint64_t> mLevelBytes; ///< residentBytes per level
 };
 
 } // namespace bc::brickstore::detail

@@ -287,6 +287,27 @@ TEST(BrickCacheTest, CountsLoadedEvictedResidentAndPinnedBytes) {
     EXPECT_EQ(s.residentBricks, 2u);
 }
 
+// Resident bytes per pyramid level (how warm a level is, server/FrameBudget.h): loads add to
+// their level's count, evictions take from it, and levels never loaded count nothing.
+TEST(BrickCacheTest, CountsResidentBytesPerLevel) {
+    FakeLoader fake;
+    BrickCache cache(fake.loader(), budgetOf(3));
+    const BrickKey coarse{2, {0, 0, 0}};
+    cache.pin(keyOf(0));
+    cache.pin(coarse);
+    EXPECT_EQ(cache.residentBytes(0), kBrickBytes);
+    EXPECT_EQ(cache.residentBytes(1), 0u);
+    EXPECT_EQ(cache.residentBytes(2), kBrickBytes);
+    EXPECT_EQ(cache.residentBytes(7), 0u) << "a level never loaded";
+    cache.pin(keyOf(1));
+    cache.pin(keyOf(2)); // over the budget: the least recently used, brick 0, goes
+    EXPECT_EQ(cache.residentBytes(0), 2 * kBrickBytes);
+    cache.pin(keyOf(3)); // and then the level-2 brick
+    EXPECT_EQ(cache.residentBytes(0), 3 * kBrickBytes);
+    EXPECT_EQ(cache.residentBytes(2), 0u);
+    EXPECT_EQ(cache.stats().residentBytes, 3 * kBrickBytes);
+}
+
 TEST(BrickCacheTest, ConcurrentPinsOfOneKeyLoadItOnce) {
     FakeLoader fake;
     fake.delay = std::chrono::milliseconds(50);

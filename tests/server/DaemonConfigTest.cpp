@@ -1,6 +1,7 @@
 // The daemon configuration: the embedded default and the shipped file agree, every bad input
 // names the file, the position and the key, paths resolve against the config's folder.
 #include "server/DaemonConfig.h"
+#include "brickstore/HostMemory.h"
 #include "server/Error.h"
 
 #include "tests/TestSupport.h"
@@ -60,6 +61,25 @@ TEST(DaemonConfigTest, ShippedConfigFileEqualsTheEmbeddedDefault) {
     file.source = "<embedded default>";
     file.file.clear();
     EXPECT_EQ(file, DaemonConfig::embeddedDefault());
+}
+
+// host_mb = "auto" (the default) is a quarter of the memory the daemon may use, at least
+// 256 MiB, fixed when the configuration is read; a number of MiB overrides it.
+TEST(DaemonConfigTest, HostBudgetIsAQuarterOfTheMachinesMemoryUnlessGiven) {
+    const auto memory = bc::brickstore::hostMemory();
+    ASSERT_GT(memory.physicalBytes, 0u) << "sysconf says how much memory there is on Linux";
+    const DaemonConfig byDefault = parseText(kVolume);
+    EXPECT_TRUE(byDefault.hostBudgetAuto);
+    EXPECT_EQ(byDefault.hostBudgetBytes,
+              std::max<std::uint64_t>(256ull << 20, memory.perProcessBytes() / 4 >> 20 << 20));
+    const DaemonConfig spelt = parseText(std::string("[budgets]\nhost_mb = \"auto\"\n") + kVolume);
+    EXPECT_EQ(spelt, byDefault);
+    const DaemonConfig given = parseText(std::string("[budgets]\nhost_mb = 3\n") + kVolume);
+    EXPECT_FALSE(given.hostBudgetAuto);
+    EXPECT_EQ(given.hostBudgetBytes, 3ull << 20);
+    EXPECT_EQ(describeHostBudget(given), "3 MiB (budgets.host_mb)");
+    EXPECT_NE(describeHostBudget(byDefault).find("(auto: a quarter of "), std::string::npos)
+        << describeHostBudget(byDefault);
 }
 
 TEST(DaemonConfigTest, OmittedKeysKeepTheirDefaults) {
@@ -172,6 +192,11 @@ std::vector<BadCase> badCases() {
          {"frames.interactive_ms", "10001 is outside 0..10000"},
          2},
         {"host_mb 0", "[budgets]\nhost_mb = 0\n" + v, {"budgets.host_mb", "outside 1.."}, 2},
+        {"host_mb a word",
+         "[budgets]\nhost_mb = \"lots\"\n" + v,
+         {"budgets.host_mb", "an integer (MiB) or \"auto\"", "\"lots\""},
+         2},
+        {"host_mb a float", "[budgets]\nhost_mb = 1.5\n" + v, {"budgets.host_mb", "integer"}, 2},
         {"idle 0", "[timeouts]\nidle_ms = 0\n" + v, {"timeouts.idle_ms", "outside 1.."}, 2},
         {"long token",
          "[server]\ntoken = \"" + std::string(257, 'a') + "\"\n" + v,

@@ -32,10 +32,10 @@ struct Flown {
     double ms;
 };
 
-const LevelRange kOneLevel{0, 0, {}};
+const LevelRange kOneLevel{0, 0, {}, {}};
 
 /// The divisor of the next frame at a single level.
-std::uint32_t divisorOf(const InteractiveBudget& budget, const std::string& volume,
+std::uint32_t divisorOf(InteractiveBudget& budget, const std::string& volume,
                         const std::string& renderer, std::uint32_t width, std::uint32_t height) {
     return budget.choose(volume, renderer, width, height, kOneLevel).divisor;
 }
@@ -100,7 +100,7 @@ TEST(FrameBudget, MeetsTheTargetWithin25PercentAfterTenFramesOnAScanFourTimesLar
 }
 
 TEST(FrameBudget, ImageScaleGoesBeforeLevelAndLevelWhenScaleIsNotEnough) {
-    const LevelRange four{0, 3, {}};
+    const LevelRange four{0, 3, {}, {}};
     // 512^2 at level 0 takes 400 ms: a third of the edge (171^2, 44 ms) meets 66 ms at level 0.
     InteractiveBudget budget(66);
     auto frames = fly(budget, "v", {0.0, 400.0 / (512.0 * 512.0)}, 10, 512, four);
@@ -121,17 +121,17 @@ TEST(FrameBudget, ALevelWhoseBricksDoNotFitTheHostShareIsPassedOver) {
     // Level 0 is over the volume's host cache share (every frame of it reloads bricks), level 1
     // fits: drawn at level 1 from the first frame, however cheap its rays look.
     InteractiveBudget budget(66);
-    const LevelRange mosaic{0, 3, {false, true, true, true}};
+    const LevelRange mosaic{0, 3, {false, true, true, true}, {}};
     const auto frames = fly(budget, "mosaic", {0.0, 1e-6}, 4, 512, mosaic);
     for (const Flown& f : frames)
         EXPECT_EQ(f.level, 1u);
     EXPECT_EQ(frames.front().divisor, InteractiveBudget::kFirstDivisor);
     EXPECT_EQ(frames.back().divisor, 1u);
     // When none fits, the coarsest.
-    const LevelRange none{0, 2, {false, false, false}};
+    const LevelRange none{0, 2, {false, false, false}, {}};
     EXPECT_EQ(budget.choose("mosaic", "cpu", 512, 512, none).level, 2u);
     // A level the client asked for is the only one.
-    EXPECT_EQ(budget.choose("mosaic", "cpu", 512, 512, {0, 0, {}}).level, 0u);
+    EXPECT_EQ(budget.choose("mosaic", "cpu", 512, 512, {0, 0, {}, {}}).level, 0u);
 }
 
 TEST(FrameBudget, ALevelNotDrawnYetIsExpectedFromTheNearestDrawnOne) {
@@ -158,7 +158,7 @@ TEST(FrameBudget, AfterASlowFrameTheBudgetComesBackToTheLevelItLeft) {
     // 512^2 at level 0 in 100 ms: half size meets 66 ms. One frame runs 5 s (caches gone cold,
     // the machine busy) and the budget drops to coarser levels; their fast frames bring every
     // level's rate down again, and within eight frames it is back at level 0, half size.
-    const LevelRange four{0, 3, {}};
+    const LevelRange four{0, 3, {}, {}};
     const Cost cost{0.0, 100.0 / (512.0 * 512.0)};
     InteractiveBudget budget(66);
     auto frames = fly(budget, "v", cost, 6, 512, four);
@@ -174,7 +174,7 @@ TEST(FrameBudget, AfterASlowFrameTheBudgetComesBackToTheLevelItLeft) {
 }
 
 TEST(FrameBudget, TheLevelDrawnLastIsKeptWhileItsSmallestImageIsWithinTwiceTheTarget) {
-    const LevelRange two{0, 1, {}};
+    const LevelRange two{0, 1, {}, {}};
     const double pixels64 = 64.0 * 64.0; // 512^2 over 8
     // Level 0's smallest image at 1.5 x the target: kept (level 1 would have to load its
     // bricks); at 2.5 x: level 1.
@@ -195,6 +195,47 @@ TEST(FrameBudget, TheLevelDrawnLastIsKeptWhileItsSmallestImageIsWithinTwiceTheTa
     // the target, and does not.
     budget.record("v", "cpu", 1, 4096, 1.5 * 66.0 / 2.0);
     EXPECT_EQ(budget.choose("v", "cpu", 512, 512, two).level, 1u);
+}
+
+// A level whose bricks are not resident costs a long first frame to enter (its view's bricks
+// loaded: over a second for the mosaic's level 1 on the dev VM, which every session waits
+// for). One late frame does not send the budget there: only kColdEntryFrames choices in a row
+// that want it do; a warm level is entered at once.
+TEST(FrameBudget, AColdLevelIsEnteredOnlyWhenFramesInARowWantIt) {
+    const double pixels64 = 64.0 * 64.0; // 512^2 over 8: level 0's smallest image
+    for (const bool warm : {false, true}) {
+        InteractiveBudget budget(66);
+        const LevelRange two{0, 1, {}, {true, warm}};
+        budget.record("v", "cpu", 0, 4096, 30.0); // level 0 at 64^2 in 30 ms: within 66
+        ASSERT_EQ(budget.choose("v", "cpu", 512, 512, two).level, 0u);
+        // One frame 10 times slower (another session's load): level 0's smallest image is
+        // expected at 300 ms, over twice the target, and level 1 within it.
+        budget.record("v", "cpu", 0, 4096, 300.0);
+        for (std::uint32_t i = 1; i <= InteractiveBudget::kColdEntryFrames; ++i) {
+            const InteractiveChoice c = budget.choose("v", "cpu", 512, 512, two);
+            const bool entered = warm || i == InteractiveBudget::kColdEntryFrames;
+            EXPECT_EQ(c.level, entered ? 1u : 0u) << "choice " << i << (warm ? " warm" : " cold");
+            if (!entered) {
+                EXPECT_EQ(c.divisor, 8u) << "level 0's smallest image meanwhile";
+                EXPECT_NEAR(c.expectedMs, 300.0 * pixels64 / 4096.0, 1e-9);
+            }
+            if (warm) break;
+        }
+    }
+    // The late frame was a one-off: the next level-0 frames are fast again, and the count of
+    // choices wanting level 1 starts over.
+    InteractiveBudget budget(66);
+    const LevelRange two{0, 1, {}, {true, false}};
+    budget.record("v", "cpu", 0, 4096, 30.0);
+    for (int round = 0; round < 3; ++round) {
+        budget.record("v", "cpu", 0, 4096, 300.0);
+        for (std::uint32_t i = 1; i < InteractiveBudget::kColdEntryFrames; ++i)
+            EXPECT_EQ(budget.choose("v", "cpu", 512, 512, two).level, 0u);
+        budget.record("v", "cpu", 0, 4096, 1.0); // fast: half way down, within the target
+        budget.record("v", "cpu", 0, 4096, 1.0);
+        budget.record("v", "cpu", 0, 4096, 1.0);
+        EXPECT_EQ(budget.choose("v", "cpu", 512, 512, two).level, 0u);
+    }
 }
 
 TEST(FrameBudget, TimeWaitingForBricksIsNotTakenForTheRays) {

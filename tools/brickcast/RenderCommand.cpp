@@ -3,6 +3,7 @@
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "brickstore/Error.h"
+#include "brickstore/HostMemory.h"
 #include "render/BrickPlan.h"
 #include "render/Camera.h"
 #include "render/ConvergedReference.h"
@@ -55,7 +56,7 @@ struct RenderCliOptions {
          jitter = false, preintegrate = false, reference = false, interactive = false, mpi = false,
          mpiBarrier = false;
     double mpiTimeoutS = 60.0;
-    std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024;
+    std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024; // the latter: "auto" in addRenderCommand
     std::int32_t level = 0;
     std::uint32_t repeat = 1;
     std::uint32_t threads = 0; ///< 0: every core
@@ -626,7 +627,11 @@ void addRenderCommand(CLI::App& app) {
                   "(CPU raycaster and reference)");
     cmd->add_option("--gpu-budget-mb", o->gpuBudgetMb, "GPU brick pool budget")
         ->capture_default_str();
-    cmd->add_option("--host-budget-mb", o->hostBudgetMb, "Host brick cache budget")
+    o->hostBudgetMb =
+        brickstore::autoHostBudgetBytes(brickstore::hostMemory().perProcessBytes()) >> 20;
+    cmd->add_option("--host-budget-mb", o->hostBudgetMb,
+                    "Host brick cache budget (default: a quarter of the memory this process may "
+                    "use, as brickcastd's host_mb = \"auto\")")
         ->capture_default_str();
     cmd->add_option("--level", o->level, "Pyramid level (0 = full resolution)")
         ->capture_default_str();
