@@ -86,7 +86,8 @@ max_frame_gsamples = 64
 max_unsliced_gsamples = 4
 # A frame that would take longer than this is drawn in slices of about this long (10..10000
 # ms); sessions take turns between slices, and a frame whose session has gone or whose camera
-# has moved on is dropped at the next slice.
+# has moved on is dropped at the next slice. A refined frame beside sessions whose cameras move
+# takes shorter slices: their share of interactive_ms (66 / (n + 1) ms beside n, at least 10).
 slice_ms = 50
 # While a camera moves, the time a frame should take (0..10000 ms; a session may ask for its
 # own, SetFrameBudget): each such frame is drawn at the finest pyramid level whose bricks fit

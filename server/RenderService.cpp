@@ -847,6 +847,11 @@ struct VolumeOutOfService : std::runtime_error {
 /// The measured speed replaces it from the first slice on.
 constexpr double kFirstCostPerMs = 2000.0;
 
+/// The shortest slice of a refined frame beside moving sessions (sliceMsBeside): shorter, the
+/// fixed cost of a slice (planning the frame's bricks: about 2 ms for the 2.36 GiB mosaic on
+/// the dev VM) would be a large part of it.
+constexpr double kMinSliceBesideMs = 10.0;
+
 /// Estimated cost of pixel (x, y): its ray's samples inside the box, plus one for the ray.
 double pixelCost(const FrameDrawing& d, std::uint32_t x, std::uint32_t y) {
     const render::Ray ray = d.view.basis.ray(x, y, d.options.width, d.options.height);
@@ -1046,6 +1051,22 @@ render::Renderer& RenderService::rendererFor(const std::shared_ptr<RenderSlot>& 
     return renderer;
 }
 
+double RenderService::sliceMsBeside(const std::shared_ptr<RenderSlot>& slot,
+                                    const FrameDrawing& d) const {
+    const double sliceMs = double(mConfig.sliceMs);
+    if (!d.job.refined || mConfig.interactiveMs == 0) return sliceMs;
+    // Sessions moving now: an interactive frame started within the rest interval and a slice.
+    const auto now = Clock::now();
+    const auto window = std::chrono::milliseconds(mConfig.restMs + mConfig.sliceMs);
+    std::uint32_t moving = 0;
+    for (const auto& [key, other] : mRenderers->sessions)
+        moving += key != slot.get() && other.lastInteractive && !other.slot.expired() &&
+                  now - *other.lastInteractive < window;
+    if (moving == 0) return sliceMs;
+    return std::clamp(double(mConfig.interactiveMs) / double(moving + 1), kMinSliceBesideMs,
+                      sliceMs);
+}
+
 bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d) {
     render::Renderer& renderer = rendererFor(slot, d);
     const auto start = Clock::now();
@@ -1071,6 +1092,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     const double perMs = rate == mSliceCostPerMs.end() ? kFirstCostPerMs : rate->second;
     double cost = 0;
     render::RenderOptions options = d.options;
+    if (d.slices == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
     options.region = nextSlice(d, d.sliceTargetMs * perMs, cost);
     options.hostKeptBefore = d.stats.hostKeptBytes; // the slices keep one frame's bricks
     render::FrameStats stats;
@@ -1082,7 +1104,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     // loaded by each). Slices are made long enough that it stays at most half of each.
     const double ms = msSince(start), loadMs = std::min(stats.uploadMs, ms);
     calibrate(mSliceCostPerMs, cost, ms - loadMs);
-    d.sliceTargetMs = std::max(double(mConfig.sliceMs), 2.0 * loadMs);
+    d.sliceTargetMs = std::max(sliceMsBeside(slot, d), 2.0 * loadMs);
     ++d.slices;
     d.slicesMs += msSince(start);
     d.drawMs = d.slicesMs;

@@ -226,6 +226,11 @@ class RenderService {
     void prepare(FrameDrawing& d);
     /// Draws the next slice; true when the frame is complete.
     bool drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
+    /// How long a slice of `d` should be: `frames.slice_ms`, but a refined frame's, while other
+    /// sessions move, their share of `frames.interactive_ms` (each of the n moving and this one
+    /// gets interactive_ms / (n + 1), at least 10 ms): a moving session's frame then waits for
+    /// short slices of the frames at rest, not for whole 50 ms ones.
+    double sliceMsBeside(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d) const;
     /// Draws `options.region` of the frame: with `renderer` here, or across the cluster's
     /// ranks when there is one and the frame is the CPU raycaster's.
     render::Image drawRegion(render::Renderer& renderer, const FrameDrawing& d,

@@ -200,6 +200,52 @@ TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionG
     EXPECT_EQ(counter(light, "frame_slices_total"), slices);
 }
 
+// Beside a session whose camera moves, a refined frame is drawn in slices of the moving
+// sessions' share of frames.interactive_ms (here 66 / 2 ms), not of frames.slice_ms (here a
+// whole second): the moving session's frames wait for short slices. Without that rule its
+// frames would wait for one-second slices.
+TEST_F(FairScheduling, BesideAMovingCameraARefinedFrameTakesShortSlices) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    DaemonConfig c = config();
+    c.interactiveMs = 66;
+    c.sliceMs = 1000;
+    c.maxFrameSamples = 1ull << 50;
+    TestDaemon d(c);
+    client::Client moving(d.clientConfig());
+    const auto v = moving.openVolume("cthead");
+    protocol::RenderOptions o = smallCpuFrames(64);
+    o.quality = protocol::Quality::Adaptive;
+    moving.setRenderOptions(o);
+    moving.setCamera(orbitCamera(v, 0, 1));
+    moving.requestFrame(protocol::FrameMode::ContinuousOn);
+    moving.nextFrame();
+    client::Client heavy(d.clientConfig());
+    heavy.openVolume("cthead");
+    protocol::RenderOptions h = smallCpuFrames(2048);
+    h.stepVoxels = 0.02f; // seconds of slices on any machine
+    heavy.setRenderOptions(h);
+    heavy.setCamera(orbitCamera(v, 30, 1));
+    heavy.requestFrame();
+    // A camera after each frame: every frame is an interactive one.
+    double worstGapMs = 0;
+    std::uint32_t frames = 0;
+    auto last = Clock::now();
+    for (const auto until = last + std::chrono::seconds(4); Clock::now() < until; ++frames) {
+        moving.setCamera(orbitCamera(v, 2.0 * (frames + 1), frames + 2));
+        moving.nextFrame();
+        const auto now = Clock::now();
+        if (frames >= 3) worstGapMs = std::max(worstGapMs, msBetween(last, now));
+        last = now;
+    }
+    const double slices = counter(moving, "frame_slices_total");
+    std::printf("[fair] %u moving frames in 4 s beside a refined 2048^2 frame, worst gap %.0f ms "
+                "(after the first 3), %.0f slices so far\n",
+                frames, worstGapMs, slices);
+    EXPECT_GT(slices, 20.0) << "the refined frame was not sliced, or in long slices";
+    EXPECT_LT(worstGapMs, 500.0 * bc::test::timeScale())
+        << "the moving camera's frames waited for whole slice_ms slices";
+}
+
 TEST_F(FairScheduling, ASlicedFrameIsTheFrameDrawnWhole) {
     if (!sStore) return bc::test::missingData("scan cthead");
     expectSlicedFrameIsWhole(protocol::Renderer::CpuRaycaster, "cpu");
