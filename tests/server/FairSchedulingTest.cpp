@@ -201,14 +201,15 @@ TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionG
 }
 
 // Beside a session whose camera moves, a refined frame is drawn in slices of the moving
-// sessions' share of frames.interactive_ms (here 66 / 2 ms), not of frames.slice_ms (here a
-// whole second): the moving session's frames wait for short slices. Without that rule its
-// frames would wait for one-second slices.
+// sessions' share of frames.interactive_ms (here 66 / 2 ms), not of frames.slice_ms (here two
+// seconds): the moving session's frames wait for short slices. Without that rule its frames
+// would wait for two-second slices (measured idle: worst gaps of 245 ms with it, 966 ms
+// without it at a one-second slice_ms).
 TEST_F(FairScheduling, BesideAMovingCameraARefinedFrameTakesShortSlices) {
     if (!sStore) return bc::test::missingData("scan cthead");
     DaemonConfig c = config();
     c.interactiveMs = 66;
-    c.sliceMs = 1000;
+    c.sliceMs = 2000;
     c.maxFrameSamples = 1ull << 50;
     TestDaemon d(c);
     client::Client moving(d.clientConfig());
@@ -242,7 +243,7 @@ TEST_F(FairScheduling, BesideAMovingCameraARefinedFrameTakesShortSlices) {
                 "(after the first 3), %.0f slices so far\n",
                 frames, worstGapMs, slices);
     EXPECT_GT(slices, 20.0) << "the refined frame was not sliced, or in long slices";
-    EXPECT_LT(worstGapMs, 500.0 * bc::test::timeScale())
+    EXPECT_LT(worstGapMs, 1000.0 * bc::test::timeScale())
         << "the moving camera's frames waited for whole slice_ms slices";
 }
 
