@@ -133,8 +133,8 @@ daemon_config)
             -P cmake/EmbedTfPresets.cmake
     fi
     sources=(server/DaemonConfig.cpp render/TransferFunction.cpp "$out/TfPresets.cpp"
-        "${reader_common[@]}" brickstore/Sources.cpp brickstore/readers/*.cpp
-        brickstore/readers/detail/*.cpp)
+        brickstore/HostMemory.cpp "${reader_common[@]}" brickstore/Sources.cpp
+        brickstore/readers/*.cpp brickstore/readers/detail/*.cpp)
     folders=(server render render/detail brickstore brickstore/readers protocol)
     # The config checks generator names with parseSynthKind (Sources.cpp), which comes with
     # openSource and so every reader.
