@@ -18,15 +18,21 @@ std::optional<std::string> readSmallFile(const std::string& path) {
     return text;
 }
 
+/// `text` as a whole non-negative number (no sign, no suffix), or nullopt.
+std::optional<std::uint64_t> wholeNumber(std::string_view text) {
+    std::uint64_t v = 0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (text.empty() || ec != std::errc() || end != text.data() + text.size()) return std::nullopt;
+    return v;
+}
+
 } // namespace
 
 std::optional<std::uint64_t> parseCgroupLimit(std::string_view text) {
     while (!text.empty() && (text.back() == '\n' || text.back() == ' '))
         text.remove_suffix(1);
-    std::uint64_t bytes = 0;
-    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), bytes);
-    if (ec != std::errc() || end != text.data() + text.size() || text.empty()) return std::nullopt;
-    if (bytes == 0 || bytes > (1ull << 60)) return std::nullopt;
+    const auto bytes = wholeNumber(text);
+    if (!bytes || *bytes == 0 || *bytes > (1ull << 60)) return std::nullopt;
     return bytes;
 }
 
@@ -84,11 +90,8 @@ HostMemory hostMemory() {
         readCgroupLimit(m, "/sys/fs/cgroup/memory", cgroupPath(false), "memory.limit_in_bytes");
     for (const char* name : {"OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS"})
         if (const char* text = std::getenv(name)) {
-            std::uint32_t ranks = 0;
-            const std::string_view v(text);
-            const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), ranks);
-            if (ec == std::errc() && end == v.data() + v.size() && ranks >= 1 && ranks <= 4096)
-                m.localRanks = ranks;
+            if (const auto ranks = wholeNumber(text); ranks && *ranks >= 1 && *ranks <= 4096)
+                m.localRanks = std::uint32_t(*ranks);
             break;
         }
     return m;

@@ -653,16 +653,24 @@ bool isLoopback(const std::string& hostText) {
     return IN6_IS_ADDR_LOOPBACK(&v6) || (IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127);
 }
 
+namespace {
+
+/// The machine's memory as read once: what "auto" came from is what the log describes.
+const brickstore::HostMemory& machineMemory() {
+    static const brickstore::HostMemory memory = brickstore::hostMemory();
+    return memory;
+}
+
+} // namespace
+
 std::uint64_t autoHostBudgetBytes() {
-    static const std::uint64_t bytes =
-        brickstore::autoHostBudgetBytes(brickstore::hostMemory().perProcessBytes());
-    return bytes;
+    return brickstore::autoHostBudgetBytes(machineMemory().perProcessBytes());
 }
 
 std::string describeHostBudget(const DaemonConfig& config) {
     const std::string mib = std::to_string(config.hostBudgetBytes >> 20) + " MiB";
     if (!config.hostBudgetAuto) return mib + " (budgets.host_mb)";
-    const auto memory = brickstore::hostMemory();
+    const brickstore::HostMemory& memory = machineMemory();
     char gib[32];
     std::snprintf(gib, sizeof gib, "%.1f GiB", double(memory.usableBytes()) / double(1ull << 30));
     if (memory.usableBytes() == 0) return mib + " (auto: the machine's memory is unknown)";

@@ -1051,17 +1051,24 @@ render::Renderer& RenderService::rendererFor(const std::shared_ptr<RenderSlot>& 
     return renderer;
 }
 
+std::uint32_t RenderService::interactiveSessions(Clock::duration within,
+                                                 const RenderSlot* except) const {
+    const auto now = Clock::now();
+    std::uint32_t n = 0;
+    for (const auto& [key, other] : mRenderers->sessions)
+        n += key != except && other.lastInteractive && !other.slot.expired() &&
+             now - *other.lastInteractive < within;
+    return n;
+}
+
 double RenderService::sliceMsBeside(const std::shared_ptr<RenderSlot>& slot,
                                     const FrameDrawing& d) const {
     const double sliceMs = double(mConfig.sliceMs);
     if (!d.job.refined || mConfig.interactiveMs == 0) return sliceMs;
-    // Sessions moving now: an interactive frame started within the rest interval and a slice.
-    const auto now = Clock::now();
-    const auto window = std::chrono::milliseconds(mConfig.restMs + mConfig.sliceMs);
-    std::uint32_t moving = 0;
-    for (const auto& [key, other] : mRenderers->sessions)
-        moving += key != slot.get() && other.lastInteractive && !other.slot.expired() &&
-                  now - *other.lastInteractive < window;
+    // Other sessions moving now: an interactive frame started within the rest interval and a
+    // slice.
+    const std::uint32_t moving = interactiveSessions(
+        std::chrono::milliseconds(mConfig.restMs + mConfig.sliceMs), slot.get());
     if (moving == 0) return sliceMs;
     return std::clamp(double(mConfig.interactiveMs) / double(moving + 1), kMinSliceBesideMs,
                       sliceMs);
@@ -1201,13 +1208,9 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
         if (!mine.drawing->job.refined) {
             // Sessions that started an interactive frame within the last second share the
             // frame-time budget.
-            const auto now = Clock::now();
-            mine.lastInteractive = now;
-            std::uint32_t sharers = 0;
-            for (const auto& [key, other] : mRenderers->sessions)
-                sharers += other.lastInteractive && !other.slot.expired() &&
-                           now - *other.lastInteractive < std::chrono::seconds(1);
-            mine.drawing->sharers = std::max<std::uint32_t>(sharers, 1);
+            mine.lastInteractive = Clock::now();
+            mine.drawing->sharers =
+                std::max<std::uint32_t>(interactiveSessions(std::chrono::seconds(1)), 1);
         }
     } else if (slot.closed() || (mine.drawing->refinement() && slot.superseded())) {
         // Nobody waits for it, or it refines a view the camera has left (interactive frames

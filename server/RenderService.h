@@ -231,6 +231,10 @@ class RenderService {
     /// gets interactive_ms / (n + 1), at least 10 ms): a moving session's frame then waits for
     /// short slices of the frames at rest, not for whole 50 ms ones.
     double sliceMsBeside(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d) const;
+    /// Sessions (other than `except`) that started an interactive frame within `within` of
+    /// now: those sharing the frame-time budget, or moving beside a refined frame.
+    std::uint32_t interactiveSessions(Clock::duration within,
+                                      const RenderSlot* except = nullptr) const;
     /// Draws `options.region` of the frame: with `renderer` here, or across the cluster's
     /// ranks when there is one and the frame is the CPU raycaster's.
     render::Image drawRegion(render::Renderer& renderer, const FrameDrawing& d,
