@@ -136,18 +136,21 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayR
     }
 }
 
-/// One pass over the pixels of `rect` (within `region`) for the bricks of batch f.batch (rays:
-/// the region's, row by row; only those of rect are touched).
+/// One pass over the rays of `rect` (within `region`) for the bricks of batch f.batch (rays:
+/// the region's, row by row; only those of rect are touched). Both rectangles are of the
+/// lattice's pixels (RenderOptions::stride): ray (x, y) is the ray of image pixel
+/// (lattice.pixel(x), lattice.pixel(y)).
 template <class T>
-void marchPass(const Frame& f, const PixelRect& region, const PixelRect& rect, RayStates& rays,
-               std::vector<detail::Front>& fronts, RayCount& total) {
+void marchPass(const Frame& f, PixelLattice lattice, const PixelRect& region, const PixelRect& rect,
+               RayStates& rays, std::vector<detail::Front>& fronts, RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0};
     const auto x0 = region.x, y0 = region.y, w = region.width;
     auto ray = [&](std::uint32_t x, std::uint32_t y) {
         detail::PacketRay p;
-        p.sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
-        p.sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
-        p.shift = f.jitter ? rayJitter(x, y) - 0.5f : 0.0f;
+        const std::uint32_t px = lattice.pixel(x), py = lattice.pixel(y);
+        p.sx = 2.0f * (float(px) + 0.5f) / f.width - 1.0f;
+        p.sy = 1.0f - 2.0f * (float(py) + 0.5f) / f.height;
+        p.shift = f.jitter ? rayJitter(px, py) - 0.5f : 0.0f;
         const std::size_t i = std::size_t(y - y0) * w + (x - x0);
         p.state = &rays[i];
         p.resume = &rays.resume(i);
@@ -191,24 +194,24 @@ void marchPass(const Frame& f, const PixelRect& region, const PixelRect& rect, R
     total.leaps += leaps;
 }
 
-void marchPassOfType(brickstore::VoxelType type, const Frame& f, const PixelRect& region,
-                     const PixelRect& rect, RayStates& rays, std::vector<detail::Front>& fronts,
-                     RayCount& total) {
+void marchPassOfType(brickstore::VoxelType type, const Frame& f, PixelLattice lattice,
+                     const PixelRect& region, const PixelRect& rect, RayStates& rays,
+                     std::vector<detail::Front>& fronts, RayCount& total) {
     switch (type) {
     case brickstore::VoxelType::U8:
-        return marchPass<std::uint8_t>(f, region, rect, rays, fronts, total);
+        return marchPass<std::uint8_t>(f, lattice, region, rect, rays, fronts, total);
     case brickstore::VoxelType::U16:
-        return marchPass<std::uint16_t>(f, region, rect, rays, fronts, total);
+        return marchPass<std::uint16_t>(f, lattice, region, rect, rays, fronts, total);
     case brickstore::VoxelType::I16:
-        return marchPass<std::int16_t>(f, region, rect, rays, fronts, total);
+        return marchPass<std::int16_t>(f, lattice, region, rect, rays, fronts, total);
     case brickstore::VoxelType::F32:
-        return marchPass<float>(f, region, rect, rays, fronts, total);
+        return marchPass<float>(f, lattice, region, rect, rays, fronts, total);
     }
 }
 
-/// The pixels of `region` whose rays may meet a brick the plan draws: the footprint of the
-/// drawn bricks' bounding box (render/Partition.h), within the region; not visible when none
-/// is left. The rays of the other pixels could only miss every drawn brick.
+/// The pixels of `region` (image pixels) whose rays may meet a brick the plan draws: the
+/// footprint of the drawn bricks' bounding box (render/Partition.h), within the region; not
+/// visible when none is left. The rays of the other pixels could only miss every drawn brick.
 Footprint raysToMarch(const LevelGeometry& g, const BrickPlan& plan, const View& view,
                       const PixelRect& region) {
     if (plan.drawn.empty()) return {};
@@ -339,12 +342,14 @@ void cellsOfBatch(const BrickPlan& plan, std::size_t first, std::size_t end,
 }
 
 /// The rays still marching (waiting for a later batch) after a pass, for ray guidance: a
-/// summed-area table of them over `marched` (image coordinates), so that whether a rectangle
-/// holds any takes four reads, and then which of them meet a box.
+/// summed-area table of them over `marched` (rays, as marchPass numbers them), so that whether
+/// a rectangle holds any takes four reads, and then which of them meet a box.
 class MarchingRays {
   public:
-    MarchingRays(const RayStates& rays, const PixelRect& region, const PixelRect& marched)
-        : mRays(rays), mRegion(region), mRect(marched), mStride(std::size_t(marched.width) + 1),
+    MarchingRays(const RayStates& rays, PixelLattice lattice, const PixelRect& region,
+                 const PixelRect& marched)
+        : mRays(rays), mLattice(lattice), mRegion(region), mRect(marched),
+          mStride(std::size_t(marched.width) + 1),
           mSum(mStride * (std::size_t(marched.height) + 1), 0) {
         for (std::uint32_t y = 0; y < marched.height; ++y) {
             std::uint32_t line = 0;
@@ -355,19 +360,20 @@ class MarchingRays {
         }
     }
 
-    /// Whether a ray still marching, of a pixel of `r` (image coordinates), passes within a
-    /// voxel of the box [lo, hi] (voxels of the level): the ray as RayWalk::begin sets it up,
-    /// the voxel of margin for the floats of its walk.
+    /// Whether a ray still marching, of a pixel of `r` (image pixels), passes within a voxel
+    /// of the box [lo, hi] (voxels of the level): the ray as RayWalk::begin sets it up, the
+    /// voxel of margin for the floats of its walk.
     bool anyMeets(const Frame& f, const PixelRect& r, glm::vec3 lo, glm::vec3 hi) const {
-        const std::optional<PixelRect> in = overlap(r, mRect);
+        const std::optional<PixelRect> rays = mLattice.of(r);
+        const std::optional<PixelRect> in = rays ? overlap(*rays, mRect) : std::nullopt;
         if (!in || !any(*in)) return false;
         lo -= 1.0f;
         hi += 1.0f;
         for (std::uint32_t y = in->y; y < in->y + in->height; ++y)
             for (std::uint32_t x = in->x; x < in->x + in->width; ++x) {
                 if (!marching(x, y)) continue;
-                const float sx = 2.0f * (float(x) + 0.5f) / f.width - 1.0f;
-                const float sy = 1.0f - 2.0f * (float(y) + 0.5f) / f.height;
+                const float sx = 2.0f * (float(mLattice.pixel(x)) + 0.5f) / f.width - 1.0f;
+                const float sy = 1.0f - 2.0f * (float(mLattice.pixel(y)) + 0.5f) / f.height;
                 const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
                 const glm::vec3 d =
                     f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
@@ -405,6 +411,7 @@ class MarchingRays {
     }
 
     const RayStates& mRays;
+    PixelLattice mLattice;
     PixelRect mRegion, mRect;
     std::size_t mStride;
     std::vector<std::uint32_t> mSum;
@@ -462,7 +469,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
                            FrameStats& stats) {
     const auto frameStart = Clock::now();
     options.validate();
-    checkView(view, options, true, true);
+    checkView(view, options, true, true, true);
     stats = FrameStats{};
     const brickstore::BrickStore& store = scene.store;
     brickstore::BrickCache& cache = scene.cache;
@@ -537,12 +544,18 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         f.cell = float(fine->cellVoxels());
         f.cellAxis = int(fine->cellsPerAxis());
     }
-    const PixelRect region = options.drawn();
+    // The rays: one per pixel of the region, or of its lattice under a stride (validate() keeps
+    // the lattice from being empty). `region` and `marched` number them, not image pixels.
+    const PixelLattice lattice = options.lattice();
+    const PixelRect region = *lattice.of(options.drawn());
     // Only the rays that may meet a drawn brick are marched (the others stay transparent
     // black); without skipping every ray is, the reference of the skipping invariant.
-    const Footprint marched = options.skip == SkipMode::None
-                                  ? Footprint{region, region.pixels() > 0}
-                                  : raysToMarch(g, plan, view, region);
+    Footprint marched{region, region.pixels() > 0};
+    if (options.skip != SkipMode::None) {
+        const Footprint reach = raysToMarch(g, plan, view, options.drawn());
+        const std::optional<PixelRect> rays = reach.visible ? lattice.of(reach.rect) : std::nullopt;
+        marched = rays ? Footprint{*rays, true} : Footprint{};
+    }
     RayStates rays(region.pixels());
     std::vector<detail::Front> fronts(f.pre ? region.pixels() : 0);
     RayCount count;
@@ -550,7 +563,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         if (guided && batch > 0 && marched.visible)
             stats.bricksUnreached +=
                 markUnreached(g, plan, first, ends[batch], view, f,
-                              MarchingRays(rays, region, marched.rect), unreached);
+                              MarchingRays(rays, lattice, region, marched.rect), unreached);
         const auto loadStart = Clock::now();
         std::vector<brickstore::BrickPin> pins =
             pinBatch(plan, first, ends[batch], unreached, cache, bricks);
@@ -561,7 +574,8 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         const auto renderStart = Clock::now();
         f.batch = std::uint32_t(batch);
         if (marched.visible)
-            marchPassOfType(store.info().volume.type, f, region, marched.rect, rays, fronts, count);
+            marchPassOfType(store.info().volume.type, f, lattice, region, marched.rect, rays,
+                            fronts, count);
         stats.renderMs += msSince(renderStart);
         for (brickstore::BrickPin& pin : pins) {
             if (!pin) continue;

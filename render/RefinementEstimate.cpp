@@ -1,5 +1,7 @@
 #include "render/RefinementEstimate.h"
 
+#include "render/RenderTypes.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -27,6 +29,33 @@ double estimatedPsnrDb(std::span<const std::uint8_t> finer, std::span<const std:
     const double between = psnrRgb8(finer, coarser);
     return std::isinf(between) ? kMaxEstimateDb
                                : std::min(between + 20.0 * std::log10(2.0), kMaxEstimateDb);
+}
+
+std::uint32_t checkStride(std::uint32_t width, std::uint32_t height) {
+    auto pixels = [&](std::uint32_t stride) {
+        const PixelLattice l{stride};
+        return std::uint64_t(l.first(width)) * l.first(height);
+    };
+    std::uint32_t stride = 1;
+    while (pixels(stride + 1) >= kCheckPixels)
+        ++stride;
+    return stride;
+}
+
+std::vector<std::uint8_t> latticeOf(std::span<const std::uint8_t> rgba8, std::uint32_t width,
+                                    std::uint32_t height, std::uint32_t stride) {
+    if (rgba8.size() != std::size_t(width) * height * 4)
+        throw std::invalid_argument("latticeOf: " + std::to_string(rgba8.size()) +
+                                    " bytes are not " + std::to_string(width) + "x" +
+                                    std::to_string(height) + " RGBA pixels");
+    const PixelLattice l{std::max(stride, 1u)};
+    const std::uint32_t w = l.first(width), h = l.first(height);
+    std::vector<std::uint8_t> out(std::size_t(w) * h * 4);
+    for (std::uint32_t j = 0; j < h; ++j)
+        for (std::uint32_t i = 0; i < w; ++i)
+            std::copy_n(&rgba8[(std::size_t(l.pixel(j)) * width + l.pixel(i)) * 4], 4,
+                        &out[(std::size_t(j) * w + i) * 4]);
+    return out;
 }
 
 double refinementStep(double step, std::uint32_t pass) {

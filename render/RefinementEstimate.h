@@ -9,10 +9,19 @@
 // converged, which keeps the estimate on the safe side of the truth. Near convergence the
 // 8-bit frames stop improving (the CPU raycaster's frames agree with the converged image to
 // 52-67 dB at their finest steps on the shared scans), so no estimate exceeds kMaxEstimateDb.
+//
+// The first pass needs a pass before it. Where the renderer draws a stride (RenderOptions::
+// stride, the CPU raycaster) and the frame is large enough, the daemon draws the first pass at
+// half the session's step and checks it against a sparse frame at the session's step: the
+// pixels of a lattice of about kCheckPixels (checkStride()), each exactly as the whole frame at
+// that step would have it. The estimate is then the same formula over the lattice's pixels, a
+// sample of the frame's. The sparse frame costs about kCheckPixels rays, where the whole frame
+// at the session's step cost a ray per pixel (a 512^2 frame: a sixteenth).
 // What was measured: README "Frames on a budget"; the test: tests/render/RefinementEstimateTest.
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <vector>
 
 namespace bc::render {
 
@@ -20,6 +29,8 @@ namespace bc::render {
 inline constexpr double kMaxEstimateDb = 50.0;
 /// No refinement pass samples finer than this (voxels).
 inline constexpr double kFinestRefinementStep = 1.0 / 16.0;
+/// The fewest pixels of the sparse frame a first pass is checked against (checkStride()).
+inline constexpr std::uint64_t kCheckPixels = 128 * 128;
 
 /// PSNR (dB) of `a` against `b`, both 8-bit RGBA of the same size, over R, G and B (the
 /// colours composited over black when premultiplied); +infinity when they are equal.
@@ -30,6 +41,17 @@ double psnrRgb8(std::span<const std::uint8_t> a, std::span<const std::uint8_t> b
 /// before it at twice its step, `coarser`: psnrRgb8(finer, coarser) + 6.02 dB, at most
 /// kMaxEstimateDb.
 double estimatedPsnrDb(std::span<const std::uint8_t> finer, std::span<const std::uint8_t> coarser);
+
+/// The stride of the lattice a first pass of width x height is checked against: the largest
+/// whose lattice (PixelLattice) holds kCheckPixels pixels or more; 1 when the frame is too
+/// small for a sparse check (under 256 x 256), and its first pass is drawn at the session's step.
+std::uint32_t checkStride(std::uint32_t width, std::uint32_t height);
+
+/// The pixels of PixelLattice{stride} of a width x height 8-bit RGBA frame, as a frame of the
+/// lattice's size (what RenderOptions::stride draws).
+/// @throw std::invalid_argument when the frame is not width x height pixels.
+std::vector<std::uint8_t> latticeOf(std::span<const std::uint8_t> rgba8, std::uint32_t width,
+                                    std::uint32_t height, std::uint32_t stride);
 
 /// The step of refinement pass `pass` (0: the session's `step`): step / 2^pass.
 double refinementStep(double step, std::uint32_t pass);

@@ -31,7 +31,7 @@ float rayJitter(std::uint32_t x, std::uint32_t y) {
 }
 
 void RenderOptions::validate() const {
-    constexpr std::uint32_t kMaxEdge = 16384;
+    constexpr std::uint32_t kMaxEdge = 16384, kMaxStride = 256;
     if (width == 0 || height == 0 || width > kMaxEdge || height > kMaxEdge)
         throw std::invalid_argument("size: " + std::to_string(width) + "x" +
                                     std::to_string(height) + " is outside 1.." +
@@ -52,6 +52,20 @@ void RenderOptions::validate() const {
                                     std::to_string(parts) +
                                     " (parts must lie in 1..4096, part "
                                     "below parts)");
+    if (stride == 0 || stride > kMaxStride)
+        throw std::invalid_argument("stride: " + std::to_string(stride) + " is outside 1.." +
+                                    std::to_string(kMaxStride));
+    if (stride / 2 >= width || stride / 2 >= height)
+        throw std::invalid_argument("stride: " + std::to_string(stride) + " leaves no pixel of " +
+                                    std::to_string(width) + "x" + std::to_string(height));
+    if (stride > 1 && parts > 1)
+        throw std::invalid_argument("stride: " + std::to_string(stride) +
+                                    " draws the whole volume (one part)");
+    if (!region.whole() && !lattice().of(region))
+        throw std::invalid_argument("stride: the region " + std::to_string(region.width) + "x" +
+                                    std::to_string(region.height) + " at " +
+                                    std::to_string(region.x) + "," + std::to_string(region.y) +
+                                    " holds no pixel of stride " + std::to_string(stride));
     if (cellVoxels != 0 && (cellVoxels > 64 || (cellVoxels & (cellVoxels - 1)) != 0))
         throw std::invalid_argument("cells: " + std::to_string(cellVoxels) +
                                     " voxels; 0 (none) or a power of two up to 64");

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 namespace bc::render {
@@ -37,6 +38,29 @@ struct PixelRect {
     bool whole() const { return width == 0; }
     std::uint64_t pixels() const { return std::uint64_t(width) * height; }
     bool operator==(const PixelRect&) const = default;
+};
+
+/// The pixels a frame drawn at RenderOptions::stride s takes: (s i + s / 2, s j + s / 2), one
+/// at the middle of each s x s cell (s = 1: every pixel). Lattice pixel (i, j) is image pixel
+/// (pixel(i), pixel(j)).
+struct PixelLattice {
+    std::uint32_t stride = 1;
+
+    std::uint32_t pixel(std::uint32_t i) const { return i * stride + stride / 2; }
+    /// The first lattice index whose pixel is at or after image pixel p; at p = an image's edge,
+    /// how many lattice pixels lie across it.
+    std::uint32_t first(std::uint32_t p) const {
+        const std::uint32_t o = stride / 2;
+        return p <= o ? 0 : (p - o + stride - 1) / stride;
+    }
+    /// The lattice pixels inside image rectangle `r` (not whole), as a rectangle of lattice
+    /// indices; nullopt when none is.
+    std::optional<PixelRect> of(const PixelRect& r) const {
+        const std::uint32_t x0 = first(r.x), x1 = first(r.x + r.width);
+        const std::uint32_t y0 = first(r.y), y1 = first(r.y + r.height);
+        if (x1 <= x0 || y1 <= y0) return std::nullopt;
+        return PixelRect{x0, y0, x1 - x0, y1 - y0};
+    }
 };
 
 struct RenderOptions {
@@ -110,11 +134,20 @@ struct RenderOptions {
     /// outgrow the budget, the next pass over the view then starts on resident bricks instead
     /// of evicting each just before it is wanted (render/RESIDENCY.md).
     std::uint64_t hostKeptBefore = 0;
+    /// Draw only every stride-th pixel along each axis, the pixels of PixelLattice{stride},
+    /// each exactly as in the whole frame; the image returned is the lattice's pixels of the
+    /// region (PixelLattice::of), which must hold one. A sparse frame at low cost: the daemon's
+    /// check of the first refinement pass at rest (render/RefinementEstimate.h), drawn in bands
+    /// of rows like a frame in slices. With one part only. Renderers whose kind says `strided`
+    /// honour it (the CPU raycaster); others refuse a stride above 1 (Renderer::checkView).
+    std::uint32_t stride = 1;
 
     /// Throws std::invalid_argument naming the field when a value is out of range.
     void validate() const;
-    /// The pixels to draw: `region`, or the whole image when it is empty.
+    /// The pixels to draw: `region`, or the whole image when it is empty (under a stride, the
+    /// lattice's pixels of it).
     PixelRect drawn() const { return region.whole() ? PixelRect{0, 0, width, height} : region; }
+    PixelLattice lattice() const { return {stride}; }
 };
 
 /// Where pixel (x, y) of the frame (y from the top) starts its samples under

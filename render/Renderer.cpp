@@ -33,7 +33,7 @@ FrameClassification classifyFrame(const Scene& scene, std::uint32_t level,
 }
 
 void Renderer::checkView(const View& view, const RenderOptions& options, bool drawsRegions,
-                         bool drawsParts) {
+                         bool drawsParts, bool drawsStrided) {
     if (view.width != options.width || view.height != options.height)
         throw std::invalid_argument("the view is " + std::to_string(view.width) + "x" +
                                     std::to_string(view.height) + ", the options ask for " +
@@ -44,6 +44,9 @@ void Renderer::checkView(const View& view, const RenderOptions& options, bool dr
     if (!drawsParts && options.parts > 1)
         throw std::invalid_argument("parts: this renderer draws whole volumes only (the CPU "
                                     "and GPU raycasters draw parts)");
+    if (!drawsStrided && options.stride > 1)
+        throw std::invalid_argument("stride: this renderer draws every pixel (the CPU raycaster "
+                                    "draws a stride)");
 }
 
 void Renderer::refusePreintegration(const RenderOptions& options, const char* renderer) {

@@ -88,10 +88,11 @@ class Renderer {
     virtual GpuResidency* gpuResidency() { return nullptr; }
 
     /// @throw std::invalid_argument when `view` is not the options' size, or when the options
-    /// ask for a region of the image from a renderer that draws whole images only, or for a
-    /// part of the volume (RenderOptions::parts) from one that draws whole volumes only.
+    /// ask for a region of the image from a renderer that draws whole images only, for a part
+    /// of the volume (RenderOptions::parts) from one that draws whole volumes only, or for a
+    /// stride (RenderOptions::stride) from one that draws every pixel.
     static void checkView(const View& view, const RenderOptions& options, bool drawsRegions = false,
-                          bool drawsParts = false);
+                          bool drawsParts = false, bool drawsStrided = false);
     /// @throw std::invalid_argument naming `renderer` when the options ask for
     /// pre-integration (RenderOptions::preintegrate), which it does not do.
     static void refusePreintegration(const RenderOptions& options, const char* renderer);

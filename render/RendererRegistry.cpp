@@ -23,6 +23,7 @@ const RendererRegistry& RendererRegistry::builtin() {
                .description = "CPU raycaster",
                .regions = true,
                .parts = true,
+               .strided = true,
                .create = [] { return std::make_unique<CpuRaycaster>(); }});
         r.add({.name = "reference",
                .description = "CPU reference raycaster (double precision, no skipping)",

@@ -30,6 +30,9 @@ struct RendererKind {
     /// Draws RenderOptions::parts (one part of the brick grid, render/SCALEOUT.md): the
     /// daemon's MPI ranks draw its frames together (the raycasters).
     bool parts = false;
+    /// Draws RenderOptions::stride, every stride-th pixel (the CPU raycaster): the daemon
+    /// checks its first refinement pass at rest against a sparse frame at twice its step.
+    bool strided = false;
     std::function<std::unique_ptr<Renderer>()> create;
 };
 

@@ -270,7 +270,19 @@ struct FrameDrawing {
     /// A refined frame's estimated PSNR against the converged image (render/
     /// RefinementEstimate.h); negative: none.
     double estimatedPsnrDb = -1;
-    double drawMs = 0; ///< drawing its slices, not waiting for other sessions' turns
+    /// The first refinement pass at rest under an error bound, where the renderer draws a
+    /// stride: the stride of the sparse frame at twice the pass's step that it is checked
+    /// against (render::checkStride; 1: no such check), that frame (8-bit RGBA, the lattice's
+    /// size) and the image row its next band starts at (a sliced frame draws it in bands of
+    /// rows, first).
+    std::uint32_t checkStride = 1;
+    std::vector<std::uint8_t> check;
+    std::uint32_t checkRow = 0;
+    double checkMs = 0;      ///< drawing it
+    double drawMs = 0;       ///< drawing its slices, not waiting for other sessions' turns
+    std::uint32_t draws = 0; ///< render calls so far (slices and bands of the check)
+
+    bool checkDue() const { return checkStride > 1 && checkRow < options.height; }
 
     /// A refined frame drawn because an adaptive session's camera came to rest.
     bool refinement() const {
@@ -372,7 +384,7 @@ std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume&
 struct RenderService::Counters {
     std::map<std::string, double> frames; ///< per renderer
     double refined = 0, errors = 0, renderMs = 0, encodeMs = 0, bytes = 0, samples = 0;
-    double refused = 0, cancelled = 0, slices = 0;
+    double refused = 0, cancelled = 0, slices = 0, checks = 0;
     Histogram latencyMs{Histogram::series125(1, 10000)};
     Histogram renderMsHist{Histogram::series125(1, 10000)};
     Histogram uploadMs{Histogram::series125(0.1, 10000)};
@@ -524,6 +536,9 @@ void RenderService::collect(MetricSet& m) {
               c.cancelled);
     m.counter("frame_slices_total", "Slices drawn of frames too long to draw in one turn",
               c.slices);
+    m.counter("refinement_checks_total",
+              "First refinement passes at rest checked against a sparse frame at twice their step",
+              c.checks);
     m.counter("render_ms_total", "Milliseconds spent drawing frames", c.renderMs);
     m.counter("encode_ms_total", "Milliseconds spent encoding frames", c.encodeMs);
     m.counter("frame_bytes_total", "Encoded frame message bytes", c.bytes);
@@ -927,6 +942,16 @@ void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool
     total.totalMs += slice.totalMs;
 }
 
+/// Whether the bricks of `level` of `volume` (the last level past it) fit the volume's share
+/// of the host cache whole (decompressed, aprons included).
+bool levelFits(const Volume& volume, std::uint32_t level) {
+    const auto& levels = volume.store->layout().levels();
+    const std::uint64_t bricks =
+        levels[std::min<std::size_t>(level, levels.size() - 1)].brickCount();
+    return double(bricks) * double(volume.store->brickBytes()) <=
+           double(volume.cache->stats().budgetBytes);
+}
+
 /// The levels an interactive frame of `volume` may be drawn at: the one asked for, or under
 /// automatic level every level, each marked by whether its bricks fit the volume's share of
 /// the host cache whole (decompressed, aprons included).
@@ -942,7 +967,7 @@ LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions
     LevelRange range{0, levels - 1, {}, {}};
     for (std::uint32_t l = 0; l < levels; ++l) {
         const double levelBytes = double(layout.levels()[l].brickCount()) * brickBytes;
-        range.fits.push_back(levelBytes <= share);
+        range.fits.push_back(levelFits(volume, l));
         // Stored bricks only are loaded (constant ones are not): the level's bytes bound them.
         range.warm.push_back(double(volume.cache->residentBytes(l)) >=
                              LevelRange::kWarmShare * std::min(levelBytes, share));
@@ -987,6 +1012,18 @@ void RenderService::prepare(FrameDrawing& d) {
     if (!d.job.refined) d.divisor = budgeted ? budgeted->divisor : InteractiveBudget::kFirstDivisor;
     d.options = toRenderOptions(o, d.divisor);
     if (budgeted) d.options.level = std::int32_t(budgeted->level);
+    // The first pass at rest under an error bound, where the renderer draws a stride and the
+    // frame is large enough: at half the session's step, checked against a sparse frame at the
+    // step, so that its estimate comes with it (render/RefinementEstimate.h). Only where the
+    // level's bricks fit the volume's host share: otherwise the sparse frame's rays would load
+    // most of the view's bricks, and the pass load them again. Not across ranks: the sparse
+    // frame is drawn here, and rank 0 holds only its part's bricks.
+    if (d.refinement() && s.budget.restPsnrDb > 0 && d.job.pass == 0 && d.kind->strided &&
+        levelFits(*s.volume, std::uint32_t(d.options.level)) &&
+        !(mConfig.cluster && mConfig.cluster->ranks() > 1)) {
+        d.checkStride = render::checkStride(o.width, o.height);
+        if (d.checkStride > 1) d.job.pass = 1;
+    }
     // A refinement pass at rest under an error bound: the session's step over 2^pass.
     if (d.job.pass > 0)
         d.options.stepVoxels = float(render::refinementStep(d.options.stepVoxels, d.job.pass));
@@ -1074,8 +1111,54 @@ double RenderService::sliceMsBeside(const std::shared_ptr<RenderSlot>& slot,
                       sliceMs);
 }
 
+double RenderService::drawCheck(render::Renderer& renderer, FrameDrawing& d, double budget) {
+    const auto start = Clock::now();
+    const render::PixelLattice lattice{d.checkStride};
+    const std::uint32_t w = d.options.width, h = d.options.height;
+    if (d.check.empty()) d.check.assign(std::size_t(lattice.first(w)) * lattice.first(h) * 4, 0);
+    render::RenderOptions options = d.options;
+    options.stride = d.checkStride;
+    options.stepVoxels = 2.0 * d.options.stepVoxels; // the session's step: a power of two apart
+    options.hostKeptBefore = d.stats.hostKeptBytes;  // its bricks count as the frame's
+    // Whole lattice rows from d.checkRow, about `budget` cost units, at least one: a lattice
+    // row takes a stride-th of its image row's rays, at twice the step.
+    std::uint32_t rows = h - d.checkRow;
+    if (budget > 0) {
+        double cost = 0;
+        std::uint32_t j = lattice.first(d.checkRow);
+        do
+            cost += rowCost(d, lattice.pixel(j)) / (2.0 * d.checkStride);
+        while (++j < lattice.first(h) && cost < budget);
+        rows = (j < lattice.first(h) ? lattice.pixel(j) : h) - d.checkRow;
+    }
+    options.region = {0, d.checkRow, w, rows};
+    const std::optional<render::PixelRect> at = lattice.of(options.region);
+    render::FrameStats stats;
+    const render::Image band = drawRegion(renderer, d, options, stats);
+    paste(d.check, lattice.first(w), band, *at);
+    accumulate(d.stats, stats, d.draws++ == 0);
+    d.checkRow += rows;
+    d.checkMs += msSince(start);
+    if (!d.checkDue()) {
+        std::lock_guard lock(mMutex);
+        mCounters->checks += 1;
+    }
+    return std::min(stats.uploadMs, msSince(start));
+}
+
 bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d) {
     render::Renderer& renderer = rendererFor(slot, d);
+    if (d.checkDue() && !d.sliced) {
+        drawCheck(renderer, d, 0); // whole, and the pass in the same turn
+    } else if (d.checkDue()) {     // a band of it is this turn's slice
+        if (d.draws == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
+        const auto rate = mSliceCostPerMs.find(d.kind->name);
+        const double perMs = rate == mSliceCostPerMs.end() ? kFirstCostPerMs : rate->second;
+        const double loadMs = drawCheck(renderer, d, d.sliceTargetMs * perMs);
+        d.sliceTargetMs = std::max(sliceMsBeside(slot, d), 2.0 * loadMs);
+        d.drawMs = d.checkMs;
+        return false;
+    }
     const auto start = Clock::now();
     // Speeds measured, per renderer: whole frames against their upper-bound cost (whether to
     // slice), slices against their pixels' estimated samples (how large a slice is). The
@@ -1089,9 +1172,12 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
         if (!fresh) it->second = perMs < it->second ? perMs : 0.5 * (it->second + perMs);
     };
     if (!d.sliced) {
-        d.rgba8 = render::toRgba8(drawRegion(renderer, d, d.options, d.stats));
-        d.drawMs = msSince(start);
-        calibrate(mCostPerMs, double(d.cost), d.drawMs);
+        render::FrameStats stats;
+        d.rgba8 = render::toRgba8(drawRegion(renderer, d, d.options, stats));
+        accumulate(d.stats, stats, d.draws++ == 0);
+        const double ms = msSince(start);
+        d.drawMs = d.checkMs + ms;
+        calibrate(mCostPerMs, double(d.cost), ms);
         planPrefetch(slot, d, renderer);
         return true;
     }
@@ -1099,13 +1185,13 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     const double perMs = rate == mSliceCostPerMs.end() ? kFirstCostPerMs : rate->second;
     double cost = 0;
     render::RenderOptions options = d.options;
-    if (d.slices == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
+    if (d.draws == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
     options.region = nextSlice(d, d.sliceTargetMs * perMs, cost);
     options.hostKeptBefore = d.stats.hostKeptBytes; // the slices keep one frame's bricks
     render::FrameStats stats;
     const render::Image part = drawRegion(renderer, d, options, stats);
     paste(d.rgba8, d.options.width, part, options.region);
-    accumulate(d.stats, stats, d.slices == 0);
+    accumulate(d.stats, stats, d.draws++ == 0);
     // The speed of the rays alone: loading bricks is a cost per slice, not per pixel (when the
     // frame's bricks exceed the host budget, a brick whose footprint spans several slices is
     // loaded by each). Slices are made long enough that it stays at most half of each.
@@ -1114,7 +1200,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
     d.sliceTargetMs = std::max(sliceMsBeside(slot, d), 2.0 * loadMs);
     ++d.slices;
     d.slicesMs += msSince(start);
-    d.drawMs = d.slicesMs;
+    d.drawMs = d.checkMs + d.slicesMs;
     d.nextPixel += options.region.pixels();
     {
         std::lock_guard lock(mMutex);
@@ -1136,7 +1222,7 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     // The raycasters' frames go across the ranks; the other renderers (the reference and the
     // splatters, which do not draw parts) draw here, from the whole volume (rank 0 reads the
     // same store).
-    if (!cluster || cluster->ranks() < 2 || !d.kind->parts)
+    if (!cluster || cluster->ranks() < 2 || !d.kind->parts || options.stride > 1)
         return renderer.render(scene, d.view, options, stats);
     ClusterOrder order{s.volume->name, d.kind->name, *s.camera,     s.tfMessage,
                        s.options,      d.divisor,    options.region};
@@ -1239,8 +1325,12 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
         // one before, and another follows at half the step until the estimate meets the bound.
         const double boundDb = d.job.state.budget.restPsnrDb;
         if (!cached && d.refinement() && boundDb > 0) {
-            if (d.job.pass > 0 && mine.lastPassIndex + 1 == d.job.pass &&
-                mine.lastPass.size() == d.rgba8.size())
+            if (!d.check.empty())
+                d.estimatedPsnrDb = render::estimatedPsnrDb(
+                    render::latticeOf(d.rgba8, d.options.width, d.options.height, d.checkStride),
+                    d.check);
+            else if (d.job.pass > 0 && mine.lastPassIndex + 1 == d.job.pass &&
+                     mine.lastPass.size() == d.rgba8.size())
                 d.estimatedPsnrDb = render::estimatedPsnrDb(d.rgba8, mine.lastPass);
             mine.lastPass = d.rgba8;
             mine.lastPassIndex = d.job.pass;

@@ -224,8 +224,15 @@ class RenderService {
     void turn(const std::shared_ptr<RenderSlot>& slot, std::optional<RenderSlot::Job> job);
     /// Resolves the frame's options and view, checks its cost and decides on slices.
     void prepare(FrameDrawing& d);
-    /// Draws the next slice; true when the frame is complete.
+    /// Draws the next slice; true when the frame is complete. A first refinement pass checked
+    /// against a sparse frame (FrameDrawing::checkStride) draws that frame first: in the same
+    /// turn when the pass is drawn whole, in bands of rows, a turn each, when it is sliced.
     bool drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
+    /// Draws the sparse frame a first refinement pass is checked against (render/
+    /// RefinementEstimate.h), the pass's lattice of pixels at twice its step: its next band of
+    /// about `budget` cost units (slices' units), or, at 0, all of it that is left. Returns the
+    /// milliseconds spent loading bricks.
+    double drawCheck(render::Renderer& renderer, FrameDrawing& d, double budget);
     /// How long a slice of `d` should be: `frames.slice_ms`, but a refined frame's, while other
     /// sessions move, their share of `frames.interactive_ms` (each of the n moving and this one
     /// gets interactive_ms / (n + 1), at least 10 ms): a moving session's frame then waits for
@@ -236,7 +243,8 @@ class RenderService {
     std::uint32_t interactiveSessions(Clock::duration within,
                                       const RenderSlot* except = nullptr) const;
     /// Draws `options.region` of the frame: with `renderer` here, or across the cluster's
-    /// ranks when there is one and the frame is the CPU raycaster's.
+    /// ranks when there is one and the frame is a raycaster's (a sparse frame, options.stride,
+    /// is drawn here).
     render::Image drawRegion(render::Renderer& renderer, const FrameDrawing& d,
                              const render::RenderOptions& options, render::FrameStats& stats);
     /// After a GPU frame `d` completed: its session's next view, predicted from its last two,

@@ -5,14 +5,19 @@
 // daemon draws under a 40 dB bound and hold every estimate to the measured error: never more
 // than kOptimisticDb above it, and at most kPessimisticDb below it (a factor of 3.2 in RMSE;
 // an estimate claims no more than kMaxEstimateDb), and the pass where the daemon stops under a
-// bound of 30, 40 or 50 dB meets it. The true image is the CPU raycaster at
-// 1/32 voxel without jitter or early termination, checked to be settled (1/16 against 1/32).
+// bound of 30, 40 or 50 dB meets it. The first pass of a large frame is checked against a
+// sparse frame at twice its step instead (RenderOptions::stride): the same holds of that
+// estimate, at lattices far sparser than the daemon's (a ninth and a quarter of a 96^2 frame:
+// 1024 and 2304 pixels, where the daemon's hold at least kCheckPixels). The true image is the
+// CPU raycaster at 1/32 voxel without jitter or early termination, checked to be settled (1/16
+// against 1/32).
 #include "render/RefinementEstimate.h"
 #include "RenderTestSupport.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
 #include <vector>
 
 namespace bc::render {
@@ -48,6 +53,28 @@ TEST(RefinementEstimate, PassesHalveTheStepUntilTheBoundOrTheFinestStep) {
     EXPECT_TRUE(refineFurther(30, 40, 2 * kFinestRefinementStep));    // the finest comes next
     EXPECT_FALSE(refineFurther(30, 40, kFinestRefinementStep));       // nothing finer
     EXPECT_FALSE(refineFurther(30, 40, kFinestRefinementStep * 1.5)); // half would be finer
+}
+
+TEST(RefinementEstimate, TheCheckLatticeHoldsAtLeastItsPixelsAndPicksThemOut) {
+    EXPECT_EQ(checkStride(512, 512), 4u); // 128^2 pixels
+    EXPECT_EQ(checkStride(256, 256), 2u);
+    EXPECT_EQ(checkStride(255, 256), 1u); // too small for a sparse check
+    EXPECT_EQ(checkStride(64, 64), 1u);
+    EXPECT_EQ(checkStride(1920, 1080), 11u);
+    for (const auto [w, h] : {std::pair{512u, 512u}, {1920u, 1080u}, {300u, 4000u}, {16384u, 2u}}) {
+        const std::uint32_t s = checkStride(w, h);
+        const PixelLattice l{s}, next{s + 1};
+        EXPECT_GE(std::uint64_t(l.first(w)) * l.first(h), kCheckPixels) << w << "x" << h;
+        if (s > 1) EXPECT_LT(std::uint64_t(next.first(w)) * next.first(h), kCheckPixels);
+    }
+    // A 5x3 frame whose pixel (x, y) holds x, y, x + y, 255, at stride 2: pixels (1, 1), (3, 1).
+    std::vector<std::uint8_t> frame;
+    for (std::uint8_t y = 0; y < 3; ++y)
+        for (std::uint8_t x = 0; x < 5; ++x)
+            frame.insert(frame.end(), {x, y, std::uint8_t(x + y), 255});
+    EXPECT_EQ(latticeOf(frame, 5, 3, 2), (std::vector<std::uint8_t>{1, 1, 2, 255, 3, 1, 4, 255}));
+    EXPECT_EQ(latticeOf(frame, 5, 3, 1), frame);
+    EXPECT_THROW(latticeOf(frame, 5, 4, 2), std::invalid_argument);
 }
 
 class RefinementEstimateOnScans : public ::testing::TestWithParam<test::ScanPreset> {};
@@ -104,6 +131,27 @@ TEST_P(RefinementEstimateOnScans, EstimatesFollowTheMeasuredErrorAndTheBoundIsMe
         } else {
             EXPECT_LT(bound, kBoundDb + 1) << "no pass reached " << bound << " dB";
         }
+    }
+
+    // A large frame's first pass (pass 1, at half the step) checked against the lattice of
+    // pass 0 (a sparse frame at the step): the estimate over the lattice's pixels.
+    ASSERT_GE(passes.size(), 2u);
+    RenderOptions sparse = o, first = o;
+    first.stepVoxels = float(refinementStep(o.stepVoxels, 1));
+    const std::vector<std::uint8_t> pass1 = toRgba8(test::cpuFrame(*t, tf, c, first));
+    for (const std::uint32_t stride : {2u, 3u}) {
+        sparse.stride = stride;
+        const std::vector<std::uint8_t> check = toRgba8(test::cpuFrame(*t, tf, c, sparse));
+        const double estimate = estimatedPsnrDb(latticeOf(pass1, o.width, o.height, stride), check);
+        const double measured = passes[1].measured;
+        std::printf("[ %s %s ] pass 1 checked at stride %u: estimated %.1f dB (%.1f from the "
+                    "whole pass 0)\n",
+                    k.scan.c_str(), k.preset.c_str(), stride, estimate, passes[1].estimate);
+        EXPECT_LE(estimate, measured + kOptimisticDb) << "stride " << stride;
+        EXPECT_GE(estimate, std::min(measured, kMaxEstimateDb) - kPessimisticDb)
+            << "stride " << stride;
+        for (const double bound : {30.0, kBoundDb})
+            if (estimate >= bound) EXPECT_GE(measured, bound) << "stride " << stride;
     }
 }
 

@@ -10,7 +10,9 @@
 #include "render/ReferenceRenderer.h"
 #include "render/RendererRegistry.h"
 
+#include <algorithm>
 #include <random>
+#include <utility>
 
 namespace bc::render {
 namespace {
@@ -96,6 +98,117 @@ TEST(Region, SplatterSlicesDrawOnlyTheBricksThatReachThem) {
     HybridSplatter splat;
     test::expectAThinSliceDrawsLess(splat, *t, TransferFunction::preset("ct-skin", t->stats),
                                     Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20));
+}
+
+// RenderOptions::stride: the CPU raycaster draws the rays of every stride-th pixel (the
+// lattice's), each exactly as in the whole frame, on each of its paths (scalar, SIMD along
+// rays, packets, pre-integrated; skipping none, bricks or all; jittered; in one batch or in
+// several under a host budget of a few bricks, ray-guided or not), at odd sizes and strides;
+// and takes fewer samples. What the daemon checks a first refinement pass against.
+TEST(Region, AStrideDrawsEachLatticePixelAsInTheWholeFrame) {
+    auto t = test::ingestRealScan("cthead");
+    if (!t) return test::missingData("scan cthead");
+    const auto tf = TransferFunction::preset("ct-skin", t->stats);
+    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
+    struct Case {
+        const char* what;
+        int loop; ///< 0 scalar, 1 SIMD along rays, 2 packets, 3 pre-integrated
+        SkipMode skip = SkipMode::All;
+        std::uint64_t budget = std::uint64_t(1) << 30;
+        bool guided = true;
+    };
+    constexpr std::uint64_t kFewBricks = 1u << 20; // ~11 bricks of 36^3 u16
+    const std::vector<Case> cases = {
+        {"scalar", 0},
+        {"simd", 1},
+        {"packets", 2},
+        {"pre-integrated", 3},
+        {"packets, no skipping", 2, SkipMode::None},
+        {"packets, bricks only", 2, SkipMode::Bricks},
+        {"packets, a few bricks at a time", 2, SkipMode::All, kFewBricks, false},
+        {"packets, a few bricks at a time, ray-guided", 2, SkipMode::All, kFewBricks, true},
+        {"scalar, a few bricks at a time, ray-guided", 0, SkipMode::All, kFewBricks, true},
+    };
+    CpuRaycaster cpu;
+    for (const Case& c : cases)
+        for (const std::uint32_t stride : {2u, 3u, 4u, 7u}) {
+            SCOPED_TRACE(std::string(c.what) + ", stride " + std::to_string(stride));
+            RenderOptions o;
+            o.width = 61; // odd: lattices that do not divide the image
+            o.height = 47;
+            o.jitter = true;
+            o.simd = c.loop > 0;
+            o.packets = c.loop == 2;
+            o.preintegrate = c.loop == 3;
+            o.skip = c.skip;
+            o.rayGuided = c.guided;
+            brickstore::BrickCache cache(*t->store, brickstore::BrickCacheConfig{c.budget});
+            FrameStats wholeStats, sparseStats;
+            const Image whole = cpu.render(*t->store, cache, tf, camera, o, wholeStats);
+            o.stride = stride;
+            const Image sparse = cpu.render(*t->store, cache, tf, camera, o, sparseStats);
+            const PixelLattice l{stride};
+            ASSERT_EQ(sparse.width, l.first(o.width));
+            ASSERT_EQ(sparse.height, l.first(o.height));
+            ASSERT_LT(l.pixel(sparse.width - 1), o.width);
+            ASSERT_GE(l.pixel(sparse.width), o.width) << "a lattice pixel left out";
+            int differing = 0;
+            for (std::uint32_t j = 0; j < sparse.height; ++j)
+                for (std::uint32_t i = 0; i < sparse.width; ++i)
+                    differing += !std::equal(sparse.pixel(i, j), sparse.pixel(i, j) + 4,
+                                             whole.pixel(l.pixel(i), l.pixel(j)));
+            EXPECT_EQ(differing, 0) << "lattice pixels unlike the whole frame's";
+            // In bands of rows (how the daemon draws it beside a sliced frame): the same.
+            Image banded(sparse.width, sparse.height);
+            for (const auto [y0, y1] : {std::pair{0u, 10u}, {10u, 23u}, {23u, 47u}}) {
+                o.region = {0, y0, o.width, y1 - y0};
+                const Image band = cpu.render(*t->store, cache, tf, camera, o, sparseStats);
+                const PixelRect at = *l.of(o.region);
+                ASSERT_EQ(band.width, at.width);
+                ASSERT_EQ(band.height, at.height);
+                for (std::uint32_t j = 0; j < band.height; ++j)
+                    std::copy_n(band.pixel(0, j), 4 * band.width, banded.pixel(0, at.y + j));
+            }
+            o.region = {};
+            EXPECT_EQ(compareImages(banded, sparse).maxAbs, 0.0) << "bands unlike the whole";
+            EXPECT_GT(test::alphaSum(sparse), 0.05 * sparse.width * sparse.height);
+            EXPECT_LT(double(sparseStats.samples) * stride * stride,
+                      2.0 * double(wholeStats.samples)); // a ray in stride^2
+            if (c.budget == kFewBricks) EXPECT_GT(sparseStats.batches, 1u);
+        }
+    // A stride is drawn of the whole volume (one part), of a region that holds a pixel of its
+    // lattice, and by the CPU raycaster only.
+    RenderOptions o;
+    o.width = o.height = 32;
+    FrameStats stats;
+    auto refused = [&](Renderer& r, const RenderOptions& bad, const char* why) {
+        SCOPED_TRACE(std::string(r.name()) + ": " + why);
+        try {
+            r.render(*t->store, *t->cache, tf, camera, bad, stats);
+            ADD_FAILURE() << "drawn";
+        } catch (const std::invalid_argument& e) {
+            EXPECT_NE(std::string(e.what()).find("stride"), std::string::npos) << e.what();
+        }
+    };
+    RenderOptions bad = o;
+    bad.stride = 0;
+    refused(cpu, bad, "stride 0");
+    bad.stride = 64; // its pixels start at 32
+    refused(cpu, bad, "past the image");
+    bad.stride = 4; // its pixels: 2, 6, 10...
+    bad.region = {3, 0, 3, 32};
+    refused(cpu, bad, "a region without a lattice pixel");
+    bad.stride = 2;
+    bad.region = {};
+    bad.parts = 2;
+    refused(cpu, bad, "a part");
+    bad.parts = 1;
+    ReferenceRenderer reference;
+    HybridSplatter splat;
+    refused(reference, bad, "the reference");
+    refused(splat, bad, "the splatter");
+    EXPECT_FALSE(RendererRegistry::builtin().find("gpu")->strided);
+    EXPECT_TRUE(RendererRegistry::builtin().find("cpu")->strided);
 }
 
 TEST(Region, ARegionOutsideTheImageOrFromAWholeFrameRendererIsRefused) {

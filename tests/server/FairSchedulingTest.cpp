@@ -336,5 +336,52 @@ TEST_F(FairScheduling, ASessionThatNeverReadsHoldsAtMostItsQueueBytes) {
     EXPECT_LE(largest, 2.0 * (1 << 20) + 65536);
 }
 
+// At rest under an error bound, the first pass of a 256^2 frame is checked against a sparse
+// frame at twice its step (render/RefinementEstimate.h). Drawn in 10 ms slices, the sparse
+// frame in bands of rows before them, a turn each, the pass and its estimate are those of the
+// same frame drawn whole in one turn.
+TEST_F(FairScheduling, ASlicedFirstPassAndItsCheckInBandsAreTheFrameDrawnWhole) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    struct FirstPass {
+        client::ReceivedFrame frame;
+        double slices = 0, checks = 0;
+    };
+    auto firstPass = [&](std::uint32_t sliceMs) {
+        DaemonConfig c = config();
+        c.sliceMs = sliceMs;
+        TestDaemon d(c);
+        client::Client client(d.clientConfig());
+        const auto v = client.openVolume("cthead");
+        protocol::RenderOptions o = smallCpuFrames(256);
+        o.quality = protocol::Quality::Adaptive;
+        o.codec = protocol::Codec::Raw;
+        client.setRenderOptions(o);
+        protocol::SetTransferFunction tf;
+        tf.kind = protocol::TfKind::Preset;
+        tf.preset = "ct-bone";
+        client.setTransferFunction(tf);
+        client.setFrameBudget({0, 45});
+        client.requestFrame(protocol::FrameMode::ContinuousOn);
+        client.setCamera(orbitCamera(v, 40, 1));
+        FirstPass first{client.nextFrame()};
+        while (!first.frame.header.refined)
+            first.frame = client.nextFrame();
+        first.slices = counter(client, "frame_slices_total");
+        first.checks = counter(client, "refinement_checks_total");
+        return first;
+    };
+    const FirstPass sliced = firstPass(10), whole = firstPass(600000);
+    std::printf("[fair] the first pass at rest in %.0f slices: estimated %u dB\n", sliced.slices,
+                unsigned(sliced.frame.header.estimatedPsnrDb));
+    EXPECT_GT(sliced.slices, 2.0) << "the pass was not sliced";
+    EXPECT_EQ(whole.slices, 0.0);
+    EXPECT_EQ(sliced.checks, 1.0);
+    EXPECT_EQ(whole.checks, 1.0);
+    EXPECT_GT(sliced.frame.header.estimatedPsnrDb, 0);
+    EXPECT_EQ(sliced.frame.header.estimatedPsnrDb, whole.frame.header.estimatedPsnrDb);
+    EXPECT_EQ(sliced.frame.header.samples, whole.frame.header.samples);
+    EXPECT_EQ(sliced.frame.rgba, whole.frame.rgba) << "slices changed pixels";
+}
+
 } // namespace
 } // namespace bc::server::test
