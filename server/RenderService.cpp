@@ -142,6 +142,7 @@ void RenderSlot::frameDone(std::uint64_t bytes) {
         std::lock_guard lock(mMutex);
         if (mInFlight > 0) --mInFlight;
         mBytesInFlight -= std::min(bytes, mBytesInFlight);
+        mLastDone = Clock::now();
     }
     changed();
 }
@@ -172,7 +173,13 @@ std::optional<Clock::time_point> RenderSlot::readyAt(std::uint32_t restMs) const
     // frameDone() wakes us; one frame larger than the byte limit still goes, alone
     if (mInFlight >= mQueueFrames || mBytesInFlight >= mQueueBytes) return std::nullopt;
     if (mOnce || (mContinuous && (mDirty || mRefinePass > 0))) return Clock::time_point::min();
-    if (mContinuous && mNeedsRefine) return mLastCamera + std::chrono::milliseconds(restMs);
+    // At rest: rest_ms after the camera last moved and after its last frame went out. Were it
+    // after the move alone, an interactive frame that took longer than rest_ms would be
+    // followed at once by a refined one, started before the client (which moves once it has
+    // the frame) can move again: a slice drawn for nothing, which makes its next interactive
+    // frame late too.
+    if (mContinuous && mNeedsRefine)
+        return std::max(mLastCamera, mLastDone) + std::chrono::milliseconds(restMs);
     return std::nullopt;
 }
 
@@ -219,6 +226,7 @@ bool RenderSlot::closed() const {
 void RenderSlot::delivering(std::uint64_t bytes) {
     std::lock_guard lock(mMutex);
     mBytesInFlight += bytes;
+    mLastDone = Clock::now();
 }
 
 // ---- RenderService -------------------------------------------------------------------------
@@ -1092,9 +1100,13 @@ std::uint32_t RenderService::interactiveSessions(Clock::duration within,
                                                  const RenderSlot* except) const {
     const auto now = Clock::now();
     std::uint32_t n = 0;
+    // A frame still being drawn counts however long ago it started: a cold start's first
+    // frames load the view's bricks for seconds, and the sessions drawing them share the
+    // machine all the while.
     for (const auto& [key, other] : mRenderers->sessions)
-        n += key != except && other.lastInteractive && !other.slot.expired() &&
-             now - *other.lastInteractive < within;
+        n += key != except && !other.slot.expired() &&
+             ((other.lastInteractive && now - *other.lastInteractive < within) ||
+              (other.drawing && !other.drawing->job.refined));
     return n;
 }
 
@@ -1292,8 +1304,8 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
         mine.drawing = std::make_unique<FrameDrawing>();
         mine.drawing->job = std::move(*job);
         if (!mine.drawing->job.refined) {
-            // Sessions that started an interactive frame within the last second share the
-            // frame-time budget.
+            // Sessions that started an interactive frame within the last second, or are drawing
+            // one, share the frame-time budget.
             mine.lastInteractive = Clock::now();
             mine.drawing->sharers =
                 std::max<std::uint32_t>(interactiveSessions(std::chrono::seconds(1)), 1);

@@ -135,6 +135,11 @@ class RenderSlot {
     std::uint32_t mRefinePass = 0;    ///< > 0: that refinement pass is due (continueRefinement)
     std::uint64_t mBytesInFlight = 0; ///< delivered, not yet written
     Clock::time_point mLastCamera{}, mChangedAt{};
+    /// When its last frame was handed over and written (delivering, frameDone): a camera
+    /// rests rest_ms from then or from
+    /// its last move, whichever is later, since a client that waits for each frame before it
+    /// moves cannot have moved sooner.
+    Clock::time_point mLastDone{};
     // render thread only
     protocol::FrameEncoder mEncoder;
     std::uint32_t mNextFrameId = 1;
@@ -239,7 +244,8 @@ class RenderService {
     /// short slices of the frames at rest, not for whole 50 ms ones.
     double sliceMsBeside(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d) const;
     /// Sessions (other than `except`) that started an interactive frame within `within` of
-    /// now: those sharing the frame-time budget, or moving beside a refined frame.
+    /// now or are drawing one: those sharing the frame-time budget, or moving beside a refined
+    /// frame.
     std::uint32_t interactiveSessions(Clock::duration within,
                                       const RenderSlot* except = nullptr) const;
     /// Draws `options.region` of the frame: with `renderer` here, or across the cluster's

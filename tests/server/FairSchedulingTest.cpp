@@ -383,5 +383,40 @@ TEST_F(FairScheduling, ASlicedFirstPassAndItsCheckInBandsAreTheFrameDrawnWhole) 
     EXPECT_EQ(sliced.frame.rgba, whole.frame.rgba) << "slices changed pixels";
 }
 
+// A client that moves its camera as soon as it has each frame, whose interactive frames take
+// longer than rest_ms: its camera is not taken for one at rest between them. A refined frame
+// started there would be dropped at its next slice when the camera moves, having cost the next
+// interactive frame a slice. Once it does rest, one refined frame comes.
+TEST_F(FairScheduling, AnInteractiveFrameLongerThanRestMsIsNotFollowedByARefinedOne) {
+    if (!sStore) return bc::test::missingData("scan cthead");
+    DaemonConfig c = config();
+    c.restMs = 20;
+    TestDaemon d(c);
+    client::Client client(d.clientConfig());
+    const auto v = client.openVolume("cthead");
+    protocol::RenderOptions o = smallCpuFrames(256);
+    o.quality = protocol::Quality::Adaptive;
+    o.stepVoxels = 0.05f; // half-size frames of ~60 ms here (190 with the slices ruled out)
+    client.setRenderOptions(o);
+    client.requestFrame(protocol::FrameMode::ContinuousOn);
+    double slowest = 0;
+    for (std::uint32_t i = 1; i <= 8; ++i) {
+        const auto sent = Clock::now();
+        client.setCamera(orbitCamera(v, 10.0 * i, i));
+        client::ReceivedFrame f = client.nextFrame();
+        while (f.header.cameraId != i)
+            f = client.nextFrame();
+        EXPECT_FALSE(f.header.refined) << "camera " << i;
+        if (i > 1) slowest = std::max(slowest, msBetween(sent, Clock::now()));
+    }
+    std::printf("[fair] interactive frames up to %.0f ms, rest_ms 20\n", slowest);
+    EXPECT_GT(slowest, 2.0 * c.restMs) << "the frames are too fast to test: lower the step";
+    EXPECT_EQ(counter(client, "frames_refined_total"), 0.0);
+    EXPECT_EQ(counter(client, "frames_cancelled_total"), 0.0) << "refined frames were started";
+    client::ReceivedFrame f = client.nextFrame();
+    EXPECT_TRUE(f.header.refined);
+    EXPECT_EQ(f.header.cameraId, 8u);
+}
+
 } // namespace
 } // namespace bc::server::test
