@@ -6,8 +6,11 @@
 // budget: the front-to-back plan is drawn in batches whose bricks fit the budget (one when
 // they all do), each pinned only while its pass runs, every ray carrying its colour and its
 // place in the brick grid from pass to pass, so the image does not depend on the budget
-// (render/RESIDENCY.md). No pin outlives render(). Occlusion frustums are a GPU technique and
-// are not used here. Not thread-safe: one frame at a time per instance.
+// (render/RESIDENCY.md). No pin outlives render(). It draws a region (the daemon's slices), a
+// part of the brick grid (MPI ranks) and a stride (RenderOptions::stride: the rays of a lattice
+// of pixels, the daemon's check of a first pass at rest), each pixel as in the whole frame.
+// Occlusion frustums are a GPU technique and are not used here. Not thread-safe: one frame at
+// a time per instance.
 #include "render/Partition.h"
 #include "render/Renderer.h"
 

@@ -69,7 +69,8 @@ host_mb = "auto"
 gpu_mb = 512
 
 [frames]
-# Under adaptive quality, a camera at rest this long gets one refined frame (0..60000 ms).
+# Under adaptive quality, a camera at rest this long (after its last move and after its last
+# frame went out) gets one refined frame (0..60000 ms).
 rest_ms = 150
 # Encoded frames queued per session (1..16); a slow reader gets the newest, older are dropped.
 write_queue = 2

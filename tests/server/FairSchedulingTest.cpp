@@ -54,6 +54,12 @@ class FairScheduling : public ::testing::Test {
         o.codec = protocol::Codec::Zstd;
         return o;
     }
+    static protocol::SetTransferFunction bonePreset() {
+        protocol::SetTransferFunction tf;
+        tf.kind = protocol::TfKind::Preset;
+        tf.preset = "ct-bone";
+        return tf;
+    }
     static double counter(client::Client& c, const std::string& name) {
         for (const auto& [k, v] : c.stats())
             if (k == name) return v;
@@ -75,9 +81,7 @@ class FairScheduling : public ::testing::Test {
         if (interactive) o.quality = protocol::Quality::Interactive;
         o.codec = protocol::Codec::Raw;
         client.setRenderOptions(o);
-        protocol::SetTransferFunction tfMessage;
-        tfMessage.kind = protocol::TfKind::Preset;
-        tfMessage.preset = "ct-bone";
+        const protocol::SetTransferFunction tfMessage = bonePreset();
         client.setTransferFunction(tfMessage);
         const auto camera = orbitCamera(v, 40, 1);
         client.setCamera(camera);
@@ -356,10 +360,7 @@ TEST_F(FairScheduling, ASlicedFirstPassAndItsCheckInBandsAreTheFrameDrawnWhole) 
         o.quality = protocol::Quality::Adaptive;
         o.codec = protocol::Codec::Raw;
         client.setRenderOptions(o);
-        protocol::SetTransferFunction tf;
-        tf.kind = protocol::TfKind::Preset;
-        tf.preset = "ct-bone";
-        client.setTransferFunction(tf);
+        client.setTransferFunction(bonePreset());
         client.setFrameBudget({0, 45});
         client.requestFrame(protocol::FrameMode::ContinuousOn);
         client.setCamera(orbitCamera(v, 40, 1));

@@ -378,22 +378,38 @@ std::vector<client::ReceivedFrame> framesAtRest(client::Client& c, const protoco
     return frames;
 }
 
+/// A daemon serving a 48^3 phantom, and an adaptive CPU session of edge^2 frames on it under a
+/// bound at rest of `boundDb`.
+struct BoundedSession {
+    test::TempDir dir;
+    test::TestDaemon daemon;
+    client::Client c;
+    protocol::VolumeInfo v;
+
+    BoundedSession(std::uint16_t edge, std::uint8_t boundDb)
+        : daemon(test::generatedConfig(dir, {{"phantom", 48}})), c(daemon.clientConfig()),
+          v(c.openVolume("phantom")) {
+        protocol::RenderOptions o = test::smallCpuFrames(edge);
+        o.quality = protocol::Quality::Adaptive;
+        c.setRenderOptions(o);
+        c.setFrameBudget({0, boundDb});
+    }
+    /// The refined frames after camera 1 comes to rest, until one's estimate reaches `boundDb`.
+    std::vector<client::ReceivedFrame> refinedAtRest(std::uint8_t boundDb) {
+        const auto frames = framesAtRest(c, v, [&](const client::ReceivedFrame& f) {
+            return f.header.refined && f.header.estimatedPsnrDb >= boundDb;
+        });
+        std::vector<client::ReceivedFrame> refined;
+        for (const auto& f : frames)
+            if (f.header.refined) refined.push_back(f);
+        return refined;
+    }
+};
+
 TEST(FrameBudget, AtRestTheDaemonRefinesUntilTheEstimateMeetsTheBound) {
-    const test::TempDir dir;
-    test::TestDaemon daemon(test::generatedConfig(dir, {{"phantom", 48}}));
-    client::Client c(daemon.clientConfig());
-    EXPECT_TRUE(c.server().capabilities & protocol::kCapFrameBudget);
-    const auto v = c.openVolume("phantom");
-    protocol::RenderOptions o = test::smallCpuFrames(64);
-    o.quality = protocol::Quality::Adaptive;
-    c.setRenderOptions(o);
-    c.setFrameBudget({0, 45});
-    const auto frames = framesAtRest(c, v, [](const client::ReceivedFrame& f) {
-        return f.header.refined && f.header.estimatedPsnrDb >= 45;
-    });
-    std::vector<client::ReceivedFrame> refined;
-    for (const auto& f : frames)
-        if (f.header.refined) refined.push_back(f);
+    BoundedSession s(64, 45);
+    EXPECT_TRUE(s.c.server().capabilities & protocol::kCapFrameBudget);
+    const std::vector<client::ReceivedFrame> refined = s.refinedAtRest(45);
     ASSERT_GE(refined.size(), 2u);
     EXPECT_EQ(refined.front().header.estimatedPsnrDb, 0) << "the first pass has no estimate";
     for (std::size_t i = 1; i < refined.size(); ++i) {
@@ -405,45 +421,33 @@ TEST(FrameBudget, AtRestTheDaemonRefinesUntilTheEstimateMeetsTheBound) {
     ASSERT_GE(refined.back().header.estimatedPsnrDb, 45);
     // The pass that met the bound was the last: no refined frame follows it.
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    EXPECT_EQ(counter(c.stats(), "frames_refined_total"), double(refined.size()));
-    EXPECT_EQ(counter(c.stats(), "refinement_checks_total"), 0.0) << "64^2 is drawn whole";
+    EXPECT_EQ(counter(s.c.stats(), "frames_refined_total"), double(refined.size()));
+    EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 0.0) << "64^2 is drawn whole";
 }
 
 // From 256^2 on, the first pass at rest is drawn at half the step and checked against a sparse
 // frame at the step (render/RefinementEstimate.h): it carries its estimate, and the frames at
 // rest reach the bound one pass sooner.
 TEST(FrameBudget, AtRestALargeFramesFirstPassComesWithItsEstimate) {
-    const test::TempDir dir;
-    test::TestDaemon daemon(test::generatedConfig(dir, {{"phantom", 48}}));
-    client::Client c(daemon.clientConfig());
-    const auto v = c.openVolume("phantom");
-    protocol::RenderOptions o = test::smallCpuFrames(256);
-    o.quality = protocol::Quality::Adaptive;
-    c.setRenderOptions(o);
-    c.setFrameBudget({0, 45});
-    const auto frames = framesAtRest(c, v, [](const client::ReceivedFrame& f) {
-        return f.header.refined && f.header.estimatedPsnrDb >= 45;
-    });
-    std::vector<client::ReceivedFrame> refined;
-    for (const auto& f : frames)
-        if (f.header.refined) refined.push_back(f);
+    BoundedSession s(256, 45);
+    const std::vector<client::ReceivedFrame> refined = s.refinedAtRest(45);
     ASSERT_GE(refined.size(), 1u);
     EXPECT_GT(refined.front().header.estimatedPsnrDb, 0) << "the first pass has its estimate";
     for (std::size_t i = 1; i < refined.size(); ++i)
         EXPECT_GT(refined[i].header.samples, refined[i - 1].header.samples) << "a finer step";
     ASSERT_GE(refined.back().header.estimatedPsnrDb, 45);
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    EXPECT_EQ(counter(c.stats(), "frames_refined_total"), double(refined.size()));
-    EXPECT_EQ(counter(c.stats(), "refinement_checks_total"), 1.0);
+    EXPECT_EQ(counter(s.c.stats(), "frames_refined_total"), double(refined.size()));
+    EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 1.0);
     // Without a bound the frame at rest is one pass at the session's step, unchecked.
-    c.setFrameBudget({0, 0});
-    c.setCamera(test::orbitCamera(v, 60, 2));
-    client::ReceivedFrame f = c.nextFrame();
+    s.c.setFrameBudget({0, 0});
+    s.c.setCamera(test::orbitCamera(s.v, 60, 2));
+    client::ReceivedFrame f = s.c.nextFrame();
     while (!(f.header.refined && f.header.cameraId == 2))
-        f = c.nextFrame();
+        f = s.c.nextFrame();
     EXPECT_EQ(f.header.estimatedPsnrDb, 0);
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    EXPECT_EQ(counter(c.stats(), "refinement_checks_total"), 1.0);
+    EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 1.0);
 }
 
 TEST(FrameBudget, WithoutABoundOneRefinedFrameAndACameraThatMovesStopsTheRefinement) {
