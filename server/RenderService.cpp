@@ -1025,8 +1025,10 @@ void RenderService::prepare(FrameDrawing& d) {
     // step, so that its estimate comes with it (render/RefinementEstimate.h). Only where the
     // level's bricks fit the volume's host share: otherwise the sparse frame's rays would load
     // most of the view's bricks, and the pass load them again. Not across ranks: the sparse
-    // frame is drawn here, and rank 0 holds only its part's bricks.
+    // frame is drawn here, and rank 0 holds only its part's bricks. Nor where half the step is
+    // finer than any pass may be (refineFurther: no pass would follow the first).
     if (d.refinement() && s.budget.restPsnrDb > 0 && d.job.pass == 0 && d.kind->strided &&
+        render::refineFurther(-1, s.budget.restPsnrDb, d.options.stepVoxels) &&
         levelFits(*s.volume, std::uint32_t(d.options.level)) &&
         !(mConfig.cluster && mConfig.cluster->ranks() > 1)) {
         d.checkStride = render::checkStride(o.width, o.height);

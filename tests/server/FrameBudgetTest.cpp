@@ -446,6 +446,17 @@ TEST(FrameBudget, AtRestALargeFramesFirstPassComesWithItsEstimate) {
     while (!(f.header.refined && f.header.cameraId == 2))
         f = s.c.nextFrame();
     EXPECT_EQ(f.header.estimatedPsnrDb, 0);
+    // Nor at a step whose half would be finer than any pass may be (1/16 voxel): one pass at it.
+    protocol::RenderOptions fine = test::smallCpuFrames(256);
+    fine.quality = protocol::Quality::Adaptive;
+    fine.stepVoxels = 0.1f;
+    s.c.setRenderOptions(fine);
+    s.c.setFrameBudget({0, 45});
+    s.c.setCamera(test::orbitCamera(s.v, 90, 3));
+    f = s.c.nextFrame();
+    while (!(f.header.refined && f.header.cameraId == 3))
+        f = s.c.nextFrame();
+    EXPECT_EQ(f.header.estimatedPsnrDb, 0);
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
     EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 1.0);
 }
