@@ -107,6 +107,12 @@ std::unique_ptr<BrickStore> BrickStore::open(const std::string& path) {
     checkPayloadPlacement(decoded.records, *s->mLayout, h, path);
 
     s->mRecords = std::move(decoded.records);
+    for (std::uint64_t i = 0; const LevelLayout& level : s->mLayout->levels()) { // level-major
+        std::uint64_t stored = 0;
+        for (const std::uint64_t end = i + level.brickCount(); i < end; ++i)
+            stored += s->mRecords[i].stored();
+        s->mStoredPerLevel.push_back(stored);
+    }
     s->mInfo.formatVersion = h.version;
     s->mInfo.volume = h.volume;
     s->mInfo.volume.description = decoded.description;
@@ -122,6 +128,10 @@ std::unique_ptr<BrickStore> BrickStore::open(const std::string& path) {
 
 const BrickRecord& BrickStore::record(const BrickKey& key) const {
     return mRecords[mLayout->indexOf(key)];
+}
+
+std::uint64_t BrickStore::storedBricks(std::uint32_t level) const {
+    return level < mStoredPerLevel.size() ? mStoredPerLevel[level] : 0;
 }
 
 std::optional<std::string> BrickStore::fileChange() const {

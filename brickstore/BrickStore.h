@@ -65,6 +65,9 @@ class BrickStore {
     const StoreInfo& info() const { return mInfo; }
     const StoreLayout& layout() const { return *mLayout; }
     const BrickRecord& record(const BrickKey& key) const;
+    /// Bricks of `level` stored in the file (those not stored are of one value: a cache never
+    /// holds them); 0 past the last level.
+    std::uint64_t storedBricks(std::uint32_t level) const;
     /// What changed between the file opened and the one at path() now ("replaced by another
     /// file", "size A -> B bytes", "modified", "gone: ..."); nullopt when it is the same file,
     /// unchanged. One stat; what a reload asks before reopening a store.
@@ -96,6 +99,7 @@ class BrickStore {
     StoreInfo mInfo;
     std::unique_ptr<StoreLayout> mLayout;
     std::vector<BrickRecord> mRecords;
+    std::vector<std::uint64_t> mStoredPerLevel;
     std::unique_ptr<detail::StoreReadFile> mFile;
 };
 

@@ -41,15 +41,16 @@ namespace bc::server {
 /// The pyramid levels an interactive frame may be drawn at, finest `first` to coarsest `last`.
 struct LevelRange {
     std::uint32_t first = 0, last = 0;
-    /// Per level: whether its bricks fit the volume's host cache share whole. Empty: all do.
+    /// Per level: whether its stored bricks (those of one value are never loaded) fit the
+    /// volume's host cache share whole. Empty: all do.
     std::vector<bool> fits;
     /// Per level: whether enough of its bricks are resident that a frame of it draws mostly
     /// from memory (LevelRange::kWarmShare). Empty: all are.
     std::vector<bool> warm;
     bool fitting(std::uint32_t level) const { return level >= fits.size() || fits[level]; }
     bool warming(std::uint32_t level) const { return level >= warm.size() || warm[level]; }
-    /// A level is warm with this share of its bricks' bytes resident (of the host cache share
-    /// where the level is larger): a flight's view holds about half of a level's bricks.
+    /// A level is warm with this share of its stored bricks' bytes resident (of the host cache
+    /// share where the level is larger): a flight's view holds about half of a level's bricks.
     static constexpr double kWarmShare = 0.25;
 };
 

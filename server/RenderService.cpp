@@ -950,19 +950,22 @@ void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool
     total.totalMs += slice.totalMs;
 }
 
-/// Whether the bricks of `level` of `volume` (the last level past it) fit the volume's share
-/// of the host cache whole (decompressed, aprons included).
+/// The bytes of `level` of `volume` (the last level past it) a host cache can hold: its
+/// stored bricks, decompressed, aprons included (a brick of one value is never loaded).
+double levelBytes(const Volume& volume, std::uint32_t level) {
+    const auto last = std::uint32_t(volume.store->layout().levels().size() - 1);
+    return double(volume.store->storedBricks(std::min(level, last))) *
+           double(volume.store->brickBytes());
+}
+
+/// Whether those bytes fit the volume's share of the host cache.
 bool levelFits(const Volume& volume, std::uint32_t level) {
-    const auto& levels = volume.store->layout().levels();
-    const std::uint64_t bricks =
-        levels[std::min<std::size_t>(level, levels.size() - 1)].brickCount();
-    return double(bricks) * double(volume.store->brickBytes()) <=
-           double(volume.cache->stats().budgetBytes);
+    return levelBytes(volume, level) <= double(volume.cache->stats().budgetBytes);
 }
 
 /// The levels an interactive frame of `volume` may be drawn at: the one asked for, or under
-/// automatic level every level, each marked by whether its bricks fit the volume's share of
-/// the host cache whole (decompressed, aprons included).
+/// automatic level every level, each marked by whether its stored bricks fit the volume's
+/// share of the host cache whole (levelBytes) and whether it is warm.
 LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions& o) {
     const brickstore::StoreLayout& layout = volume.store->layout();
     const auto levels = std::uint32_t(layout.levels().size());
@@ -970,15 +973,12 @@ LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions
         const std::uint32_t l = std::min<std::uint32_t>(o.level, levels - 1);
         return {l, l, {}, {}};
     }
-    const double brickBytes = double(volume.store->brickBytes());
     const double share = double(volume.cache->stats().budgetBytes);
     LevelRange range{0, levels - 1, {}, {}};
     for (std::uint32_t l = 0; l < levels; ++l) {
-        const double levelBytes = double(layout.levels()[l].brickCount()) * brickBytes;
         range.fits.push_back(levelFits(volume, l));
-        // Stored bricks only are loaded (constant ones are not): the level's bytes bound them.
         range.warm.push_back(double(volume.cache->residentBytes(l)) >=
-                             LevelRange::kWarmShare * std::min(levelBytes, share));
+                             LevelRange::kWarmShare * std::min(levelBytes(volume, l), share));
     }
     return range;
 }

@@ -340,6 +340,18 @@ TEST(StoreTest, ConstantBricksAreNotStoredAndReadBackAsTheirValue) {
     // The spike at (40, 40, 36..43) lies in brick (2,2,2), beyond the 2-voxel apron reach
     // of every neighbour (which read 30..33 and 46..49 of this brick's range).
     EXPECT_EQ(stored, 1u);
+    EXPECT_EQ(store->storedBricks(0), 1u);
+    std::uint64_t total = 0; // the pyramid's levels: what each stores is counted apart
+    for (std::uint32_t l = 0; l < store->layout().levels().size(); ++l) {
+        std::uint64_t inLevel = 0;
+        for (std::uint64_t i = 0; i < store->layout().brickCount(); ++i)
+            inLevel += store->layout().keyOf(i).level == l &&
+                       store->record(store->layout().keyOf(i)).stored();
+        EXPECT_EQ(store->storedBricks(l), inLevel) << "level " << l;
+        total += inLevel;
+    }
+    EXPECT_EQ(total, store->info().storedBricks);
+    EXPECT_EQ(store->storedBricks(std::uint32_t(store->layout().levels().size())), 0u);
     EXPECT_TRUE(readLevel(*store, 0) == v);
     EXPECT_EQ(store->info().valueMin, 0.0);
     EXPECT_EQ(store->info().valueMax, 200.0);
