@@ -870,6 +870,13 @@ struct VolumeOutOfService : std::runtime_error {
 /// The measured speed replaces it from the first slice on.
 constexpr double kFirstCostPerMs = 2000.0;
 
+/// The speed `rates` holds for renderer `name` (cost units per millisecond), or
+/// kFirstCostPerMs before it has drawn anything.
+double speedOf(const std::map<std::string, double, std::less<>>& rates, std::string_view name) {
+    const auto rate = rates.find(name);
+    return rate == rates.end() ? kFirstCostPerMs : rate->second;
+}
+
 /// The shortest slice of a refined frame beside moving sessions (sliceMsBeside): shorter, the
 /// fixed cost of a slice (planning the frame's bricks: about 2 ms for the 2.36 GiB mosaic on
 /// the dev VM) would be a large part of it.
@@ -1064,8 +1071,7 @@ void RenderService::prepare(FrameDrawing& d) {
             (sliceable ? "frames.max_frame_gsamples" : "frames.max_unsliced_gsamples") + ")");
     d.cost = std::uint64_t(cost);
 
-    const auto rate = mCostPerMs.find(name);
-    const double perMs = rate == mCostPerMs.end() ? kFirstCostPerMs : rate->second;
+    const double perMs = speedOf(mCostPerMs, name);
     d.sliced = sliceable && cost / perMs > 1.5 * mConfig.sliceMs;
     if (d.sliced) {
         d.rgba8.assign(std::size_t(d.options.width) * d.options.height * 4, 0);
@@ -1166,9 +1172,8 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
         drawCheck(renderer, d, 0); // whole, and the pass in the same turn
     } else if (d.checkDue()) {     // a band of it is this turn's slice
         if (d.draws == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
-        const auto rate = mSliceCostPerMs.find(d.kind->name);
-        const double perMs = rate == mSliceCostPerMs.end() ? kFirstCostPerMs : rate->second;
-        const double loadMs = drawCheck(renderer, d, d.sliceTargetMs * perMs);
+        const double loadMs =
+            drawCheck(renderer, d, d.sliceTargetMs * speedOf(mSliceCostPerMs, d.kind->name));
         d.sliceTargetMs = std::max(sliceMsBeside(slot, d), 2.0 * loadMs);
         d.drawMs = d.checkMs;
         return false;
@@ -1195,8 +1200,7 @@ bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDraw
         planPrefetch(slot, d, renderer);
         return true;
     }
-    const auto rate = mSliceCostPerMs.find(d.kind->name);
-    const double perMs = rate == mSliceCostPerMs.end() ? kFirstCostPerMs : rate->second;
+    const double perMs = speedOf(mSliceCostPerMs, d.kind->name);
     double cost = 0;
     render::RenderOptions options = d.options;
     if (d.draws == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
