@@ -26,6 +26,7 @@
 #include <type_traits>
 
 #include <glm/geometric.hpp>
+#include <glm/vec2.hpp>
 
 namespace bc::render {
 namespace {
@@ -136,6 +137,12 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayR
     }
 }
 
+/// The image-plane position (Frame's sx, sy in [-1, 1]) of the centre of lattice pixel (x, y).
+glm::vec2 planeOf(const Frame& f, PixelLattice lattice, std::uint32_t x, std::uint32_t y) {
+    return {2.0f * (float(lattice.pixel(x)) + 0.5f) / f.width - 1.0f,
+            1.0f - 2.0f * (float(lattice.pixel(y)) + 0.5f) / f.height};
+}
+
 /// One pass over the rays of `rect` (within `region`) for the bricks of batch f.batch (rays:
 /// the region's, row by row; only those of rect are touched). Both rectangles are of the
 /// lattice's pixels (RenderOptions::stride): ray (x, y) is the ray of image pixel
@@ -147,10 +154,10 @@ void marchPass(const Frame& f, PixelLattice lattice, const PixelRect& region, co
     const auto x0 = region.x, y0 = region.y, w = region.width;
     auto ray = [&](std::uint32_t x, std::uint32_t y) {
         detail::PacketRay p;
-        const std::uint32_t px = lattice.pixel(x), py = lattice.pixel(y);
-        p.sx = 2.0f * (float(px) + 0.5f) / f.width - 1.0f;
-        p.sy = 1.0f - 2.0f * (float(py) + 0.5f) / f.height;
-        p.shift = f.jitter ? rayJitter(px, py) - 0.5f : 0.0f;
+        const glm::vec2 at = planeOf(f, lattice, x, y);
+        p.sx = at.x;
+        p.sy = at.y;
+        p.shift = f.jitter ? rayJitter(lattice.pixel(x), lattice.pixel(y)) - 0.5f : 0.0f;
         const std::size_t i = std::size_t(y - y0) * w + (x - x0);
         p.state = &rays[i];
         p.resume = &rays.resume(i);
@@ -372,8 +379,8 @@ class MarchingRays {
         for (std::uint32_t y = in->y; y < in->y + in->height; ++y)
             for (std::uint32_t x = in->x; x < in->x + in->width; ++x) {
                 if (!marching(x, y)) continue;
-                const float sx = 2.0f * (float(mLattice.pixel(x)) + 0.5f) / f.width - 1.0f;
-                const float sy = 1.0f - 2.0f * (float(mLattice.pixel(y)) + 0.5f) / f.height;
+                const glm::vec2 at = planeOf(f, mLattice, x, y);
+                const float sx = at.x, sy = at.y;
                 const glm::vec3 o = f.ortho ? f.eye + sx * f.right + sy * f.up : f.eye;
                 const glm::vec3 d =
                     f.ortho ? f.forward : glm::normalize(f.forward + sx * f.right + sy * f.up);
