@@ -1,6 +1,7 @@
 #include "server/Daemon.h"
 
 #include "server/Catalog.h"
+#include "server/ConfigChanges.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/RenderService.h"
@@ -10,10 +11,12 @@
 #include "server/detail/Session.h"
 #include "server/detail/WebListener.h"
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <csignal>
 #include <functional>
+#include <malloc.h>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -39,9 +42,12 @@ struct Daemon::Impl {
                  [this](std::shared_ptr<Volume> v) {
                      asio::post(io, [this, v = std::move(v)] { volumeFailed(v); });
                  }),
-          acceptor(io), signals(io),
-          drainTimer(io), context{config, catalog, render, log, capabilities(), {}, {}, 0} {
+          acceptor(io), signals(io), drainTimer(io),
+          storeWatch(io), context{config, catalog, render, log,     capabilities(),
+                                  {},     {},      0,      nullptr, {}} {
         context.onClosed = [this](std::uint64_t id) { onClosed(id); };
+        context.onReady = [this](std::uint64_t) { return authenticated() < config.maxClients; };
+        context.authThrottle = &authThrottle;
         context.collect = [this](MetricSet& m) { collect(m); };
         bind();
         if (const auto where = config.webListen()) {
@@ -166,9 +172,14 @@ struct Daemon::Impl {
         if (!r.error.empty()) {
             log.error("reload: " + r.error + "; the old catalog is kept");
         } else if (!draining) {
-            if (!onlyCatalogDiffers(r.config))
-                log.info("reload: settings outside [[volume]] and [[preset]] changed in " +
-                         config.file + "; they apply at the next restart");
+            if (const auto kept = settingsAReloadKeeps(config, r.config); !kept.empty()) {
+                std::string keys;
+                for (const auto& k : kept)
+                    keys += (keys.empty() ? "" : ", ") + k;
+                log.error("reload: " + keys + " changed in " + config.file +
+                          ": not applied (a reload changes [[volume]] and [[preset]] only); "
+                          "restart the daemon to apply");
+            }
             catalog.apply(r.update, log);
             for (auto& [id, s] : std::map(sessions))
                 s->followReload(r.update);
@@ -176,22 +187,31 @@ struct Daemon::Impl {
         if (std::exchange(reloadAgain, false)) reload();
     }
 
+    /// Each served store is checked for a change on disk (one stat) every kStoreWatchPeriod:
+    /// a store rewritten while every brick a view needs is cached would otherwise serve the
+    /// old bricks until a load from disk or a reload noticed. A changed one is out of service
+    /// (its sessions are told) until a reload reopens it.
+    void watchStores() {
+        for (const auto& [name, volume] : catalog.snapshot()) {
+            if (volume->failure() || !volume->store) continue;
+            if (const auto change = volume->store->fileChange())
+                if (catalog.markFailed(*volume,
+                                       volume->store->path() +
+                                           ": changed on disk since it was opened: " + *change,
+                                       log))
+                    volumeFailed(volume);
+        }
+        storeWatch.expires_after(kStoreWatchPeriod);
+        storeWatch.async_wait([this](const IoError& ec) {
+            if (!ec && !draining) watchStores();
+        });
+    }
+    static constexpr auto kStoreWatchPeriod = std::chrono::seconds(1);
+
     /// A volume was taken out of service: its sessions are told. Network thread.
     void volumeFailed(const std::shared_ptr<Volume>& volume) {
         for (auto& [id, s] : std::map(sessions))
             s->volumeFailed(volume);
-    }
-
-    /// Whether `next` equals the running config but for volumes and presets (and the
-    /// command-line overrides of listen and metrics, which a reload keeps).
-    bool onlyCatalogDiffers(DaemonConfig next) const {
-        next.volumes = config.volumes;
-        next.presets = config.presets;
-        next.listenHost = config.listenHost;
-        next.listenPort = config.listenPort;
-        next.metricsHost = config.metricsHost;
-        next.metricsPort = config.metricsPort;
-        return next == config;
     }
 
     /// What every Hello announces; the GPU bit is added per Hello (Session::onHello) while
@@ -237,6 +257,15 @@ struct Daemon::Impl {
         m.counter("connections_accepted_total", "Client connections accepted", double(accepted));
         m.counter("connections_refused_total", "Client connections refused (Busy)",
                   double(refused));
+        m.gauge("sessions_unauthenticated", "Connections that have not completed their handshake",
+                double(sessions.size() - authenticated()));
+        m.counter("connections_unauthenticated_cut_total",
+                  "Connections cut before their handshake to make room for a newer one",
+                  double(unauthenticatedCut));
+        m.counter("auth_failures_total", "Wrong tokens", double(authThrottle.failures()));
+        m.counter("auth_delayed_total",
+                  "Auths checked late because their address sent wrong tokens before",
+                  double(authThrottle.delayed()));
         m.counter("protocol_errors_total", "Error messages sent to clients",
                   double(context.errorsSent));
     }
@@ -255,22 +284,45 @@ struct Daemon::Impl {
         });
     }
 
-    /// A connection over either transport: a session, or Busy when there are max_clients.
+    /// A connection over either transport: a session, or Busy when max_clients sessions have
+    /// completed their handshake. Connections still in their handshake have a cap of their
+    /// own (max_unauthenticated): the oldest is cut for a newer one, so connections that
+    /// never authenticate can neither take an authenticated client's place nor keep one out.
     void startSession(std::unique_ptr<detail::Transport> transport) {
         if (draining) return transport->close();
         auto session = std::make_shared<detail::Session>(std::move(transport), context, ++nextId);
-        if (sessions.size() >= config.maxClients) {
+        if (authenticated() >= config.maxClients) {
             ++refused;
-            session->refuseBusy();
-        } else {
-            ++accepted;
-            sessions[session->id()] = session;
-            session->start();
+            return session->refuseBusy();
         }
+        if (sessions.size() - authenticated() >= config.maxUnauthenticated)
+            cutOldestUnauthenticated();
+        ++accepted;
+        sessions[session->id()] = session;
+        session->start();
+    }
+
+    std::size_t authenticated() const {
+        return std::size_t(std::count_if(sessions.begin(), sessions.end(),
+                                         [](const auto& s) { return s.second->authenticated(); }));
+    }
+
+    void cutOldestUnauthenticated() {
+        for (auto& [id, s] : sessions) // by id: the oldest first
+            if (!s->authenticated()) {
+                ++unauthenticatedCut;
+                auto keep = s; // close() erases it from sessions
+                return keep->cut("handshake not completed before " +
+                                 std::to_string(config.maxUnauthenticated) +
+                                 " newer connections came (max_unauthenticated)");
+            }
     }
 
     void onClosed(std::uint64_t id) {
         sessions.erase(id);
+        // What a session that backed up its replies held goes back to the system, not only
+        // to the allocator's free lists.
+        ::malloc_trim(0);
         if (draining && sessions.empty()) io.stop();
     }
 
@@ -281,6 +333,7 @@ struct Daemon::Impl {
         acceptor.close(ignored);
         if (web) web->stop();
         signals.cancel(ignored);
+        storeWatch.cancel();
         if (metrics) metrics->stop();
         if (sessions.empty()) return io.stop();
         for (auto& [id, s] : std::map(sessions))
@@ -303,11 +356,13 @@ struct Daemon::Impl {
     asio::ip::tcp::acceptor acceptor;
     asio::signal_set signals;
     asio::steady_timer drainTimer;
+    asio::steady_timer storeWatch;     ///< watchStores()
+    detail::AuthThrottle authThrottle; ///< wrong tokens, per address, for every session
     detail::SessionContext context;
     std::map<std::uint64_t, std::shared_ptr<detail::Session>> sessions;
     std::unique_ptr<detail::MetricsEndpoint> metrics;
     std::unique_ptr<detail::WebListener> web; ///< the browser viewer's address, when served
-    std::uint64_t nextId = 0, accepted = 0, refused = 0;
+    std::uint64_t nextId = 0, accepted = 0, refused = 0, unauthenticatedCut = 0;
     bool draining = false, reloading = false, reloadAgain = false;
     std::thread reloader; ///< the last reload's worker (opens stores off this thread)
     std::shared_ptr<ReloadChannel> reloadChannel; ///< the last reload's
@@ -332,6 +387,7 @@ std::uint16_t Daemon::metricsPort() const {
 
 void Daemon::run() {
     mImpl->accept();
+    mImpl->watchStores();
     if (mImpl->metrics) mImpl->metrics->start();
     if (mImpl->web) mImpl->web->start();
     mImpl->io.run();

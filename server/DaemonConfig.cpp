@@ -38,8 +38,12 @@ listen = "127.0.0.1:7411"
 # Shared secret clients send in Auth (1..256 bytes); "" = no authentication. Required
 # whenever listen is not loopback (127.0.0.0/8, ::1, localhost).
 token = ""
-# Clients served at once (1..1024); one more is answered Busy and closed.
+# Clients served at once (1..1024) once they have completed Hello (and Auth); one more is
+# answered Busy and closed.
 max_clients = 16
+# Connections still in their handshake (1..1024), counted apart from max_clients: one more
+# cuts the oldest of them, so connections that never authenticate keep nobody out.
+max_unauthenticated = 32
 # Folder where generated volumes are ingested as brick stores; "" = $XDG_CACHE_HOME/brickcast,
 # or /tmp/brickcast-<uid> without XDG_CACHE_HOME.
 store_dir = ""
@@ -49,6 +53,11 @@ metrics = ""
 # HOST:PORT of the browser viewer (HTTP and WebSocket, same token rule as listen); "auto" =
 # listen's host and port + 1 (any free port when listen's port is 0); "" = no viewer.
 web = "auto"
+# Host names the viewer also answers to (in the browser's Host and Origin), besides the
+# address it listens on (and localhost when that is loopback): its DNS name, or its name
+# behind a reverse proxy, e.g. ["viewer.example.org"]. Any other name is refused (403): a web
+# page whose name was rebound to this address cannot reach the daemon.
+web_hosts = []
 
 [timeouts]
 # Hello (and Auth when required) must arrive within this long of connecting.
@@ -187,6 +196,20 @@ std::optional<std::string> hostProblem(const std::string& host) {
     return std::nullopt;
 }
 
+/// Why `host` is no host name, IPv4 address or bracketed IPv6 address, or nothing.
+std::optional<std::string> webHostProblem(const std::string& host) {
+    if (host.size() > 2 && host.front() == '[' && host.back() == ']') {
+        in6_addr v6{};
+        if (inet_pton(AF_INET6, host.substr(1, host.size() - 2).c_str(), &v6) == 1)
+            return std::nullopt;
+        return "'" + host + "' is not an IPv6 address";
+    }
+    if (host.size() > 253) return "a host name is at most 253 bytes";
+    if (host.find(':') != std::string::npos)
+        return "'" + host + "': a host name without a port (an IPv6 address in brackets)";
+    return hostProblem(host);
+}
+
 struct Listen {
     std::string host;
     std::uint16_t port = 0;
@@ -250,6 +273,7 @@ class Reader {
     PresetEntry readPreset(const toml::table& t, const std::string& prefix) const;
     CatalogEntry readVolume(const toml::table& t, const std::string& prefix) const;
     std::array<std::uint64_t, 3> readDims(const toml::table& t, const std::string& prefix) const;
+    std::vector<std::string> readWebHosts(const toml::node& node) const;
 
     std::string mSource;
     std::string mBaseDir;
@@ -336,7 +360,9 @@ std::string Reader::resolve(const std::string& path) const {
 void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
     const toml::table* t = section(root, "server");
     if (!t) return;
-    checkKeys(*t, "server.", {"listen", "token", "max_clients", "store_dir", "metrics", "web"});
+    checkKeys(*t, "server.",
+              {"listen", "token", "max_clients", "max_unauthenticated", "store_dir", "metrics",
+               "web", "web_hosts"});
     if (auto listen = string(*t, "server.", "listen")) {
         Listen l;
         if (auto why = splitListen(*listen, l))
@@ -367,8 +393,34 @@ void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
         c.web = *web;
     }
     assign(c.maxClients, integer(*t, "server.", "max_clients", 1, 1024));
+    assign(c.maxUnauthenticated, integer(*t, "server.", "max_unauthenticated", 1, 1024));
+    if (const toml::node* hosts = t->get("web_hosts")) c.webHosts = readWebHosts(*hosts);
     if (auto dir = string(*t, "server.", "store_dir"); dir && !dir->empty())
         c.storeDir = resolve(*dir);
+}
+
+std::vector<std::string> Reader::readWebHosts(const toml::node& node) const {
+    constexpr std::size_t kMaxWebHosts = 64;
+    const toml::array* a = node.as_array();
+    if (!a || a->size() > kMaxWebHosts)
+        fail(node.source(), "server.web_hosts",
+             "expected an array of at most " + std::to_string(kMaxWebHosts) +
+                 " host names, e.g. [\"viewer.example.org\"]");
+    std::vector<std::string> hosts;
+    for (std::size_t i = 0; i < a->size(); ++i) {
+        const auto* v = (*a)[i].as_string();
+        if (!v)
+            fail((*a)[i].source(), "server.web_hosts",
+                 "element " + std::to_string(i + 1) + " is not a string");
+        std::string host = v->get();
+        if (auto why = webHostProblem(host))
+            fail((*a)[i].source(), "server.web_hosts",
+                 "element " + std::to_string(i + 1) + ": " + *why);
+        std::transform(host.begin(), host.end(), host.begin(),
+                       [](unsigned char ch) { return char(std::tolower(ch)); });
+        hosts.push_back(std::move(host));
+    }
+    return hosts;
 }
 
 void Reader::readTimeouts(const toml::table& root, DaemonConfig& c) const {
@@ -600,6 +652,7 @@ void DaemonConfig::setListen(const std::string& text, const std::string& sourceN
     DaemonConfig next = *this;
     next.listenHost = l.host;
     next.listenPort = l.port;
+    next.listenOverridden = true;
     if (next.token.empty() && !next.loopbackOnly())
         throw ConfigError(sourceName + ": listening on '" + l.host +
                           "' (not loopback) needs server.token in the config");
@@ -616,6 +669,7 @@ void DaemonConfig::setWeb(const std::string& text, const std::string& sourceName
         if (auto why = splitListen(text, l)) throw ConfigError(sourceName + ": " + *why);
     DaemonConfig next = *this;
     next.web = text;
+    next.webOverridden = true;
     if (const auto web = next.webListen(); web && next.token.empty() && !isLoopback(web->first))
         throw ConfigError(sourceName + ": the viewer on '" + web->first +
                           "' (not loopback) needs server.token in the config");
@@ -640,6 +694,7 @@ void DaemonConfig::setMetrics(const std::string& text, const std::string& source
                           "' (not loopback): the endpoint has no authentication");
     metricsHost = l.host;
     metricsPort = l.port;
+    metricsOverridden = true;
 }
 
 bool isLoopback(const std::string& hostText) {

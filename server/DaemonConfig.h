@@ -49,7 +49,14 @@ struct DaemonConfig {
     /// The browser viewer's HTTP and WebSocket address: "auto" (listen's host, listen's port
     /// + 1, or any free port when listen's is 0), "HOST:PORT", or "" for none. See webListen().
     std::string web = "auto";
-    std::uint32_t maxClients = 16;
+    std::uint32_t maxClients = 16; ///< that have completed their handshake
+    /// Connections still in their handshake (Hello, Auth), a cap of their own: the oldest is
+    /// cut when one more arrives.
+    std::uint32_t maxUnauthenticated = 32;
+    /// Host names the viewer answers to besides the listen address's own (and, on loopback,
+    /// localhost): its name behind a reverse proxy or in DNS. Any other Host is refused (403),
+    /// so a page whose name was rebound to this address cannot read it.
+    std::vector<std::string> webHosts;
     std::uint32_t handshakeTimeoutMs = 5000;
     std::uint32_t readTimeoutMs = 10000;
     std::uint32_t idleTimeoutMs = 300000;
@@ -76,6 +83,9 @@ struct DaemonConfig {
     std::string storeDir; ///< where generated volumes are ingested
     std::vector<CatalogEntry> volumes;
     std::vector<PresetEntry> presets; ///< [[preset]]: beside the built-in ones
+    /// Set by the command line's overrides (setListen, setMetrics, setWeb): a reload of the
+    /// file keeps them.
+    bool listenOverridden = false, metricsOverridden = false, webOverridden = false;
 
     bool operator==(const DaemonConfig&) const = default;
 

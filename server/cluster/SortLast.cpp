@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstring>
 #include <optional>
+#include <set>
 #include <thread>
 
 namespace bc::server::cluster {
@@ -89,19 +90,23 @@ void waitForRanks(std::vector<MPI_Request>& requests, const std::vector<int>& pe
         if (std::chrono::steady_clock::now() >= deadline) break;
         std::this_thread::yield();
     }
-    std::string ranks;
+    std::set<int> silent; // a rank may owe several of the requests: named once
     for (std::size_t i = 0; i < requests.size(); ++i) {
         if (requests[i] == MPI_REQUEST_NULL) continue;
         int flag = 0;
         MPI_Test(&requests[i], &flag, MPI_STATUS_IGNORE);
         if (flag) continue;
-        ranks += (ranks.empty() ? "" : ", ") + std::to_string(peers[i]);
+        silent.insert(peers[i]);
         if (receives[i]) {
             MPI_Cancel(&requests[i]);
             MPI_Request_free(&requests[i]);
         }
     }
-    throw ClusterError(what + ": rank(s) " + ranks + " did not answer in time");
+    std::string ranks;
+    for (int r : silent)
+        ranks += (ranks.empty() ? "" : ", ") + std::to_string(r);
+    throw ClusterError(what + (silent.size() == 1 ? ": rank " : ": ranks ") + ranks +
+                       " did not answer in time");
 }
 
 Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,

@@ -1,21 +1,41 @@
 #include "server/detail/MetricsEndpoint.h"
 
 #include "server/detail/Acceptor.h"
+#include "server/detail/WebHosts.h"
 
 #include "server/Log.h"
 
+#include <algorithm>
 #include <array>
+#include <cctype>
 #include <chrono>
+#include <optional>
 
 namespace bc::server::detail {
+
+namespace {
+
+/// The value of the Host header of a request head, if it has one.
+std::optional<std::string> hostHeader(const std::string& head) {
+    std::string lower(head);
+    std::transform(lower.begin(), lower.end(), lower.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    const auto at = lower.find("\r\nhost:");
+    if (at == std::string::npos) return std::nullopt;
+    const auto from = head.find_first_not_of(" \t", at + 7), to = head.find("\r\n", at + 2);
+    if (from == std::string::npos || from >= to) return std::string();
+    return head.substr(from, head.find_last_not_of(" \t", to - 1) + 1 - from);
+}
+
+} // namespace
 
 /// One scrape: read the request head, answer, close.
 class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connection> {
   public:
     Connection(asio::ip::tcp::socket socket, std::function<std::string()>& body,
-               std::shared_ptr<int> open)
+               std::shared_ptr<int> open, std::shared_ptr<const WebHosts> hosts)
         : mSocket(std::move(socket)), mTimer(mSocket.get_executor()), mBody(body),
-          mOpen(std::move(open)) {
+          mOpen(std::move(open)), mHosts(std::move(hosts)) {
         ++*mOpen;
     }
     ~Connection() { --*mOpen; }
@@ -54,6 +74,10 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
         const std::string method = line.substr(0, sp1),
                           target = line.substr(sp1 + 1, sp2 - sp1 - 1);
         const std::string path = target.substr(0, target.find('?'));
+        // A browser's request always names the page's host: one whose name was rebound to
+        // this address is refused. Scrapers that send no Host are no page.
+        if (const auto host = hostHeader(mRequest.substr(0, end + 2)))
+            if (auto why = mHosts->hostProblem(*host)) return answer(403, "Forbidden", *why + "\n");
         if (path != "/metrics") return answer(404, "Not Found", "only /metrics is served here\n");
         if (method != "GET" && method != "HEAD")
             return answer(405, "Method Not Allowed", "use GET /metrics\n", "Allow: GET, HEAD\r\n");
@@ -97,6 +121,7 @@ class MetricsEndpoint::Connection : public std::enable_shared_from_this<Connecti
     asio::steady_timer mTimer;
     std::function<std::string()>& mBody;
     std::shared_ptr<int> mOpen;
+    std::shared_ptr<const WebHosts> mHosts;
     std::array<char, 2048> mBuffer{};
     std::string mRequest, mResponse;
     bool mAnswered = false;
@@ -107,6 +132,8 @@ MetricsEndpoint::MetricsEndpoint(asio::io_context& io, const std::string& host, 
                                  const std::string& source)
     : mIo(io), mAcceptor(io), mLog(log), mBody(std::move(body)), mOpen(std::make_shared<int>(0)) {
     listenOn(mAcceptor, host, port, source + ": metrics");
+    mHosts = std::make_shared<const WebHosts>(host, mAcceptor.local_endpoint().address(),
+                                              std::vector<std::string>{});
     mLog.info("metrics on http://" + host + ":" + std::to_string(this->port()) + "/metrics");
 }
 
@@ -137,7 +164,7 @@ void MetricsEndpoint::accept() {
             IoError ignored;
             socket.close(ignored);
         } else {
-            std::make_shared<Connection>(std::move(socket), mBody, mOpen)->start();
+            std::make_shared<Connection>(std::move(socket), mBody, mOpen, mHosts)->start();
         }
         accept();
     });

@@ -2,7 +2,8 @@
 // The metrics address: a minimal HTTP/1.1 server on the daemon's network thread that answers
 // GET /metrics with the Prometheus text exposition (version 0.0.4) and closes. Anything else
 // gets a status naming what was wrong (404 path, 405 method, 400 malformed, 431 headers over
-// 8 KiB, 408 a request not complete within 2 s); at most 8 scrapes at once, more are closed
+// 8 KiB, 408 a request not complete within 2 s, 403 a Host that does not name this server
+// (WebHosts.h: DNS rebinding)); at most 8 scrapes at once, more are closed
 // unanswered. It never touches the client sessions, so a bad scrape costs them nothing.
 #include "server/detail/Asio.h"
 
@@ -16,6 +17,8 @@ class Log;
 }
 
 namespace bc::server::detail {
+
+class WebHosts;
 
 class MetricsEndpoint {
   public:
@@ -42,7 +45,8 @@ class MetricsEndpoint {
     asio::ip::tcp::acceptor mAcceptor;
     Log& mLog;
     std::function<std::string()> mBody;
-    std::shared_ptr<int> mOpen; ///< connections open; shared with them
+    std::shared_ptr<int> mOpen;             ///< connections open; shared with them
+    std::shared_ptr<const WebHosts> mHosts; ///< the names a scrape's Host may give
     bool mStopped = false;
 };
 

@@ -53,6 +53,12 @@ protocol::Histogram histogramOf(const render::VolumeValueStats& stats) {
     return h;
 }
 
+/// Sets the request id of an encoded message (PROTOCOL.md: header bytes 12..15, little-endian).
+void setRequestId(std::vector<std::uint8_t>& bytes, std::uint32_t request) {
+    for (int i = 0; i < 4; ++i)
+        bytes[12 + i] = std::uint8_t(request >> (8 * i));
+}
+
 std::string mib(std::uint64_t bytes) {
     std::ostringstream s;
     s.precision(3);
@@ -63,7 +69,8 @@ std::string mib(std::uint64_t bytes) {
 } // namespace
 
 Session::Session(std::unique_ptr<Transport> transport, SessionContext& context, std::uint64_t id)
-    : mTransport(std::move(transport)), mTimer(mTransport->executor()), mContext(context), mId(id),
+    : mTransport(std::move(transport)), mTimer(mTransport->executor()),
+      mAuthTimer(mTransport->executor()), mContext(context), mId(id),
       mDecoder(protocol::kMaxClientPayloadBytes) {
     mPeer = mTransport->peer();
     mStarted = mLastMessage = Clock::now();
@@ -127,6 +134,7 @@ void Session::moveTo(const std::shared_ptr<Volume>& next) {
     }
     if (lease.volume() != next) return leave("volume '" + next->name + "' was reopened");
     mLease = std::move(lease);
+    mKept[std::size_t(Reusable::Histogram)].bytes.clear();
     mSlot->moveTo(next, std::move(tf), mTfMessage);
     send(protocol::VolumeOpened{next->info}, 0);
     mContext.log.info("session " + std::to_string(mId) + ": volume '" + next->name +
@@ -137,6 +145,7 @@ void Session::moveTo(const std::shared_ptr<Volume>& next) {
 void Session::leave(const std::string& why) {
     mSlot->setVolume(nullptr); // the render thread stops drawing the old store
     mLease = {};
+    mKept[std::size_t(Reusable::Histogram)].bytes.clear();
     sendError(ErrorCode::UnknownVolume, false, std::uint8_t(MessageType::OpenVolume), 0, why);
 }
 
@@ -150,8 +159,10 @@ void Session::volumeFailed(const std::shared_ptr<Volume>& volume) {
 // ---- reading -------------------------------------------------------------------------------
 
 void Session::read() {
+    mReading = true;
     mTransport->read(
         [self = shared_from_this()](const std::string& error, std::span<const std::uint8_t> bytes) {
+            self->mReading = false;
             if (self->mPhase == Phase::Closed) return;
             if (!error.empty()) return self->close(error);
             self->onBytes(bytes);
@@ -161,9 +172,20 @@ void Session::read() {
 void Session::onBytes(std::span<const std::uint8_t> bytes) {
     mBytesReceived += bytes.size();
     mDecoder.feed(bytes);
-    for (;;) {
+    pump();
+}
+
+void Session::pump() {
+    while (!paused()) {
         auto r = mDecoder.next();
-        if (r.status == protocol::Decoder::Status::NeedMore) break;
+        if (r.status == protocol::Decoder::Status::NeedMore) {
+            if (!mDecoder.midMessage())
+                mMidMessageSince.reset();
+            else if (!mMidMessageSince)
+                mMidMessageSince = Clock::now();
+            if (!mReading) read();
+            return;
+        }
         mLastMessage = Clock::now();
         if (r.status == protocol::Decoder::Status::Error) {
             sendError(r.error.code, r.error.fatal, r.error.type, r.error.request, r.error.message);
@@ -173,12 +195,6 @@ void Session::onBytes(std::span<const std::uint8_t> bytes) {
         handle(r.message, r.request);
         if (mPhase == Phase::Closing || mPhase == Phase::Closed) return;
     }
-    if (mDecoder.midMessage()) {
-        if (!mMidMessageSince) mMidMessageSince = Clock::now();
-    } else {
-        mMidMessageSince.reset();
-    }
-    read();
 }
 
 /// The handshake gate: before Hello only Hello; before a required Auth only Auth (and Bye).
@@ -267,7 +283,8 @@ void Session::onHello(const protocol::Hello& hello, std::uint32_t request) {
                     protocol::Codec::Jpeg, protocol::Codec::Png};
     reply.software = "brickcastd 0.1";
     send(reply, request);
-    mPhase = mContext.config.token.empty() ? Phase::Ready : Phase::AwaitAuth;
+    mPhase = Phase::AwaitAuth;
+    if (mContext.config.token.empty()) becomeReady(t, request);
 }
 
 void Session::onAuth(const protocol::Auth& auth, std::uint32_t request) {
@@ -276,11 +293,50 @@ void Session::onAuth(const protocol::Auth& auth, std::uint32_t request) {
         sendError(ErrorCode::BadState, false, t, request, "no authentication is pending");
         return;
     }
-    if (!tokensEqual(auth.token, mContext.config.token)) {
+    const auto now = Clock::now();
+    const auto at = mContext.authThrottle ? mContext.authThrottle->admit(addressOf(mPeer), now)
+                                          : std::optional(now);
+    if (!at)
+        return sendError(ErrorCode::Busy, true, t, request,
+                         "another authentication from " + addressOf(mPeer) +
+                             " waits its turn (wrong tokens came from there); try again later");
+    if (*at <= now) return checkAuth(auth.token, request);
+    // Reading pauses until the turn comes: the client can queue nothing meanwhile.
+    mAuthWaiting = true;
+    mAuthTimer.expires_at(*at);
+    mAuthTimer.async_wait(
+        [self = shared_from_this(), token = auth.token, request](const IoError& ec) {
+            if (ec || self->mPhase != Phase::AwaitAuth) return;
+            self->mAuthWaiting = false;
+            self->checkAuth(token, request);
+            if (self->mPhase == Phase::Ready && !self->mReading) self->pump(); // reads on
+        });
+}
+
+void Session::checkAuth(const std::string& token, std::uint32_t request) {
+    const auto t = std::uint8_t(MessageType::Auth);
+    const std::string address = addressOf(mPeer);
+    if (!tokensEqual(token, mContext.config.token)) {
+        if (mContext.authThrottle) {
+            const auto wait = mContext.authThrottle->failed(address, Clock::now());
+            mContext.log.info("session " + std::to_string(mId) + ": wrong token from " + address +
+                              "; its next Auth is checked in " + std::to_string(wait.count()) +
+                              " ms at the soonest");
+        }
         sendError(ErrorCode::AuthFailed, true, t, request, "authentication failed");
         return;
     }
-    send(protocol::AuthOk{}, request);
+    if (mContext.authThrottle) mContext.authThrottle->succeeded(address);
+    becomeReady(t, request);
+    if (mPhase == Phase::Ready) send(protocol::AuthOk{}, request);
+}
+
+void Session::becomeReady(std::uint8_t type, std::uint32_t request) {
+    if (mContext.onReady && !mContext.onReady(mId)) {
+        sendError(ErrorCode::Busy, true, type, request,
+                  "too many clients (" + std::to_string(mContext.config.maxClients) + ")");
+        return;
+    }
     mPhase = Phase::Ready;
 }
 
@@ -366,10 +422,12 @@ void Session::onRequestFrame(const protocol::RequestFrame& m, std::uint32_t requ
 void Session::onRequestHistogram(std::uint32_t request) {
     const auto t = std::uint8_t(MessageType::RequestHistogram);
     if (!mLease) return sendError(ErrorCode::NoVolume, false, t, request, "open a volume first");
-    send(histogramOf(mLease.volume()->stats), request);
+    if (sendKept(Reusable::Histogram, request)) return;
+    sendKeeping(Reusable::Histogram, histogramOf(mLease.volume()->stats), request);
 }
 
 void Session::onRequestStats(std::uint32_t request) {
+    if (sendKept(Reusable::Stats, request)) return; // asked again before the last one went
     MetricSet metrics;
     if (mContext.collect) mContext.collect(metrics);
     metrics.counter("session_frames_sent_total", "Frames this session was sent",
@@ -382,7 +440,7 @@ void Session::onRequestStats(std::uint32_t request) {
     protocol::Stats stats;
     stats.counters = metrics.statCounters(protocol::kMaxStatNameBytes);
     if (stats.counters.size() > protocol::kMaxStats) stats.counters.resize(protocol::kMaxStats);
-    send(stats, request);
+    sendKeeping(Reusable::Stats, stats, request);
 }
 
 // ---- writing -------------------------------------------------------------------------------
@@ -390,6 +448,23 @@ void Session::onRequestStats(std::uint32_t request) {
 void Session::send(const protocol::Message& message, std::uint32_t request) {
     Outgoing out;
     protocol::encode(message, request, out.bytes);
+    enqueue(std::move(out));
+}
+
+bool Session::sendKept(Reusable kind, std::uint32_t request) {
+    const KeptReply& kept = mKept[std::size_t(kind)];
+    if (kept.queued == 0 || kept.bytes.empty()) return false;
+    Outgoing out{kept.bytes, false, kind};
+    setRequestId(out.bytes, request);
+    enqueue(std::move(out));
+    return true;
+}
+
+void Session::sendKeeping(Reusable kind, const protocol::Message& message, std::uint32_t request) {
+    Outgoing out;
+    out.reusable = kind;
+    protocol::encode(message, request, out.bytes);
+    mKept[std::size_t(kind)].bytes = out.bytes;
     enqueue(std::move(out));
 }
 
@@ -412,6 +487,8 @@ void Session::enqueue(Outgoing out) {
         return;
     }
     mQueueBytes += out.bytes.size();
+    if (!out.fromRenderer) mReplyBytes += out.bytes.size();
+    if (out.reusable != Reusable::None) ++mKept[std::size_t(out.reusable)].queued;
     mQueue.push_back(std::move(out));
     if (!mWriting) write();
 }
@@ -427,15 +504,22 @@ void Session::write() {
     mTransport->write(mQueue.front().bytes,
                       [self = shared_from_this()](const std::string& error, std::size_t n) {
                           if (self->mPhase == Phase::Closed) return;
-                          Outgoing done = std::move(self->mQueue.front());
-                          self->mQueue.pop_front();
-                          self->mQueueBytes -= done.bytes.size();
-                          if (done.fromRenderer)
-                              self->mSlot->frameDone(done.bytes.size()), ++self->mFramesSent;
-                          if (!error.empty()) return self->close(error);
-                          self->mBytesSent += n;
-                          self->write();
+                          self->written(error, n);
                       });
+}
+
+void Session::written(const std::string& error, std::size_t n) {
+    Outgoing done = std::move(mQueue.front());
+    mQueue.pop_front();
+    mQueueBytes -= done.bytes.size();
+    if (!done.fromRenderer) mReplyBytes -= done.bytes.size();
+    if (done.reusable != Reusable::None) --mKept[std::size_t(done.reusable)].queued;
+    if (done.fromRenderer) mSlot->frameDone(done.bytes.size()), ++mFramesSent;
+    if (!error.empty()) return close(error);
+    mBytesSent += n;
+    write();
+    // The client took a reply: the requests waiting behind the bound are handled now.
+    if (mPhase != Phase::Closing && mPhase != Phase::Closed && !mReading && !paused()) pump();
 }
 
 // ---- deadlines and closing -----------------------------------------------------------------
@@ -482,6 +566,8 @@ void Session::close(const std::string& why) {
     mPhase = Phase::Closed;
     mTransport->close();
     mTimer.cancel();
+    mAuthTimer.cancel();
+    if (mAuthWaiting && mContext.authThrottle) mContext.authThrottle->abandoned(addressOf(mPeer));
     if (mSlot) mSlot->close();
     mLease = {};
     const double seconds = std::chrono::duration<double>(Clock::now() - mStarted).count();

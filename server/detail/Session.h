@@ -2,9 +2,11 @@
 // One client connection of brickcastd (private to server/), over TCP or WebSocket (Transport).
 // Runs on the daemon's network thread: reads bytes into the protocol decoder, answers control
 // messages at once, hands render requests to its RenderSlot, and writes what comes back through a
-// bounded queue. A watchdog enforces the handshake, trickle (message started but incomplete), idle
-// and write deadlines. Every error is answered with an Error message; a fatal one closes the
-// session.
+// bounded queue. Replies are bounded too: while more than kMaxQueuedReplyBytes of them wait, the
+// session reads no further request (the client's own sends block), and a Stats or Histogram
+// asked for again while the last one waits is a copy of it. A watchdog enforces the handshake,
+// trickle (message started but incomplete), idle and write deadlines. Every error is answered
+// with an Error message; a fatal one closes the session.
 #include "protocol/Decoder.h"
 #include "protocol/Messages.h"
 #include "server/Catalog.h"
@@ -12,8 +14,10 @@
 #include "server/RenderService.h"
 
 #include "server/detail/Asio.h"
+#include "server/detail/AuthThrottle.h"
 #include "server/detail/Transport.h"
 
+#include <array>
 #include <cstdint>
 #include <deque>
 #include <functional>
@@ -38,11 +42,19 @@ struct SessionContext {
     std::function<void(std::uint64_t id)> onClosed; ///< on the network thread
     /// The whole server's metrics (what GET /metrics serves), on the network thread.
     std::function<void(MetricSet&)> collect;
-    std::uint64_t errorsSent = 0; ///< by every session; network thread only
+    std::uint64_t errorsSent = 0;         ///< by every session; network thread only
+    AuthThrottle* authThrottle = nullptr; ///< wrong tokens per address; none: no waits
+    /// The session completed its handshake (Hello, and Auth when required); false: no room
+    /// among the authenticated clients (the session is answered Busy). None: always room.
+    std::function<bool(std::uint64_t id)> onReady;
 };
 
 class Session : public std::enable_shared_from_this<Session> {
   public:
+    /// Replies (all but frames) queued beyond this stop the session reading requests until
+    /// the client has taken them: what a client that never reads can make the daemon hold.
+    static constexpr std::uint64_t kMaxQueuedReplyBytes = 256 * 1024;
+
     Session(std::unique_ptr<Transport> transport, SessionContext& context, std::uint64_t id);
     /// Starts reading and the watchdog.
     void start();
@@ -65,20 +77,39 @@ class Session : public std::enable_shared_from_this<Session> {
     std::size_t queued() const { return mQueue.size(); }
     /// Bytes in the write queue (the message being written included).
     std::uint64_t queuedBytes() const { return mQueueBytes; }
+    /// Whether the session has completed its handshake (Hello, and Auth when required).
+    bool authenticated() const { return mPhase == Phase::Ready; }
+    /// Cuts the connection now, saying why in the log (a newer connection needs its place).
+    void cut(const std::string& why) { close(why); }
 
   private:
     enum class Phase { AwaitHello, AwaitAuth, Ready, Closing, Closed };
+    /// Replies whose bytes are kept while one waits in the queue, for a copy to answer the
+    /// same request again.
+    enum class Reusable { Stats, Histogram, Count, None = Count };
     struct Outgoing {
         std::vector<std::uint8_t> bytes;
         bool fromRenderer = false; ///< a frame or render error: tell the slot when written
+        Reusable reusable = Reusable::None;
+    };
+    struct KeptReply {
+        std::vector<std::uint8_t> bytes;
+        unsigned queued = 0; ///< copies of it in the queue
     };
 
     void read();
     void onBytes(std::span<const std::uint8_t> bytes);
+    /// Handles what the decoder holds, then reads on, unless replies are backed up or an Auth
+    /// waits its turn: then reading stays paused until write() or the Auth timer resumes it.
+    void pump();
+    bool paused() const { return mReplyBytes > kMaxQueuedReplyBytes || mAuthWaiting; }
     void handle(protocol::Message& message, std::uint32_t request);
     bool admitted(protocol::MessageType type, std::uint32_t request);
     void onHello(const protocol::Hello& hello, std::uint32_t request);
     void onAuth(const protocol::Auth& auth, std::uint32_t request);
+    void checkAuth(const std::string& token, std::uint32_t request);
+    /// The handshake is complete: Ready, or Busy when the daemon has no room.
+    void becomeReady(std::uint8_t type, std::uint32_t request);
     void onOpenVolume(const protocol::OpenVolume& open, std::uint32_t request);
     void onSetTransferFunction(const protocol::SetTransferFunction& tf, std::uint32_t request);
     void onSetRenderOptions(const protocol::SetRenderOptions& options, std::uint32_t request);
@@ -90,10 +121,15 @@ class Session : public std::enable_shared_from_this<Session> {
     /// Stops viewing the current volume and sends UnknownVolume saying `why`.
     void leave(const std::string& why);
     void send(const protocol::Message& message, std::uint32_t request);
+    /// A copy of the kept reply of `kind`, answering `request`, when one waits in the queue.
+    bool sendKept(Reusable kind, std::uint32_t request);
+    void sendKeeping(Reusable kind, const protocol::Message& message, std::uint32_t request);
     void sendError(protocol::ErrorCode code, bool fatal, std::uint8_t type, std::uint32_t request,
                    const std::string& message);
     void enqueue(Outgoing out);
     void write();
+    /// The front message was written (or failed).
+    void written(const std::string& error, std::size_t bytes);
     void watchdog();
     /// Stops reading; closes once the queue is written (or the write deadline passes).
     void closeAfterFlush(const std::string& why);
@@ -101,6 +137,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
     std::unique_ptr<Transport> mTransport;
     asio::steady_timer mTimer;
+    asio::steady_timer mAuthTimer; ///< an Auth waiting its turn (AuthThrottle)
     SessionContext& mContext;
     std::uint64_t mId;
     std::string mPeer;
@@ -108,7 +145,11 @@ class Session : public std::enable_shared_from_this<Session> {
     protocol::Decoder mDecoder;
     std::deque<Outgoing> mQueue;
     std::uint64_t mQueueBytes = 0;
+    std::uint64_t mReplyBytes = 0; ///< of mQueueBytes, what is not from the renderer
+    std::array<KeptReply, std::size_t(Reusable::Count)> mKept;
     bool mWriting = false;
+    bool mReading = false;     ///< a transport read is pending
+    bool mAuthWaiting = false; ///< an Auth waits for its turn (mAuthTimer)
     std::shared_ptr<RenderSlot> mSlot;
     VolumeLease mLease;
     protocol::SetTransferFunction mTfMessage;

@@ -55,4 +55,9 @@ std::string peerOf(const asio::ip::tcp::socket& socket) {
     return ep.address().to_string() + ":" + std::to_string(ep.port());
 }
 
+std::string addressOf(const std::string& peer) {
+    const auto colon = peer.rfind(':');
+    return colon == std::string::npos ? peer : peer.substr(0, colon);
+}
+
 } // namespace bc::server::detail

@@ -43,4 +43,7 @@ std::unique_ptr<Transport> makeTcpTransport(asio::ip::tcp::socket socket);
 /// "ADDRESS:PORT" of a socket's peer, "?" when unknown.
 std::string peerOf(const asio::ip::tcp::socket& socket);
 
+/// The address of a peer "ADDRESS:PORT" (as peerOf gives it): its part before the last ':'.
+std::string addressOf(const std::string& peer);
+
 } // namespace bc::server::detail

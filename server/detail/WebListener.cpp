@@ -5,13 +5,16 @@
 #include "server/Metrics.h"
 #include "server/detail/Acceptor.h"
 #include "server/detail/WebAssets.h"
+#include "server/detail/WebHosts.h"
 #include "server/detail/WebSocketTransport.h"
 
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket/rfc6455.hpp>
 
+#include <list>
 #include <map>
+#include <optional>
 
 namespace bc::server::detail {
 
@@ -24,6 +27,10 @@ const WebAsset* findWebAsset(std::string_view path) {
     return nullptr;
 }
 
+namespace {
+class HttpConnection;
+} // namespace
+
 struct WebListener::Impl {
     Impl(asio::io_context& io, const DaemonConfig& c, Log& l,
          std::function<void(std::unique_ptr<Transport>)> open)
@@ -33,9 +40,14 @@ struct WebListener::Impl {
     const DaemonConfig& config;
     Log& log;
     std::function<void(std::unique_ptr<Transport>)> onOpen;
-    std::size_t open = 0;                 ///< HTTP connections open (not upgraded)
+    std::optional<WebHosts> hosts;               ///< set once the address is bound
+    std::size_t open = 0;                        ///< HTTP connections open (not upgraded)
+    std::map<std::string, std::size_t> openFrom; ///< by peer address
+    /// Connections waiting for (the rest of) a request, the longest waiting first: where a
+    /// connection over the limits takes its place from.
+    std::list<std::weak_ptr<HttpConnection>> waiting;
     std::map<unsigned, double> responses; ///< by status
-    double upgrades = 0, refused = 0;
+    double upgrades = 0, refused = 0, cutForNewer = 0;
     bool stopped = false;
 };
 
@@ -53,22 +65,32 @@ template <class Body> void secure(http::response<Body>& res) {
     res.set("Referrer-Policy", "no-referrer");
 }
 
-/// The host:port part of an Origin ("http://host:port"), empty when it has none.
-std::string_view originHost(std::string_view origin) {
-    const auto scheme = origin.find("://");
-    return scheme == std::string_view::npos ? std::string_view{} : origin.substr(scheme + 3);
-}
-
 class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
   public:
     HttpConnection(asio::ip::tcp::socket socket, std::shared_ptr<WebListener::Impl> listener)
         : mSocket(std::move(socket)), mTimer(mSocket.get_executor()), mL(std::move(listener)),
-          mPeer(peerOf(mSocket)) {
+          mPeer(peerOf(mSocket)), mAddress(addressOf(mPeer)) {
         ++mL->open;
+        ++mL->openFrom[mAddress];
     }
-    ~HttpConnection() { --mL->open; }
+    ~HttpConnection() {
+        stopWaiting();
+        --mL->open;
+        if (--mL->openFrom[mAddress] == 0) mL->openFrom.erase(mAddress);
+    }
+
+    const std::string& address() const { return mAddress; }
+
+    /// Closes the connection while it waits for a request, to make room for a newer one.
+    void cutForNewer() {
+        ++mL->cutForNewer;
+        stopWaiting();
+        cut();
+    }
 
     void readRequest() {
+        stopWaiting();
+        mWaiting = mL->waiting.insert(mL->waiting.end(), weak_from_this());
         mParser.emplace();
         mParser->header_limit(WebListener::kMaxHeaderBytes);
         mParser->body_limit(0);
@@ -81,11 +103,18 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
         http::async_read(mSocket, mBuffer, *mParser,
                          [self = shared_from_this()](const IoError& ec, std::size_t) {
                              self->mTimer.cancel();
+                             self->stopWaiting();
                              self->onRequest(ec);
                          });
     }
 
   private:
+    void stopWaiting() {
+        if (!mWaiting) return;
+        mL->waiting.erase(*mWaiting);
+        mWaiting.reset();
+    }
+
     void onRequest(const IoError& ec) {
         if (ec == http::error::end_of_stream || ec == asio::error::operation_aborted ||
             !mSocket.is_open())
@@ -98,6 +127,9 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
             return fail(http::status::payload_too_large, "requests have no body here");
         if (ec) return fail(http::status::bad_request, "malformed request: " + ec.message());
         const auto& req = mParser->get();
+        const auto host = req[http::field::host];
+        if (auto why = mL->hosts->hostProblem(std::string_view(host.data(), host.size())))
+            return fail(http::status::forbidden, *why);
         const std::string_view target(req.target().data(), req.target().size());
         const std::string_view path = target.substr(0, target.find('?'));
         if (beast::websocket::is_upgrade(req)) return upgrade(path);
@@ -119,13 +151,14 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
         if (path != "/ws") return notFound(path, 11, false);
         const auto& req = mParser->get();
         // A page from another origin must not drive the daemon from its user's browser
-        // (cross-site WebSocket hijacking): an Origin, when sent, names this host.
+        // (cross-site WebSocket hijacking): an Origin, when sent, is this server's own.
+        // Browsers always send one; a program that sends none is no page.
         const auto origin = req[http::field::origin];
         const auto host = req[http::field::host];
-        if (!origin.empty() && originHost(std::string_view(origin.data(), origin.size())) !=
-                                   std::string_view(host.data(), host.size()))
-            return fail(http::status::forbidden, "cross-origin WebSocket refused (Origin " +
-                                                     std::string(origin.substr(0, 200)) + ")");
+        if (req.find(http::field::origin) != req.end())
+            if (auto why = WebHosts::originProblem(std::string_view(origin.data(), origin.size()),
+                                                   std::string_view(host.data(), host.size())))
+                return fail(http::status::forbidden, "cross-origin WebSocket refused: " + *why);
         ++mL->upgrades;
         acceptWebSocket(std::move(mSocket), mParser->release(), mL->config.handshakeTimeoutMs,
                         mL->log, mL->onOpen);
@@ -178,10 +211,33 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
     asio::ip::tcp::socket mSocket;
     asio::steady_timer mTimer;
     std::shared_ptr<WebListener::Impl> mL;
-    std::string mPeer;
+    std::string mPeer, mAddress;
+    std::optional<std::list<std::weak_ptr<HttpConnection>>::iterator> mWaiting;
     beast::flat_buffer mBuffer{WebListener::kMaxHeaderBytes + 1024};
     std::optional<http::request_parser<http::empty_body>> mParser;
 };
+
+/// Cuts the connection that has waited longest for its request, of `address` when given.
+bool cutLongestWaiting(WebListener::Impl& l, const std::string* address) {
+    for (const auto& weak : l.waiting)
+        if (auto c = weak.lock(); c && (!address || c->address() == *address)) {
+            c->cutForNewer();
+            return true;
+        }
+    return false;
+}
+
+/// Whether a connection from `address` may be taken: under both limits, or once the one that
+/// waited longest for its request (from that address, when its own limit is the one reached)
+/// is cut. A slow client holds a place only until newer ones need it, and one that sends a
+/// request at once is served however many slow ones there are.
+bool makeRoom(WebListener::Impl& l, const std::string& address) {
+    const auto from = l.openFrom.find(address);
+    if (from != l.openFrom.end() && from->second >= WebListener::kMaxConnectionsPerAddress &&
+        !cutLongestWaiting(l, &address))
+        return false;
+    return l.open < WebListener::kMaxConnections || cutLongestWaiting(l, nullptr);
+}
 
 void accept(const std::shared_ptr<WebListener::Impl>& l) {
     l->acceptor.async_accept([l](const IoError& ec, asio::ip::tcp::socket socket) {
@@ -191,7 +247,7 @@ void accept(const std::shared_ptr<WebListener::Impl>& l) {
             if (l->acceptor.is_open()) accept(l);
             return;
         }
-        if (l->open >= WebListener::kMaxConnections) {
+        if (!makeRoom(*l, addressOf(peerOf(socket)))) {
             ++l->refused; // closed unanswered: answering would cost what the limit saves
         } else {
             IoError ignored;
@@ -209,6 +265,7 @@ WebListener::WebListener(asio::io_context& io, const std::string& host, std::uin
                          std::function<void(std::unique_ptr<Transport>)> onOpen)
     : mImpl(std::make_shared<Impl>(io, config, log, std::move(onOpen))) {
     listenOn(mImpl->acceptor, host, port, config.source + ": web");
+    mImpl->hosts.emplace(host, mImpl->acceptor.local_endpoint().address(), config.webHosts);
 }
 
 WebListener::~WebListener() {
@@ -245,6 +302,9 @@ void WebListener::collect(MetricSet& m) const {
     m.counter("web_upgrades_total", "WebSocket upgrades asked for", mImpl->upgrades);
     m.counter("web_connections_refused_total",
               "HTTP connections closed unanswered (over the connection limit)", mImpl->refused);
+    m.counter("web_connections_cut_total",
+              "HTTP connections cut while waiting for a request, to make room for a newer one",
+              mImpl->cutForNewer);
     m.gauge("web_connections", "HTTP connections open", double(mImpl->open));
 }
 

@@ -3,7 +3,10 @@
 // daemon's network thread that serves the viewer's embedded files (WebAssets.h: an exact path
 // or 404, nothing read from disk) and upgrades GET /ws to a WebSocket carrying the protocol,
 // whose sessions the daemon runs as it runs TCP ones. Requests are bounded: headers 8 KiB, no
-// bodies, each complete within the handshake timeout; at most kMaxConnections at once.
+// bodies, each complete within the handshake timeout; at most kMaxConnections at once and
+// kMaxConnectionsPerAddress from one address, where a newer connection takes the place of the
+// one that has waited longest for its request. Every request's Host names this server
+// (WebHosts.h), or is answered 403.
 // Boost.Beast parses HTTP; this header keeps it out of the daemon.
 #include "server/detail/Asio.h"
 #include "server/detail/Transport.h"
@@ -25,6 +28,7 @@ class WebListener {
   public:
     static constexpr std::size_t kMaxHeaderBytes = 8 * 1024;
     static constexpr std::size_t kMaxConnections = 512;
+    static constexpr std::size_t kMaxConnectionsPerAddress = 128;
 
     /// Binds host:port (0 = any free port). `onOpen` runs for each completed WebSocket
     /// handshake. @throw ConfigError naming the address.

@@ -143,6 +143,12 @@ std::vector<std::vector<Message>> seedMessages() {
         {points, SetTransferFunction{}, RequestStats{}, Bye{}},
         {VolumeList{{volume}}, VolumeOpened{volume}, AuthOk{}},
         {frame, Stats{{{"frames", 3}}}, Error{ErrorCode::OutOfRange, false, 10, "width"}},
+        // The shapes of the adversarial passes: replies asked for and never read, a guessed
+        // token, a Hello that never gets to Auth.
+        std::vector<Message>(64, RequestStats{}),
+        std::vector<Message>(64, RequestHistogram{}),
+        {hello, Auth{std::string(256, 'g')}, Auth{"guess"}},
+        {hello, hello, ListVolumes{}},
     };
 }
 

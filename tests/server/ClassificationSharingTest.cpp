@@ -17,7 +17,7 @@ class SharedClassification : public ::testing::Test {
         port = daemon->daemon->metricsPort();
     }
     double metric(const std::string& name) {
-        const std::string reply = scrape(port, "GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n");
+        const std::string reply = scrape(port, "GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n");
         return sampleOf(reply.substr(reply.find("\r\n\r\n") + 4), "brickcast_" + name);
     }
     /// One frame under preset `tf` from `c` (a new camera each time).

@@ -2,6 +2,7 @@
 // names the file, the position and the key, paths resolve against the config's folder.
 #include "server/DaemonConfig.h"
 #include "brickstore/HostMemory.h"
+#include "server/ConfigChanges.h"
 #include "server/Error.h"
 
 #include "tests/TestSupport.h"
@@ -97,8 +98,10 @@ TEST(DaemonConfigTest, EveryKeyIsRead) {
 listen = "[::1]:0"
 token = "s3cret"
 max_clients = 4
+max_unauthenticated = 7
 store_dir = "cache"
 metrics = "127.0.0.1:9100"
+web_hosts = ["Viewer.Example.org", "10.1.2.3", "[fe80::1]"]
 [timeouts]
 handshake_ms = 1
 read_ms = 2
@@ -118,6 +121,9 @@ interactive_ms = 40
     EXPECT_EQ(c.listenPort, 0);
     EXPECT_EQ(c.token, "s3cret");
     EXPECT_EQ(c.maxClients, 4u);
+    EXPECT_EQ(c.maxUnauthenticated, 7u);
+    EXPECT_EQ(c.webHosts,
+              (std::vector<std::string>{"viewer.example.org", "10.1.2.3", "[fe80::1]"}));
     EXPECT_EQ(c.storeDir, "/cfg/cache");
     EXPECT_EQ(c.metricsHost, "127.0.0.1");
     EXPECT_EQ(c.metricsPort, 9100);
@@ -441,6 +447,43 @@ TEST(DaemonConfigTest, DefaultStoreDirFollowsXdgCacheHome) {
     ::unsetenv("XDG_CACHE_HOME");
     EXPECT_EQ(defaultStoreDir(), "/tmp/brickcast-" + std::to_string(::getuid()));
     if (old) ::setenv("XDG_CACHE_HOME", saved.c_str(), 1);
+}
+
+} // namespace
+} // namespace bc::server
+
+namespace bc::server {
+namespace {
+
+TEST(DaemonConfigTest, BadWebHostsAreNamed) {
+    for (const char* hosts : {"\"viewer.lan\"", "[\"viewer.lan:8080\"]", "[\"evil.com/x\"]",
+                              "[\"[::zz]\"]", "[1]", "[\"\"]"}) {
+        try {
+            DaemonConfig::parse("[server]\nweb_hosts = " + std::string(hosts) + "\n" + kVolume,
+                                "c.toml", "/cfg");
+            ADD_FAILURE() << hosts << " was accepted";
+        } catch (const ConfigError& e) {
+            EXPECT_NE(std::string(e.what()).find("server.web_hosts"), std::string::npos)
+                << e.what();
+        }
+    }
+}
+
+TEST(DaemonConfigTest, AReloadNamesEverySettingItCannotApply) {
+    const DaemonConfig running =
+        parseText(std::string("[server]\nlisten = \"127.0.0.1:7411\"\n") + kVolume);
+    DaemonConfig next = running;
+    next.volumes.push_back(next.volumes.at(0));
+    next.volumes.back().name = "another";
+    EXPECT_TRUE(settingsAReloadKeeps(running, next).empty()) << "the catalog is a reload's";
+    next.listenPort = 7500;
+    next.writeTimeoutMs = 1;
+    EXPECT_EQ(settingsAReloadKeeps(running, next),
+              (std::vector<std::string>{"server.listen", "timeouts.write_ms"}));
+    DaemonConfig overridden = running;
+    overridden.setListen("127.0.0.1:7600", "--listen");
+    EXPECT_EQ(settingsAReloadKeeps(overridden, next), std::vector<std::string>{"timeouts.write_ms"})
+        << "listen given on the command line stays the command line's";
 }
 
 } // namespace

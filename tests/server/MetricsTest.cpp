@@ -90,7 +90,7 @@ class DaemonMetrics : public ::testing::Test {
         ASSERT_NE(port, 0);
     }
     std::string metrics() {
-        const std::string reply = scrape(port, "GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n");
+        const std::string reply = scrape(port, "GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n");
         EXPECT_TRUE(reply.starts_with("HTTP/1.1 200 OK\r\n")) << reply.substr(0, 200);
         EXPECT_NE(reply.find("Content-Type: text/plain; version=0.0.4"), std::string::npos);
         return reply.substr(reply.find("\r\n\r\n") + 4);
@@ -159,6 +159,10 @@ TEST_F(DaemonMetrics, BadScrapesGetAStatusAndClientsKeepTheirFrames) {
     EXPECT_EQ(status("GET /secrets HTTP/1.1\r\n\r\n"), "HTTP/1.1 404 Not Found");
     EXPECT_EQ(status("hello\r\n\r\n"), "HTTP/1.1 400 Bad Request");
     EXPECT_EQ(status(std::string(9000, 'x')), "HTTP/1.1 431 Request Header Fields Too Large");
+    EXPECT_EQ(status("GET /metrics HTTP/1.1\r\nHost: evil.example:9100\r\n\r\n"),
+              "HTTP/1.1 403 Forbidden")
+        << "a page whose name was rebound to the metrics address reads nothing";
+    EXPECT_EQ(status("GET /metrics HTTP/1.1\r\nhost:  localhost:9100 \r\n\r\n"), "HTTP/1.1 200 OK");
     EXPECT_EQ(status("GET /metrics HTTP/1.1\r\n"), "HTTP/1.1 408 Request Timeout")
         << "a request head that never ends is cut after 2 s";
     const std::string head = scrape(port, "HEAD /metrics HTTP/1.1\r\n\r\n");

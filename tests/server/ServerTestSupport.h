@@ -179,6 +179,25 @@ class RawConnection {
             throw std::runtime_error("no AuthOk from the server");
     }
     bool closed() const { return mClosed; }
+    /// The bytes that arrive within `timeoutMs`, raw (an HTTP answer); empty when the peer
+    /// closed or nothing came.
+    std::string receive(int timeoutMs) {
+        pollfd p{mFd, POLLIN, 0};
+        if (::poll(&p, 1, timeoutMs) <= 0) return {};
+        char buf[4096];
+        const ssize_t n = ::recv(mFd, buf, sizeof buf, 0);
+        return n > 0 ? std::string(buf, std::size_t(n)) : std::string();
+    }
+    /// Whether the peer has closed (or reset) the connection, without waiting; what it sent
+    /// is dropped.
+    bool peerGone() {
+        std::uint8_t buf[4096];
+        for (;;) {
+            const ssize_t n = ::recv(mFd, buf, sizeof buf, MSG_DONTWAIT);
+            if (n > 0) continue;
+            return n == 0 || (errno != EAGAIN && errno != EWOULDBLOCK);
+        }
+    }
 
   private:
     int mFd = -1;

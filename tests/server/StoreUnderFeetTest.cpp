@@ -3,14 +3,19 @@
 // of service (its other sessions are told, later requests are refused at once, ListVolumes
 // leaves it out, /metrics counts it, one log line), the daemon lives on and the client of
 // another volume keeps receiving frames; a reload reopens it once the store is valid again and
-// its sessions move to it. And the start is strict: a configured store that is missing or
-// corrupt stops the daemon, naming it, unless it is optional.
+// its sessions move to it. A store rewritten while every brick its view needs is cached is
+// noticed too, without a frame asking. And the start is strict: a configured store that is
+// missing, corrupt or not a file (a FIFO) stops the daemon at once, naming it, unless it is
+// optional.
 #include "ServerTestSupport.h"
 
 #include "server/Catalog.h"
 #include "server/Error.h"
 
+#include <fcntl.h>
 #include <filesystem>
+#include <future>
+#include <sys/stat.h>
 #include <variant>
 
 namespace bc::server::test {
@@ -276,6 +281,61 @@ TEST(StrictStart, AnOptionalMissingStoreIsLeftOutAndACorruptOneStillStops) {
                                      "dims = [8, 8, 8]\noptional = true\n",
                                      "<t>", dir.path().string()),
                  ConfigError);
+}
+
+TEST(StrictStart, AStoreThatIsAFifoStopsTheStartAtOnceNamingIt) {
+    TempDir dir;
+    const std::string good = makeStore(dir, "good.bcs", 32);
+    const std::string fifo = dir.file("fifo.bcs");
+    ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    auto start = std::async(std::launch::async, [&]() -> std::string {
+        try {
+            TestDaemon d(twoStores(good, fifo));
+            return "started";
+        } catch (const ConfigError& e) {
+            return e.what();
+        }
+    });
+    if (start.wait_for(std::chrono::seconds(5)) != std::future_status::ready) {
+        // Unblock an open() that waits for a writer, so that the test ends.
+        const int writer = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK);
+        start.wait();
+        if (writer >= 0) ::close(writer);
+        FAIL() << "the start waited on a FIFO for over 5 s";
+    }
+    const std::string why = start.get();
+    EXPECT_NE(why.find(fifo), std::string::npos) << why;
+    EXPECT_NE(why.find("not a regular file"), std::string::npos) << why;
+}
+
+TEST(StoreUnderFeet, AStoreRewrittenWhileItsBricksAreCachedIsNoticedWithoutAFrame) {
+    TempDir dir, other;
+    const std::string a = makeStore(dir, "first.bcs", 48), b = makeStore(dir, "second.bcs", 32);
+    const std::string replacement =
+        makeStore(other, "replacement.bcs", 48, brickstore::SynthKind::Vessels);
+    DaemonConfig config = twoStores(a, b);
+    config.hostBudgetBytes = 256ull << 20; // every brick stays cached
+    TestDaemon daemon(config);
+    auto cc = daemon.clientConfig();
+    cc.timeoutMs = 10000;
+    client::Client c(cc);
+    const auto v = c.openVolume("first");
+    c.setRenderOptions(smallCpuFrames(48));
+    ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(frameOrError(c, v, 0, 1)));
+    ASSERT_TRUE(std::holds_alternative<client::ReceivedFrame>(frameOrError(c, v, 0, 2)));
+    const auto r = bc::test::runCommand("cp " + replacement + " " + a);
+    ASSERT_EQ(r.exitCode, 0) << r.text;
+    // Asked for nothing: told unasked (request id 0), within a few seconds.
+    std::uint32_t request = 1;
+    const auto m = c.nextMessage(&request);
+    ASSERT_TRUE(std::holds_alternative<protocol::Error>(m));
+    const auto& e = std::get<protocol::Error>(m);
+    EXPECT_EQ(e.code, protocol::ErrorCode::RenderFailed);
+    EXPECT_EQ(request, 0u);
+    EXPECT_NE(e.message.find(a), std::string::npos) << e.message;
+    auto again = frameOrError(c, v, 0, 3);
+    ASSERT_TRUE(std::holds_alternative<client::ServerError>(again))
+        << "a frame of the old bricks was sent after the store changed";
 }
 
 } // namespace

@@ -2,7 +2,7 @@
 // the protocol over WebSocket as one more transport of the same sessions. Every piece of bad
 // input of the list ends only the connection that sent it: a witness WebSocket
 // session and a witness TCP client keep being answered after each.
-#include "ServerTestSupport.h"
+#include "WebTestSupport.h"
 
 #include "protocol/FrameCodec.h"
 #include "render/TransferFunction.h"
@@ -18,91 +18,6 @@
 
 namespace bc::server::test {
 namespace {
-
-namespace asio = boost::asio;
-namespace beast = boost::beast;
-namespace websocket = beast::websocket;
-using protocol::ErrorCode;
-
-/// A WebSocket client of the viewer's address (Beast, synchronous): the browser's part.
-class WsClient {
-  public:
-    explicit WsClient(std::uint16_t port, const std::string& origin = {}) : mWs(mIo) {
-        mWs.next_layer().connect({asio::ip::make_address("127.0.0.1"), port});
-        const std::string host = "127.0.0.1:" + std::to_string(port);
-        mWs.set_option(websocket::stream_base::decorator([origin](websocket::request_type& r) {
-            if (!origin.empty()) r.set(beast::http::field::origin, origin);
-        }));
-        mWs.handshake(host, "/ws");
-        mWs.binary(true);
-    }
-    void send(const protocol::Message& m, std::uint32_t request = 1) {
-        const auto bytes = protocol::encode(m, request);
-        mWs.write(asio::buffer(bytes));
-    }
-    /// The next protocol message; each WebSocket message carries exactly one.
-    protocol::Message next() {
-        beast::flat_buffer b;
-        mWs.read(b);
-        const auto data = b.cdata();
-        protocol::Decoder d(protocol::kDefaultMaxServerPayloadBytes);
-        d.feed({static_cast<const std::uint8_t*>(data.data()), data.size()});
-        auto r = d.next();
-        if (r.status != protocol::Decoder::Status::Message)
-            throw std::runtime_error("not one whole message: " + r.error.message);
-        if (d.midMessage()) throw std::runtime_error("bytes after the message");
-        return std::move(r.message);
-    }
-    template <class M> M expect() {
-        auto m = next();
-        if (auto* e = std::get_if<protocol::Error>(&m))
-            throw std::runtime_error("Error: " + e->message);
-        return std::get<M>(m);
-    }
-    void handshake(const std::string& token = {}) {
-        send(protocol::Hello{}, 1);
-        const auto hello = expect<protocol::Hello>();
-        if (std::find(hello.codecs.begin(), hello.codecs.end(), protocol::Codec::Png) ==
-            hello.codecs.end())
-            throw std::runtime_error("the server does not offer PNG");
-        if (token.empty()) return;
-        send(protocol::Auth{token}, 2);
-        expect<protocol::AuthOk>();
-    }
-    /// Reads until the server closes; the close code it sent (0 when the TCP connection just
-    /// ended).
-    int closeCode() {
-        try {
-            for (;;) {
-                beast::flat_buffer b;
-                mWs.read(b);
-            }
-        } catch (const boost::system::system_error&) {
-        }
-        return int(mWs.reason().code);
-    }
-    websocket::stream<asio::ip::tcp::socket>& ws() { return mWs; }
-
-  private:
-    asio::io_context mIo;
-    websocket::stream<asio::ip::tcp::socket> mWs;
-};
-
-/// An HTTP request with the headers every test sends.
-std::string get(const std::string& target, const std::string& extra = {}) {
-    return "GET " + target + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n" + extra +
-           "\r\n";
-}
-
-int statusOf(const std::string& reply) {
-    if (!reply.starts_with("HTTP/1.1 ")) return 0;
-    return std::stoi(reply.substr(9, 3));
-}
-
-std::string bodyOf(const std::string& reply) {
-    const auto at = reply.find("\r\n\r\n");
-    return at == std::string::npos ? std::string() : reply.substr(at + 4);
-}
 
 class WebViewer : public ::testing::Test {
   protected:
@@ -157,7 +72,7 @@ TEST_F(WebViewer, ServesTheEmbeddedPageAndThePresets) {
         EXPECT_EQ(bodyOf(reply), a.body) << a.path;
     }
     const std::string head =
-        scrape(sPort, "HEAD / HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+        scrape(sPort, "HEAD / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
     EXPECT_EQ(statusOf(head), 200);
     EXPECT_EQ(bodyOf(head), "");
     EXPECT_NE(head.find("Content-Length: " + std::to_string(index->body.size())),
@@ -201,7 +116,7 @@ TEST_F(WebViewer, PathsOutsideTheEmbeddedSetAre404AndNoFileIsOpened) {
     for (const auto& t : targets)
         EXPECT_EQ(statusOf(scrape(sPort, get(t))), 404) << t;
     std::filesystem::current_path(cwd);
-    EXPECT_EQ(statusOf(scrape(sPort, "POST / HTTP/1.1\r\nHost: x\r\nContent-Length: 0\r\n"
+    EXPECT_EQ(statusOf(scrape(sPort, "POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 0\r\n"
                                      "Connection: close\r\n\r\n")),
               405);
     EXPECT_TRUE(watch.events().empty()) << "the daemon opened a file under " << s;
