@@ -69,8 +69,9 @@ class BrickStore {
     /// holds them); 0 past the last level.
     std::uint64_t storedBricks(std::uint32_t level) const;
     /// What changed between the file opened and the one at path() now ("replaced by another
-    /// file", "size A -> B bytes", "modified", "gone: ..."); nullopt when it is the same file,
-    /// unchanged. One stat; what a reload asks before reopening a store.
+    /// file", "size A -> B bytes", "modified", "rewritten in place..." when only the inode's
+    /// change time moved, "gone: ..."); nullopt when it is the same file, unchanged. One stat;
+    /// what a reload asks before reopening a store.
     std::optional<std::string> fileChange() const;
     /// Bytes of one decompressed brick ((B+2A)^3 voxels).
     std::uint64_t brickBytes() const;

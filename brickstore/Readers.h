@@ -2,7 +2,9 @@
 // Every way a volume enters brickcast. Each function opens its input, validates the header
 // (validateVolumeInfo plus format-specific checks) and returns a forward-only slice stream.
 // All throw FormatError naming the file and field at fault; none allocates from a size it
-// has not checked against the file.
+// has not checked against the file, nor takes on more work than inputLimits() lets a header
+// ask for (VolumeSource.h: voxels against the bytes that back them, chunk counts). A path that
+// is not a regular file (a FIFO, whose open would wait for a writer) is refused unopened.
 #include "brickstore/VolumeSource.h"
 
 #include <array>

@@ -2,6 +2,7 @@
 
 #include "brickstore/Error.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -40,6 +41,20 @@ namespace {
 
 const char* kAxis[3] = {"x", "y", "z"};
 
+std::atomic<std::uint64_t> gMaxVolumeBytes{InputLimits{}.maxVolumeBytes};
+std::atomic<std::uint64_t> gMaxExpansion{InputLimits{}.maxExpansion};
+std::atomic<std::uint64_t> gMaxChunks{InputLimits{}.maxChunks};
+
+std::uint64_t volumeBytes(const VolumeInfo& info) {
+    return info.voxelCount() * voxelBytes(info.type); // within kMaxVolumeBytes: validated
+}
+
+/// "1024x1024x1048576 u8 (1.1 TB)": a volume as the limits' errors name it.
+std::string volumeText(const VolumeInfo& info) {
+    return dimsText(info.dims) + " " + std::string(voxelTypeName(info.type)) + " (" +
+           bytesText(double(volumeBytes(info))) + ")";
+}
+
 /// Dims within the edge, slice and volume limits (bytes computed without overflow).
 void checkDims(const VolumeInfo& info, const std::string& file, const std::string& field) {
     const std::string dims = dimsText(info.dims);
@@ -69,6 +84,12 @@ void checkDims(const VolumeInfo& info, const std::string& file, const std::strin
     std::uint64_t bytes = 0;
     if (!checkedVolumeBytes(info.dims, voxelBytes(info.type), bytes) || bytes > kMaxVolumeBytes)
         throw FormatError(file, field, dims + ": the volume's bytes exceed the limit of 1 PiB");
+    const std::uint64_t limit = gMaxVolumeBytes.load();
+    if (bytes > limit)
+        throw FormatError(file, field,
+                          dims + " " + std::string(voxelTypeName(info.type)) + ": " +
+                              bytesText(double(bytes)) + " of voxels exceed the limit of " +
+                              bytesText(double(limit)) + " a volume may hold (--max-volume-gb)");
 }
 
 } // namespace
@@ -85,11 +106,58 @@ void validateVolumeInfo(const VolumeInfo& info, const std::string& file,
     }
 }
 
+void setInputLimits(const InputLimits& limits) {
+    if (limits.maxVolumeBytes == 0 || limits.maxVolumeBytes > kMaxVolumeBytes)
+        throw std::invalid_argument("maxVolumeBytes must be 1 byte to 1 PiB");
+    if (limits.maxExpansion == 0 || limits.maxChunks == 0)
+        throw std::invalid_argument("maxExpansion and maxChunks must be at least 1");
+    gMaxVolumeBytes = limits.maxVolumeBytes;
+    gMaxExpansion = limits.maxExpansion;
+    gMaxChunks = limits.maxChunks;
+}
+
+InputLimits inputLimits() {
+    return {gMaxVolumeBytes.load(), gMaxExpansion.load(), gMaxChunks.load()};
+}
+
+void checkInputHolds(const VolumeInfo& info, std::uint64_t inputBytes,
+                     const std::string& inputWords, const std::string& file,
+                     const std::string& field) {
+    const std::uint64_t declared = volumeBytes(info), ratio = gMaxExpansion.load();
+    // inputBytes * ratio >= declared, without overflow.
+    if (declared <= kExpansionFreeBytes || inputBytes >= (declared + ratio - 1) / ratio) return;
+    throw FormatError(file, field,
+                      volumeText(info) + " declared, but " + inputWords + " hold only " +
+                          bytesText(double(inputBytes)) + ", under 1/" + std::to_string(ratio) +
+                          " of it: the header declares voxels the input does not hold (a "
+                          "volume over " +
+                          bytesText(double(kExpansionFreeBytes)) + " may expand " +
+                          std::to_string(ratio) +
+                          " times its input at most; --max-expansion raises that for a "
+                          "volume truly this sparse)");
+}
+
+void checkChunkCount(const VolumeInfo& info, const std::array<std::uint64_t, 3>& chunkDims,
+                     const std::string& file, const std::string& field) {
+    std::uint64_t chunks = 1; // at most 2^42: each count is at most its axis's dims
+    for (int a = 0; a < 3; ++a)
+        chunks *= (info.dims[a] + chunkDims[a] - 1) / chunkDims[a];
+    const std::uint64_t limit = gMaxChunks.load();
+    if (chunks <= limit) return;
+    throw FormatError(file, field,
+                      dimsText(info.dims) + " voxels in chunks of " + dimsText(chunkDims) +
+                          " make " + std::to_string(chunks) + " chunks, over the limit of " +
+                          std::to_string(limit) +
+                          ": each is looked up whether stored or not (--max-chunks raises the "
+                          "limit for a store truly this finely chunked)");
+}
+
 void checkCompressedPayload(const VolumeInfo& info, std::uint64_t declaredBytes,
                             std::uint64_t payloadBytes, const char* codec, std::uint64_t maxRatio,
                             const std::string& file, const std::string& dimsField) {
-    // payloadBytes * maxRatio < declaredBytes, without overflow.
-    if (payloadBytes >= (declaredBytes + maxRatio - 1) / maxRatio) return;
+    // payloadBytes * maxRatio >= declaredBytes, without overflow.
+    if (payloadBytes >= (declaredBytes + maxRatio - 1) / maxRatio)
+        return checkInputHolds(info, payloadBytes, std::string(codec) + " data", file, dimsField);
     throw FormatError(file, dimsField,
                       dimsText(info.dims) + " " + std::string(voxelTypeName(info.type)) +
                           " voxels need " + bytesText(double(declaredBytes)) + ", but " +

@@ -40,19 +40,62 @@ constexpr std::uint64_t kMaxVolumeBytes = 1ull << 50;  ///< x*y*z*voxel bytes (1
 /// to fill the declared dims cannot hold them.
 constexpr std::uint64_t kMaxGzipRatio = 1032;
 constexpr std::uint64_t kMaxZstdRatio = 32768;
+/// A volume up to this size is read whatever its input holds: that little work bounds itself.
+constexpr std::uint64_t kExpansionFreeBytes = 64ull << 20;
 
-/// Checks dims (non-zero, byte size without 64-bit overflow, within the limits above) and
-/// spacing (finite, positive). `dimsField` names the header field the dims came from
-/// ("dim[1..3]", "Rows/Columns"). @throw FormatError naming `file` and the field at fault.
+/// The limits on what an input's header may ask of ingest that a user may set (the command
+/// line's --max-volume-gb, --max-expansion, --max-chunks). A header is checked against them
+/// when its reader opens it, before any slice is read: a few bytes of header must not buy
+/// hours of ingest.
+struct InputLimits {
+    /// Most bytes of voxels a volume may hold (x*y*z*voxel bytes); at most kMaxVolumeBytes.
+    std::uint64_t maxVolumeBytes = kMaxVolumeBytes;
+    /// Most bytes of voxels a volume larger than kExpansionFreeBytes may declare per byte its
+    /// input holds (chunk files present, an HDF5 dataset's allocated storage, the files of a
+    /// TIFF, DICOM or VDB volume, compressed payloads). The default is the most any codec read
+    /// here expands (zstd, kMaxZstdRatio): past it, voxels cannot all be stored, however well
+    /// compressed, and the rest is chunks never written. Scans compress 2-20:1, sparse label
+    /// maps some hundreds, a sparse store with whole chunks missing thousands; a header of a
+    /// kilobyte declaring a terabyte, a hundred million.
+    std::uint64_t maxExpansion = kMaxZstdRatio;
+    /// Most chunks a chunked input (Zarr, HDF5) may declare: each costs a look-up (a file, an
+    /// index entry) whether or not it is stored, so one-voxel chunks make hours of a tiny
+    /// store. 2^20 holds a terabyte in chunks of a MiB, the size Zarr's guides advise.
+    std::uint64_t maxChunks = 1ull << 20;
+};
+/// Sets the limits of later reader opens and validateVolumeInfo calls (process-wide, as
+/// setParserSandboxLimits; a sandboxed reader's child inherits them).
+/// @throw std::invalid_argument for a zero limit or maxVolumeBytes above kMaxVolumeBytes.
+void setInputLimits(const InputLimits& limits);
+InputLimits inputLimits();
+
+/// Checks dims (non-zero, byte size without 64-bit overflow, within the limits above and
+/// inputLimits().maxVolumeBytes) and spacing (finite, positive). `dimsField` names the header
+/// field the dims came from ("dim[1..3]", "Rows/Columns").
+/// @throw FormatError naming `file` and the field at fault.
 void validateVolumeInfo(const VolumeInfo& info, const std::string& file,
                         const std::string& dimsField = "dims");
 
 /// Checks that `payloadBytes` of `codec` data ("gzip", "zstd") can expand to the
-/// `declaredBytes` the header promises, given the codec's largest ratio `maxRatio`.
+/// `declaredBytes` the header promises, given the codec's largest ratio `maxRatio`, and that
+/// the input holds them within inputLimits().maxExpansion (checkInputHolds).
 /// @throw FormatError(file, dimsField) saying both sizes and the ratio.
 void checkCompressedPayload(const VolumeInfo& info, std::uint64_t declaredBytes,
                             std::uint64_t payloadBytes, const char* codec, std::uint64_t maxRatio,
                             const std::string& file, const std::string& dimsField = "dims");
+
+/// Checks that `inputBytes`, what the input holds of the volume (`inputWords` says what, as
+/// errors name it: "the array's chunk files"), back the voxels `info` declares: a volume
+/// above kExpansionFreeBytes may declare at most inputLimits().maxExpansion times them.
+/// @throw FormatError(file, field) naming both sizes, the limit and how to raise it.
+void checkInputHolds(const VolumeInfo& info, std::uint64_t inputBytes,
+                     const std::string& inputWords, const std::string& file,
+                     const std::string& field);
+
+/// Checks the number of chunks a chunked input declares against inputLimits().maxChunks.
+/// `chunkDims` is a chunk's extent (x, y, z). @throw FormatError(file, field) naming the count.
+void checkChunkCount(const VolumeInfo& info, const std::array<std::uint64_t, 3>& chunkDims,
+                     const std::string& file, const std::string& field);
 
 /// "32767x32767x32767": dims as messages write them.
 std::string dimsText(const std::array<std::uint64_t, 3>& dims);

@@ -1,15 +1,10 @@
 #include "client/Client.h"
 
 #include "client/Error.h"
+#include "client/detail/Channel.h"
 
 #include <cerrno>
 #include <cstring>
-#include <netdb.h>
-#include <netinet/in.h>
-#include <netinet/tcp.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
 
 namespace bc::client {
 
@@ -17,36 +12,12 @@ namespace {
 
 using protocol::MessageType;
 
-int connectTo(const std::string& host, std::uint16_t port, const std::string& where) {
-    addrinfo hints{};
-    hints.ai_family = AF_UNSPEC;
-    hints.ai_socktype = SOCK_STREAM;
-    addrinfo* list = nullptr;
-    const int rc = ::getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &list);
-    if (rc != 0) throw ClientError(where + ": " + ::gai_strerror(rc));
-    std::string why = "no address";
-    for (addrinfo* a = list; a; a = a->ai_next) {
-        const int fd = ::socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol);
-        if (fd < 0) continue;
-        if (::connect(fd, a->ai_addr, a->ai_addrlen) == 0) {
-            const int one = 1;
-            ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-            ::freeaddrinfo(list);
-            return fd;
-        }
-        why = std::strerror(errno);
-        ::close(fd);
-    }
-    ::freeaddrinfo(list);
-    throw ClientError(where + ": connect: " + why);
-}
-
 } // namespace
 
 Client::Client(const ClientConfig& config)
     : mConfig(config), mWhere(config.host + ":" + std::to_string(config.port)),
       mDecoder(config.maxPayloadBytes) {
-    mFd = connectTo(config.host, config.port, mWhere);
+    mChannel = detail::openChannel(config, mWhere);
     protocol::Hello hello;
     hello.codecs = {protocol::Codec::Raw, protocol::Codec::Zstd, protocol::Codec::ZstdDelta,
                     protocol::Codec::Jpeg, protocol::Codec::Png};
@@ -61,9 +32,7 @@ Client::Client(const ClientConfig& config)
     }
 }
 
-Client::~Client() {
-    if (mFd >= 0) ::close(mFd);
-}
+Client::~Client() = default;
 
 std::vector<protocol::VolumeInfo> Client::listVolumes() {
     const std::uint32_t id = nextId();
@@ -139,13 +108,7 @@ void Client::bye() {
 }
 
 void Client::sendRaw(const std::vector<std::uint8_t>& bytes) {
-    std::size_t sent = 0;
-    while (sent < bytes.size()) {
-        const ssize_t n = ::send(mFd, bytes.data() + sent, bytes.size() - sent, MSG_NOSIGNAL);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) throw ClientError(mWhere + ": send: " + std::strerror(errno));
-        sent += std::size_t(n);
-    }
+    mChannel->sendAll(bytes);
 }
 
 void Client::send(const protocol::Message& message, std::uint32_t request) {
@@ -186,20 +149,10 @@ protocol::Message Client::await(MessageType type, std::uint32_t request) {
 }
 
 void Client::receiveSome() {
-    pollfd p{mFd, POLLIN, 0};
-    const int ready = ::poll(&p, 1, int(mConfig.timeoutMs));
-    if (ready == 0)
-        throw ClientError(mWhere + ": no reply in " + std::to_string(mConfig.timeoutMs) + " ms");
-    if (ready < 0 && errno != EINTR) throw ClientError(mWhere + ": poll: " + std::strerror(errno));
     std::uint8_t buffer[64 * 1024];
-    const ssize_t n = ::recv(mFd, buffer, sizeof buffer, 0);
-    if (n == 0) throw ClientError(mWhere + ": the server closed the connection");
-    if (n < 0) {
-        if (errno == EINTR || errno == EAGAIN) return;
-        throw ClientError(mWhere + ": recv: " + std::strerror(errno));
-    }
-    mBytesReceived += std::uint64_t(n);
-    mDecoder.feed(std::span<const std::uint8_t>(buffer, std::size_t(n)));
+    const std::size_t n = mChannel->receive(buffer, mConfig.timeoutMs);
+    mBytesReceived += n;
+    mDecoder.feed(std::span<const std::uint8_t>(buffer, n));
 }
 
 } // namespace bc::client

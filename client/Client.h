@@ -1,6 +1,7 @@
 #pragma once
 // The thin client library: one blocking connection to brickcastd (POSIX sockets, poll-based
-// timeouts), speaking protocol/ only. Not thread-safe; one per thread.
+// timeouts; TLS through OpenSSL when asked), speaking protocol/ only. Not thread-safe; one per
+// thread.
 #include "protocol/Decoder.h"
 #include "protocol/FrameCodec.h"
 #include "protocol/Messages.h"
@@ -14,10 +15,19 @@
 
 namespace bc::client {
 
+namespace detail {
+class Channel;
+}
+
 struct ClientConfig {
     std::string host = "127.0.0.1";
     std::uint16_t port = 7411;
-    std::string token;               ///< sent when the server requires one
+    std::string token; ///< sent when the server requires one
+    bool tls = false;  ///< the server has tls_cert: speak TLS
+    /// With tls: the PEM file of the certificate authority (or the self-signed certificate)
+    /// to trust; empty: the system's. The certificate must name `host`.
+    std::string tlsCaFile;
+    bool tlsVerify = true;           ///< false: accept any certificate (encryption, no identity)
     std::uint32_t timeoutMs = 30000; ///< any single wait (connect, a reply, a frame)
     std::uint32_t maxPayloadBytes = protocol::kDefaultMaxServerPayloadBytes;
 };
@@ -73,7 +83,7 @@ class Client {
     void receiveSome();
 
     ClientConfig mConfig;
-    int mFd = -1;
+    std::unique_ptr<detail::Channel> mChannel;
     std::string mWhere;
     protocol::Decoder mDecoder;
     protocol::FrameImageDecoder mImages;

@@ -43,7 +43,7 @@ command -v ccache >/dev/null && launcher=(ccache)
 # Per target: the sources (besides tests/fuzz/<Harness>.cpp), the folders whose headers it
 # depends on, the libraries, the largest input and the libFuzzer memory limits.
 cd "$src"
-reader_common=(brickstore/VolumeSource.cpp brickstore/VoxelType.cpp)
+reader_common=(brickstore/VolumeSource.cpp brickstore/VoxelType.cpp brickstore/detail/RegularFile.cpp)
 cflags=()
 asan_options=detect_leaks=1
 rss_mb=2048

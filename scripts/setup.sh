@@ -17,6 +17,7 @@ packages=(
   libhwy-dev                                          # Highway: the CPU raycaster's SIMD
   libopenmpi-dev openmpi-bin                          # OpenMPI: sort-last scale-out over ranks (mpirun)
   libboost-dev libtomlplusplus-dev libturbojpeg0-dev  # brickcastd: Asio + Beast (network, HTTP, WebSocket), config file, JPEG frames
+  libssl-dev openssl                                  # TLS (server, thin client); tests make self-signed certificates
   libgtest-dev clang libclang-rt-14-dev               # tests; the protocol fuzzer (libFuzzer)
   clang-format                                        # the formatting check (test clang_format)
   gnuplot-nox                                         # bc_bench_render --plot

@@ -33,6 +33,8 @@ std::vector<std::string> settingsAReloadKeeps(const DaemonConfig& running,
              return running.webOverridden || a.web == b.web;
          }},
         {"server.web_hosts", field(&DaemonConfig::webHosts)},
+        {"server.tls_cert", field(&DaemonConfig::tlsCert)},
+        {"server.tls_key", field(&DaemonConfig::tlsKey)},
         {"timeouts.handshake_ms", field(&DaemonConfig::handshakeTimeoutMs)},
         {"timeouts.read_ms", field(&DaemonConfig::readTimeoutMs)},
         {"timeouts.idle_ms", field(&DaemonConfig::idleTimeoutMs)},

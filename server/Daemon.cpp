@@ -9,6 +9,7 @@
 #include "server/detail/Asio.h"
 #include "server/detail/MetricsEndpoint.h"
 #include "server/detail/Session.h"
+#include "server/detail/Tls.h"
 #include "server/detail/WebListener.h"
 
 #include <algorithm>
@@ -49,11 +50,12 @@ struct Daemon::Impl {
         context.onReady = [this](std::uint64_t) { return authenticated() < config.maxClients; };
         context.authThrottle = &authThrottle;
         context.collect = [this](MetricSet& m) { collect(m); };
+        tls = detail::makeTlsContext(config);
         bind();
         if (const auto where = config.webListen()) {
             web = std::make_unique<detail::WebListener>(
                 io, where->first, where->second, config, log,
-                [this](std::unique_ptr<detail::Transport> t) { startSession(std::move(t)); });
+                [this](std::unique_ptr<detail::Transport> t) { startSession(std::move(t)); }, tls);
             log.info("viewer: " + web->url());
         }
         if (!config.metricsHost.empty())
@@ -228,7 +230,8 @@ struct Daemon::Impl {
                          config.source + ": listen");
         log.info("listening on " + config.listenHost + ":" + std::to_string(port()) + " (" +
                  std::to_string(catalog.size()) + " volumes, " +
-                 (config.token.empty() ? "no token" : "token required") + ")");
+                 (config.token.empty() ? "no token" : "token required") +
+                 (tls ? ", TLS: " + config.tlsCert : std::string()) + ")");
         log.info("host brick budget: " + describeHostBudget(config));
     }
 
@@ -279,9 +282,28 @@ struct Daemon::Impl {
             }
             IoError ignored;
             socket.set_option(asio::ip::tcp::no_delay(true), ignored);
-            startSession(detail::makeTcpTransport(std::move(socket)));
+            if (tls)
+                startTls(std::move(socket));
+            else
+                startSession(detail::makeTcpTransport(std::move(socket)));
             accept();
         });
+    }
+
+    /// A TLS handshake, then a session. Handshakes under way have the cap of connections in
+    /// their handshake (max_unauthenticated) of their own: one more is closed at once.
+    void startTls(asio::ip::tcp::socket socket) {
+        if (tlsHandshakes >= config.maxUnauthenticated) {
+            ++refused;
+            IoError ignored;
+            return socket.close(ignored);
+        }
+        ++tlsHandshakes;
+        detail::acceptTls(std::move(socket), tls, config.handshakeTimeoutMs, log,
+                          [this](std::unique_ptr<detail::Transport> t) {
+                              --tlsHandshakes;
+                              if (t) startSession(std::move(t));
+                          });
     }
 
     /// A connection over either transport: a session, or Busy when max_clients sessions have
@@ -356,8 +378,10 @@ struct Daemon::Impl {
     asio::ip::tcp::acceptor acceptor;
     asio::signal_set signals;
     asio::steady_timer drainTimer;
-    asio::steady_timer storeWatch;     ///< watchStores()
-    detail::AuthThrottle authThrottle; ///< wrong tokens, per address, for every session
+    asio::steady_timer storeWatch;           ///< watchStores()
+    detail::AuthThrottle authThrottle;       ///< wrong tokens, per address, for every session
+    std::shared_ptr<detail::TlsContext> tls; ///< the config's certificate; null: no TLS
+    std::uint32_t tlsHandshakes = 0;         ///< under way on the protocol's address
     detail::SessionContext context;
     std::map<std::uint64_t, std::shared_ptr<detail::Session>> sessions;
     std::unique_ptr<detail::MetricsEndpoint> metrics;

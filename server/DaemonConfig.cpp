@@ -58,6 +58,11 @@ web = "auto"
 # behind a reverse proxy, e.g. ["viewer.example.org"]. Any other name is refused (403): a web
 # page whose name was rebound to this address cannot reach the daemon.
 web_hosts = []
+# PEM files of a certificate chain and its private key: with them both addresses speak TLS
+# only (the viewer is https://, its WebSocket wss://); "" = plain TCP and HTTP. Both or
+# neither. Behind an SSH tunnel or a TLS-terminating reverse proxy, leave them empty.
+tls_cert = ""
+tls_key = ""
 
 [timeouts]
 # Hello (and Auth when required) must arrive within this long of connecting.
@@ -274,6 +279,7 @@ class Reader {
     CatalogEntry readVolume(const toml::table& t, const std::string& prefix) const;
     std::array<std::uint64_t, 3> readDims(const toml::table& t, const std::string& prefix) const;
     std::vector<std::string> readWebHosts(const toml::node& node) const;
+    void readTls(const toml::table& server, DaemonConfig& c) const;
 
     std::string mSource;
     std::string mBaseDir;
@@ -362,7 +368,7 @@ void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
     if (!t) return;
     checkKeys(*t, "server.",
               {"listen", "token", "max_clients", "max_unauthenticated", "store_dir", "metrics",
-               "web", "web_hosts"});
+               "web", "web_hosts", "tls_cert", "tls_key"});
     if (auto listen = string(*t, "server.", "listen")) {
         Listen l;
         if (auto why = splitListen(*listen, l))
@@ -395,6 +401,7 @@ void Reader::readServer(const toml::table& root, DaemonConfig& c) const {
     assign(c.maxClients, integer(*t, "server.", "max_clients", 1, 1024));
     assign(c.maxUnauthenticated, integer(*t, "server.", "max_unauthenticated", 1, 1024));
     if (const toml::node* hosts = t->get("web_hosts")) c.webHosts = readWebHosts(*hosts);
+    readTls(*t, c);
     if (auto dir = string(*t, "server.", "store_dir"); dir && !dir->empty())
         c.storeDir = resolve(*dir);
 }
@@ -421,6 +428,18 @@ std::vector<std::string> Reader::readWebHosts(const toml::node& node) const {
         hosts.push_back(std::move(host));
     }
     return hosts;
+}
+
+void Reader::readTls(const toml::table& t, DaemonConfig& c) const {
+    const auto cert = string(t, "server.", "tls_cert"), key = string(t, "server.", "tls_key");
+    const bool withCert = cert && !cert->empty(), withKey = key && !key->empty();
+    if (withCert != withKey)
+        fail(t.get(withCert ? "tls_cert" : "tls_key")->source(),
+             withCert ? "server.tls_key" : "server.tls_cert",
+             "tls_cert and tls_key go together (a PEM certificate chain and its private key)");
+    if (!withCert) return;
+    c.tlsCert = resolve(*cert);
+    c.tlsKey = resolve(*key);
 }
 
 void Reader::readTimeouts(const toml::table& root, DaemonConfig& c) const {

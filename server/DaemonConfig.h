@@ -57,6 +57,9 @@ struct DaemonConfig {
     /// localhost): its name behind a reverse proxy or in DNS. Any other Host is refused (403),
     /// so a page whose name was rebound to this address cannot read it.
     std::vector<std::string> webHosts;
+    /// PEM certificate chain and private key: with them, the protocol's and the viewer's
+    /// addresses speak TLS only (TLS 1.2 and later). Both or neither.
+    std::string tlsCert, tlsKey;
     std::uint32_t handshakeTimeoutMs = 5000;
     std::uint32_t readTimeoutMs = 10000;
     std::uint32_t idleTimeoutMs = 300000;

@@ -54,15 +54,31 @@ StoreFile::StoreFile(const std::string& target) : mTarget(target), mEnd(kHeaderB
     mRemovedStale = removeStalePartials(t);
     mTemp = target + ".partial." + std::to_string(::getpid());
     mFd = ::open(mTemp.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (mFd < 0) throw StoreIoError(mTemp + ": cannot create: " + errnoText());
-    // The header stays zero until commit: an interrupted ingest leaves no magic.
-    std::vector<std::byte> zeros(kHeaderBytes);
-    writeAt(0, zeros);
+    if (mFd < 0)
+        throw StoreIoError(target + ": cannot create its partial file " + mTemp + ": " +
+                           errnoText());
+    // The header stays zero until commit: an interrupted ingest leaves no magic. A constructor
+    // that throws runs no destructor: a full disk here must not leave an empty partial file.
+    try {
+        writeAt(0, std::vector<std::byte>(kHeaderBytes));
+    } catch (...) {
+        discard();
+        throw;
+    }
 }
 
 StoreFile::~StoreFile() {
+    if (!mCommitted) {
+        discard();
+        return;
+    }
     if (mFd >= 0) ::close(mFd);
-    if (!mCommitted) ::unlink(mTemp.c_str());
+}
+
+void StoreFile::discard() noexcept {
+    if (mFd >= 0) ::close(mFd);
+    mFd = -1;
+    ::unlink(mTemp.c_str());
 }
 
 std::uint64_t StoreFile::append(std::span<const std::byte> bytes) {
@@ -77,7 +93,11 @@ void StoreFile::writeAt(std::uint64_t offset, std::span<const std::byte> bytes) 
         ssize_t n = ::pwrite(mFd, bytes.data() + done, bytes.size() - done,
                              static_cast<off_t>(offset + done));
         if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) throw StoreIoError(mTemp + ": write failed: " + errnoText());
+        if (n <= 0)
+            throw StoreIoError(mTarget + ": cannot write the store: " + errnoText() + " (" +
+                               std::to_string(bytes.size() - done) + " bytes at offset " +
+                               std::to_string(offset + done) + " of " + mTemp +
+                               ", removed on failure)");
         done += static_cast<std::size_t>(n);
     }
 }
@@ -88,13 +108,16 @@ void StoreFile::readAt(std::uint64_t offset, std::span<std::byte> out) const {
         ssize_t n =
             ::pread(mFd, out.data() + done, out.size() - done, static_cast<off_t>(offset + done));
         if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) throw StoreIoError(mTemp + ": read back failed: " + errnoText());
+        if (n <= 0)
+            throw StoreIoError(mTarget + ": cannot read back " + mTemp + ": " +
+                               (n < 0 ? errnoText() : std::string("it ended early")));
         done += static_cast<std::size_t>(n);
     }
 }
 
 void StoreFile::commit() {
-    if (::fsync(mFd) != 0) throw StoreIoError(mTemp + ": fsync failed: " + errnoText());
+    if (::fsync(mFd) != 0)
+        throw StoreIoError(mTarget + ": fsync of " + mTemp + " failed: " + errnoText());
     if (::rename(mTemp.c_str(), mTarget.c_str()) != 0)
         throw StoreIoError(mTarget +
                            ": cannot rename the finished store into place: " + errnoText());

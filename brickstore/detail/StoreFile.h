@@ -12,7 +12,7 @@ namespace bc::brickstore::detail {
 class StoreFile {
   public:
     /// Creates `target.partial.PID` (after removing stale partials of dead ingests).
-    /// @throw StoreIoError naming the path.
+    /// @throw StoreIoError naming the target, having removed the partial file it created.
     explicit StoreFile(const std::string& target);
     /// Unlinks the temporary file unless commit() succeeded.
     ~StoreFile();
@@ -20,6 +20,7 @@ class StoreFile {
     StoreFile& operator=(const StoreFile&) = delete;
 
     /// Appends `bytes` at a freshly reserved offset; thread-safe. Returns the offset.
+    /// @throw StoreIoError naming the target (a full disk, a file-size limit).
     std::uint64_t append(std::span<const std::byte> bytes);
     /// Writes at a fixed offset (header, index).
     void writeAt(std::uint64_t offset, std::span<const std::byte> bytes);
@@ -33,6 +34,9 @@ class StoreFile {
     const std::vector<std::string>& removedStalePartials() const { return mRemovedStale; }
 
   private:
+    /// Closes and unlinks the temporary file.
+    void discard() noexcept;
+
     std::string mTarget;
     std::string mTemp;
     int mFd = -1;

@@ -1,6 +1,7 @@
 #include "brickstore/detail/StoreReadFile.h"
 
 #include "brickstore/Error.h"
+#include "brickstore/detail/RegularFile.h"
 
 #include <cerrno>
 #include <cstring>
@@ -11,9 +12,13 @@
 namespace bc::brickstore::detail {
 namespace {
 
+std::int64_t nanoseconds(const timespec& t) {
+    return std::int64_t(t.tv_sec) * 1000000000 + t.tv_nsec;
+}
+
 FileIdentity identityOf(const struct stat& st) {
     return {std::uint64_t(st.st_dev), std::uint64_t(st.st_ino), std::uint64_t(st.st_size),
-            std::int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec};
+            nanoseconds(st.st_mtim), nanoseconds(st.st_ctim)};
 }
 
 /// "size 1000 -> 400 bytes", "modified", or "" when `now` is `was`.
@@ -27,12 +32,14 @@ std::string contentChange(const FileIdentity& was, const FileIdentity& now) {
 } // namespace
 
 StoreReadFile::StoreReadFile(const std::string& path) : mPath(path) {
-    mFd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (mFd < 0) throw StoreIoError(path + ": cannot open: " + std::strerror(errno));
+    std::string why;
+    mFd = openRegularFile(path, why);
+    if (mFd < 0) throw StoreIoError(path + ": cannot open: " + why);
     struct stat st {};
-    if (::fstat(mFd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    if (::fstat(mFd, &st) != 0) {
+        const std::string error = std::strerror(errno);
         ::close(mFd);
-        throw StoreIoError(path + ": not a regular file");
+        throw StoreIoError(path + ": fstat failed: " + error);
     }
     mOpened = identityOf(st);
 }
@@ -83,8 +90,11 @@ std::optional<std::string> StoreReadFile::changeAtPath() const {
     if (now.device != mOpened.device || now.inode != mOpened.inode)
         return std::string("replaced by another file");
     std::string change = contentChange(mOpened, now);
-    if (change.empty()) return std::nullopt;
-    return change;
+    if (!change.empty()) return change;
+    if (now.ctimeNs != mOpened.ctimeNs)
+        return std::string("rewritten in place with its size and modification time kept, or "
+                           "its owner or permissions changed (new inode change time)");
+    return std::nullopt;
 }
 
 } // namespace bc::brickstore::detail

@@ -11,15 +11,19 @@
 
 namespace bc::brickstore::detail {
 
-/// What identifies a file's contents without reading them.
+/// What identifies a file's contents without reading them. The inode's change time is the one
+/// time no one can set: a rewrite in place that restores the size and modification time (cp
+/// -p, rsync --inplace -t) still moves it, as a chmod does.
 struct FileIdentity {
     std::uint64_t device = 0, inode = 0, bytes = 0;
     std::int64_t mtimeNs = 0;
+    std::int64_t ctimeNs = 0;
     bool operator==(const FileIdentity&) const = default;
 };
 
 class StoreReadFile {
   public:
+    /// Refuses anything but a regular file without blocking (a FIFO is never opened).
     /// @throw StoreIoError naming the path when it cannot be opened or is not a regular file.
     explicit StoreReadFile(const std::string& path);
     ~StoreReadFile();
@@ -33,10 +37,13 @@ class StoreReadFile {
     /// error or a short read (the file shrank).
     void readAt(std::uint64_t offset, std::span<std::byte> out) const;
     /// Whether the open file still has the size and modification time it had when opened
-    /// (one fstat). @throw StoreCorrupt naming the path and what changed when not.
+    /// (one fstat; not the change time, which a chmod moves too: a rewrite that restored the
+    /// modification time fails the bricks' checksums instead).
+    /// @throw StoreCorrupt naming the path and what changed when not.
     void checkUnchanged() const;
     /// What changed between the opened file and whatever `path` names now ("replaced by
-    /// another file", "size A -> B bytes", "modified", "gone: ..."); nullopt when nothing did.
+    /// another file", "size A -> B bytes", "modified", "rewritten in place...", "gone: ...");
+    /// nullopt when nothing did. One stat.
     std::optional<std::string> changeAtPath() const;
 
   private:

@@ -253,6 +253,7 @@ Storage checkChunks(hid_t create, const VolumeInfo& info, std::size_t typeBytes,
                               dimsText({chunk[2], chunk[1], chunk[0]}) +
                               " voxels; the reader takes chunks of 1 byte to " +
                               bytesText(double(kMaxChunkBytes)));
+    checkChunkCount(info, {chunk[2], chunk[1], chunk[0]}, path, "chunks");
     Storage storage;
     storage.text =
         "chunked " + dimsText({chunk[2], chunk[1], chunk[0]}) + checkFilters(create, path, name);
@@ -278,6 +279,10 @@ Storage checkStorage(hid_t dataset, hid_t create, const VolumeInfo& info, std::s
         throw FormatError(path, "storage",
                           "\"" + name + "\" claims " + bytesText(double(stored)) +
                               " of storage in a file of " + bytesText(double(fileBytes)));
+    // Chunks never written, or contiguous data never allocated, read as the fill value: a
+    // header of a kilobyte can declare a terabyte of them.
+    checkInputHolds(info, stored, "the chunks and data stored for " + quoted(name), path,
+                    "storage");
     switch (H5Pget_layout(create)) {
     case H5D_CHUNKED:
         return checkChunks(create, info, typeBytes, path, name);

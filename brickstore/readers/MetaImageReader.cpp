@@ -5,6 +5,7 @@
 // memory stays at one input buffer (64 KiB of zlib input) and the caller's slices.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/detail/RegularFile.h"
 #include "brickstore/readers/detail/FolderPath.h"
 #include "brickstore/readers/detail/GzipStream.h"
 #include "brickstore/readers/detail/HeaderFields.h"
@@ -277,6 +278,7 @@ std::uint64_t dataOffset(const MetaHeader& h, const HeaderText& text, std::uint6
 } // namespace
 
 std::unique_ptr<VolumeSource> openMetaImage(const std::string& path) {
+    detail::requireRegularFile(path);
     HeaderText text = readHeaderText(path);
     MetaHeader h = interpret(text, path);
     h.info.description = describeMetaImage(path, h);

@@ -5,6 +5,7 @@
 // scaling whose full range fits) or f32.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/detail/RegularFile.h"
 
 #include <algorithm>
 #include <array>
@@ -462,6 +463,7 @@ class NiftiVolume final : public VolumeSource {
 } // namespace
 
 std::unique_ptr<VolumeSource> openNifti(const std::string& path) {
+    detail::requireRegularFile(path);
     bool swapped = false;
     HeaderPtr hdr = readHeader(path, swapped);
     return std::make_unique<NiftiVolume>(path, *hdr, swapped);

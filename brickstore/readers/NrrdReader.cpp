@@ -3,6 +3,7 @@
 // bounded in size; the data streams through detail/RawStream.h and detail/GzipStream.h.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/detail/RegularFile.h"
 #include "brickstore/readers/detail/FolderPath.h"
 #include "brickstore/readers/detail/GzipStream.h"
 #include "brickstore/readers/detail/HeaderFields.h"
@@ -316,6 +317,7 @@ std::string describeNrrd(const std::string& path, const NrrdHeader& h) {
 } // namespace
 
 std::unique_ptr<VolumeSource> openNrrd(const std::string& path) {
+    detail::requireRegularFile(path);
     HeaderText text = readHeaderText(path);
     NrrdHeader h = interpret(text, path);
     h.info.description = describeNrrd(path, h);

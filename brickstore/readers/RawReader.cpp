@@ -2,6 +2,7 @@
 // The file size, or the zstd frame's declared size, is checked against dims x type first.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/detail/RegularFile.h"
 #include "brickstore/readers/detail/RawStream.h"
 
 #include <algorithm>
@@ -39,6 +40,7 @@ std::string describeRaw(const std::string& path, const RawLayout& layout, bool z
 } // namespace
 
 std::unique_ptr<VolumeSource> openRaw(const std::string& path, const RawLayout& layout) {
+    detail::requireRegularFile(path); // a pipe never was an input: its size is checked first
     VolumeInfo info;
     info.dims = layout.dims;
     info.type = layout.type;

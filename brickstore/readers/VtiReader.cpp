@@ -11,6 +11,7 @@
 // array's header is a base64 text of its own (padded) and its blocks follow as another.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/detail/RegularFile.h"
 #include "brickstore/readers/detail/RawStream.h"
 #include "brickstore/readers/detail/VtiStreams.h"
 #include "brickstore/readers/detail/VtiXml.h"
@@ -169,6 +170,7 @@ std::string describeVti(const std::string& path, const VtiLayout& l) {
 } // namespace
 
 std::unique_ptr<VolumeSource> openVti(const std::string& path) {
+    detail::requireRegularFile(path);
     VtiFile f{path, detail::parseVtiXml(path, detail::fileBytes(path)), 0};
     VolumeInfo& info = f.layout.info;
     info.description = describeVti(path, f.layout);

@@ -1,6 +1,7 @@
 #pragma once
 // How a session's bytes travel (private to server/): a TCP connection carrying the protocol's
-// byte stream, or a WebSocket connection (the browser viewer) whose binary messages carry it.
+// byte stream (plain, or TLS: Tls.h), or a WebSocket connection (the browser viewer) whose
+// binary messages carry it.
 // A session sees one interface, so both have one decoder, one set of limits and deadlines.
 // Every call and handler runs on the daemon's network thread.
 #include "server/detail/Asio.h"
@@ -33,15 +34,16 @@ class Transport {
     virtual void close() = 0;
     /// "ADDRESS:PORT" of the peer, "?" when unknown.
     virtual std::string peer() const = 0;
-    /// "tcp" or "websocket", for the log.
+    /// "tcp", "tls", "websocket" or "websocket+tls", for the log.
     virtual const char* kind() const = 0;
 };
 
 /// The protocol's byte stream on a TCP connection.
 std::unique_ptr<Transport> makeTcpTransport(asio::ip::tcp::socket socket);
 
-/// "ADDRESS:PORT" of a socket's peer, "?" when unknown.
-std::string peerOf(const asio::ip::tcp::socket& socket);
+/// "ADDRESS:PORT" of a socket's peer (a TCP socket, or the one under a TLS stream), "?" when
+/// unknown.
+std::string peerOf(const asio::ip::tcp::socket::lowest_layer_type& socket);
 
 /// The address of a peer "ADDRESS:PORT" (as peerOf gives it): its part before the last ':'.
 std::string addressOf(const std::string& peer);

@@ -4,10 +4,12 @@
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/detail/Acceptor.h"
+#include "server/detail/Tls.h"
 #include "server/detail/WebAssets.h"
 #include "server/detail/WebHosts.h"
 #include "server/detail/WebSocketTransport.h"
 
+#include <boost/asio/ssl.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket/rfc6455.hpp>
@@ -28,24 +30,36 @@ const WebAsset* findWebAsset(std::string_view path) {
 }
 
 namespace {
-class HttpConnection;
+
+using TlsStream = asio::ssl::stream<asio::ip::tcp::socket>;
+
+/// What the connection limits see of an HTTP connection, over TCP or TLS.
+class HttpPeer {
+  public:
+    virtual ~HttpPeer() = default;
+    virtual const std::string& address() const = 0;
+    /// Closes the connection while it waits for a request, to make room for a newer one.
+    virtual void cutForNewer() = 0;
+};
+
 } // namespace
 
 struct WebListener::Impl {
     Impl(asio::io_context& io, const DaemonConfig& c, Log& l,
-         std::function<void(std::unique_ptr<Transport>)> open)
-        : acceptor(io), config(c), log(l), onOpen(std::move(open)) {}
+         std::function<void(std::unique_ptr<Transport>)> open, std::shared_ptr<TlsContext> t)
+        : acceptor(io), config(c), log(l), onOpen(std::move(open)), tls(std::move(t)) {}
 
     asio::ip::tcp::acceptor acceptor;
     const DaemonConfig& config;
     Log& log;
     std::function<void(std::unique_ptr<Transport>)> onOpen;
+    std::shared_ptr<TlsContext> tls;             ///< null: plain HTTP
     std::optional<WebHosts> hosts;               ///< set once the address is bound
     std::size_t open = 0;                        ///< HTTP connections open (not upgraded)
     std::map<std::string, std::size_t> openFrom; ///< by peer address
     /// Connections waiting for (the rest of) a request, the longest waiting first: where a
     /// connection over the limits takes its place from.
-    std::list<std::weak_ptr<HttpConnection>> waiting;
+    std::list<std::weak_ptr<HttpPeer>> waiting;
     std::map<unsigned, double> responses; ///< by status
     double upgrades = 0, refused = 0, cutForNewer = 0;
     bool stopped = false;
@@ -65,11 +79,14 @@ template <class Body> void secure(http::response<Body>& res) {
     res.set("Referrer-Policy", "no-referrer");
 }
 
-class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
+/// One HTTP connection over `Stream`: a TCP socket, or TLS over one (after its handshake).
+template <class Stream>
+class HttpConnection final : public HttpPeer,
+                             public std::enable_shared_from_this<HttpConnection<Stream>> {
   public:
-    HttpConnection(asio::ip::tcp::socket socket, std::shared_ptr<WebListener::Impl> listener)
-        : mSocket(std::move(socket)), mTimer(mSocket.get_executor()), mL(std::move(listener)),
-          mPeer(peerOf(mSocket)), mAddress(addressOf(mPeer)) {
+    HttpConnection(Stream stream, std::shared_ptr<WebListener::Impl> listener)
+        : mStream(std::move(stream)), mTimer(mStream.get_executor()), mL(std::move(listener)),
+          mPeer(peerOf(beast::get_lowest_layer(mStream))), mAddress(addressOf(mPeer)) {
         ++mL->open;
         ++mL->openFrom[mAddress];
     }
@@ -79,29 +96,47 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
         if (--mL->openFrom[mAddress] == 0) mL->openFrom.erase(mAddress);
     }
 
-    const std::string& address() const { return mAddress; }
+    const std::string& address() const override { return mAddress; }
 
-    /// Closes the connection while it waits for a request, to make room for a newer one.
-    void cutForNewer() {
+    void cutForNewer() override {
         ++mL->cutForNewer;
         stopWaiting();
         cut();
     }
 
+    /// Shakes hands first over TLS (within the handshake deadline), then reads requests.
+    void start() {
+        if constexpr (std::is_same_v<Stream, asio::ip::tcp::socket>) {
+            readRequest();
+        } else {
+            mWaiting = mL->waiting.insert(mL->waiting.end(), this->weak_from_this());
+            mTimer.expires_after(std::chrono::milliseconds(mL->config.handshakeTimeoutMs));
+            mTimer.async_wait([weak = this->weak_from_this()](const IoError& ec) {
+                if (auto self = weak.lock(); self && !ec) self->cut();
+            });
+            mStream.async_handshake(asio::ssl::stream_base::server,
+                                    [self = this->shared_from_this()](const IoError& ec) {
+                                        self->mTimer.cancel();
+                                        if (ec) return self->cut();
+                                        self->readRequest();
+                                    });
+        }
+    }
+
     void readRequest() {
         stopWaiting();
-        mWaiting = mL->waiting.insert(mL->waiting.end(), weak_from_this());
+        mWaiting = mL->waiting.insert(mL->waiting.end(), this->weak_from_this());
         mParser.emplace();
         mParser->header_limit(WebListener::kMaxHeaderBytes);
         mParser->body_limit(0);
         // The whole request (every header) within the handshake timeout: a client that
         // trickles bytes holds a connection that long at most.
         mTimer.expires_after(std::chrono::milliseconds(mL->config.handshakeTimeoutMs));
-        mTimer.async_wait([weak = weak_from_this()](const IoError& ec) {
+        mTimer.async_wait([weak = this->weak_from_this()](const IoError& ec) {
             if (auto self = weak.lock(); self && !ec) self->cut();
         });
-        http::async_read(mSocket, mBuffer, *mParser,
-                         [self = shared_from_this()](const IoError& ec, std::size_t) {
+        http::async_read(mStream, mBuffer, *mParser,
+                         [self = this->shared_from_this()](const IoError& ec, std::size_t) {
                              self->mTimer.cancel();
                              self->stopWaiting();
                              self->onRequest(ec);
@@ -117,7 +152,7 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
 
     void onRequest(const IoError& ec) {
         if (ec == http::error::end_of_stream || ec == asio::error::operation_aborted ||
-            !mSocket.is_open())
+            !beast::get_lowest_layer(mStream).is_open())
             return cut();
         if (ec == http::error::header_limit)
             return fail(http::status::request_header_fields_too_large,
@@ -160,7 +195,7 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
                                                    std::string_view(host.data(), host.size())))
                 return fail(http::status::forbidden, "cross-origin WebSocket refused: " + *why);
         ++mL->upgrades;
-        acceptWebSocket(std::move(mSocket), mParser->release(), mL->config.handshakeTimeoutMs,
+        acceptWebSocket(std::move(mStream), mParser->release(), mL->config.handshakeTimeoutMs,
                         mL->log, mL->onOpen);
     }
 
@@ -191,11 +226,11 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
         auto res = std::make_shared<http::response<Body>>(std::move(response));
         // A reader that stops reading is cut at the write deadline.
         mTimer.expires_after(std::chrono::milliseconds(mL->config.writeTimeoutMs));
-        mTimer.async_wait([weak = weak_from_this()](const IoError& ec) {
+        mTimer.async_wait([weak = this->weak_from_this()](const IoError& ec) {
             if (auto self = weak.lock(); self && !ec) self->cut();
         });
-        http::async_write(mSocket, *res,
-                          [self = shared_from_this(), res](const IoError& ec, std::size_t) {
+        http::async_write(mStream, *res,
+                          [self = this->shared_from_this(), res](const IoError& ec, std::size_t) {
                               self->mTimer.cancel();
                               if (ec || !res->keep_alive()) return self->cut();
                               self->readRequest();
@@ -204,15 +239,15 @@ class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
 
     void cut() {
         IoError ignored;
-        mSocket.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
-        mSocket.close(ignored);
+        beast::get_lowest_layer(mStream).shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+        beast::get_lowest_layer(mStream).close(ignored);
     }
 
-    asio::ip::tcp::socket mSocket;
+    Stream mStream;
     asio::steady_timer mTimer;
     std::shared_ptr<WebListener::Impl> mL;
     std::string mPeer, mAddress;
-    std::optional<std::list<std::weak_ptr<HttpConnection>>::iterator> mWaiting;
+    std::optional<std::list<std::weak_ptr<HttpPeer>>::iterator> mWaiting;
     beast::flat_buffer mBuffer{WebListener::kMaxHeaderBytes + 1024};
     std::optional<http::request_parser<http::empty_body>> mParser;
 };
@@ -252,7 +287,13 @@ void accept(const std::shared_ptr<WebListener::Impl>& l) {
         } else {
             IoError ignored;
             socket.set_option(asio::ip::tcp::no_delay(true), ignored);
-            std::make_shared<HttpConnection>(std::move(socket), l)->readRequest();
+            if (l->tls)
+                std::make_shared<HttpConnection<TlsStream>>(TlsStream(std::move(socket), *l->tls),
+                                                            l)
+                    ->start();
+            else
+                std::make_shared<HttpConnection<asio::ip::tcp::socket>>(std::move(socket), l)
+                    ->start();
         }
         accept(l);
     });
@@ -262,8 +303,9 @@ void accept(const std::shared_ptr<WebListener::Impl>& l) {
 
 WebListener::WebListener(asio::io_context& io, const std::string& host, std::uint16_t port,
                          const DaemonConfig& config, Log& log,
-                         std::function<void(std::unique_ptr<Transport>)> onOpen)
-    : mImpl(std::make_shared<Impl>(io, config, log, std::move(onOpen))) {
+                         std::function<void(std::unique_ptr<Transport>)> onOpen,
+                         std::shared_ptr<TlsContext> tls)
+    : mImpl(std::make_shared<Impl>(io, config, log, std::move(onOpen), std::move(tls))) {
     listenOn(mImpl->acceptor, host, port, config.source + ": web");
     mImpl->hosts.emplace(host, mImpl->acceptor.local_endpoint().address(), config.webHosts);
 }
@@ -291,8 +333,8 @@ std::string WebListener::url() const {
     IoError ec;
     const auto ep = mImpl->acceptor.local_endpoint(ec);
     const std::string host = ep.address().to_string();
-    return "http://" + (ep.address().is_v6() ? "[" + host + "]" : host) + ":" +
-           std::to_string(ep.port()) + "/";
+    return std::string(mImpl->tls ? "https://" : "http://") +
+           (ep.address().is_v6() ? "[" + host + "]" : host) + ":" + std::to_string(ep.port()) + "/";
 }
 
 void WebListener::collect(MetricSet& m) const {

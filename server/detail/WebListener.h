@@ -16,6 +16,10 @@
 #include <memory>
 #include <string>
 
+namespace boost::asio::ssl {
+class context;
+}
+
 namespace bc::server {
 class Log;
 class MetricSet;
@@ -31,10 +35,12 @@ class WebListener {
     static constexpr std::size_t kMaxConnectionsPerAddress = 128;
 
     /// Binds host:port (0 = any free port). `onOpen` runs for each completed WebSocket
-    /// handshake. @throw ConfigError naming the address.
+    /// handshake. With `tls`, every connection shakes hands over TLS first (HTTPS, wss).
+    /// @throw ConfigError naming the address.
     WebListener(asio::io_context& io, const std::string& host, std::uint16_t port,
                 const DaemonConfig& config, Log& log,
-                std::function<void(std::unique_ptr<Transport>)> onOpen);
+                std::function<void(std::unique_ptr<Transport>)> onOpen,
+                std::shared_ptr<asio::ssl::context> tls = nullptr);
     ~WebListener();
     WebListener(const WebListener&) = delete;
     WebListener& operator=(const WebListener&) = delete;
@@ -43,7 +49,7 @@ class WebListener {
     /// Stops accepting; open HTTP connections end with the daemon's loop.
     void stop();
     std::uint16_t port() const;
-    /// "http://HOST:PORT/" (IPv6 in brackets).
+    /// "http://HOST:PORT/" or "https://..." (IPv6 in brackets).
     std::string url() const;
     void collect(MetricSet& metrics) const;
 

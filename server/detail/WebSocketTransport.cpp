@@ -3,8 +3,10 @@
 #include "protocol/Wire.h"
 #include "server/Log.h"
 
+#include <boost/asio/ssl.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
+#include <boost/beast/websocket/ssl.hpp>
 
 #include <chrono>
 
@@ -20,19 +22,18 @@ using Clock = std::chrono::steady_clock;
 constexpr auto kCloseHandshake = std::chrono::seconds(1);
 
 /// One connection's state, shared by the transport and its pending operations (a closing
-/// handshake outlives the session).
-struct Connection {
-    explicit Connection(asio::ip::tcp::socket socket)
-        : ws(std::move(socket)), timer(ws.get_executor()) {}
+/// handshake outlives the session). `Stream`: a TCP socket, or a TLS stream over one.
+template <class Stream> struct Connection {
+    explicit Connection(Stream stream) : ws(std::move(stream)), timer(ws.get_executor()) {}
 
     /// Closes the socket under the WebSocket: pending operations complete with an error.
     void cut() {
         IoError ignored;
-        ws.next_layer().shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
-        ws.next_layer().close(ignored);
+        beast::get_lowest_layer(ws).shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+        beast::get_lowest_layer(ws).close(ignored);
     }
 
-    websocket::stream<asio::ip::tcp::socket> ws;
+    websocket::stream<Stream> ws;
     beast::flat_buffer buffer;
     asio::steady_timer timer; ///< the handshake's, then the closing handshake's deadline
     websocket::close_code closeCode = websocket::close_code::normal;
@@ -42,10 +43,10 @@ struct Connection {
     bool writing = false, closed = false;
 };
 
-class WebSocketTransport final : public Transport {
+template <class Stream> class WebSocketTransport final : public Transport {
   public:
-    explicit WebSocketTransport(std::shared_ptr<Connection> c)
-        : mC(std::move(c)), mPeer(peerOf(mC->ws.next_layer())) {}
+    explicit WebSocketTransport(std::shared_ptr<Connection<Stream>> c)
+        : mC(std::move(c)), mPeer(peerOf(beast::get_lowest_layer(mC->ws))) {}
     ~WebSocketTransport() override { close(); }
 
     asio::any_io_executor executor() override { return mC->ws.get_executor(); }
@@ -56,7 +57,8 @@ class WebSocketTransport final : public Transport {
             mC->buffer, [c = mC, handler = std::move(handler)](const IoError& ec, std::size_t) {
                 if (!c->failure.empty()) return handler(c->failure, {});
                 if (ec == websocket::error::closed || ec == asio::error::eof ||
-                    ec == asio::error::connection_reset || ec == asio::error::not_connected)
+                    ec == asio::error::connection_reset || ec == asio::error::not_connected ||
+                    ec == asio::ssl::error::stream_truncated)
                     return handler("peer closed", {}); // a page closed or reloaded
                 if (ec == websocket::error::message_too_big)
                     return handler("read: a WebSocket message over " +
@@ -100,36 +102,39 @@ class WebSocketTransport final : public Transport {
     }
 
     std::string peer() const override { return mPeer; }
-    const char* kind() const override { return "websocket"; }
+    const char* kind() const override {
+        return std::is_same_v<Stream, asio::ip::tcp::socket> ? "websocket" : "websocket+tls";
+    }
 
   private:
-    std::shared_ptr<Connection> mC;
+    std::shared_ptr<Connection<Stream>> mC;
     std::string mPeer;
 };
 
 /// Counts pings; one over kMaxPingsPerSecond in a second ends the connection.
-void limitPings(const std::shared_ptr<Connection>& c) {
-    c->ws.control_callback(
-        [weak = std::weak_ptr<Connection>(c)](websocket::frame_type kind, beast::string_view) {
-            const auto c = weak.lock();
-            if (!c || kind != websocket::frame_type::ping || !c->failure.empty()) return;
-            const auto now = Clock::now();
-            if (now - c->pingWindow > std::chrono::seconds(1)) {
-                c->pingWindow = now;
-                c->pings = 0;
-            }
-            if (++c->pings <= kMaxPingsPerSecond) return;
-            c->failure =
-                "ping flood: over " + std::to_string(kMaxPingsPerSecond) + " pings in a second";
-            asio::post(c->ws.get_executor(), [c] { c->cut(); });
-        });
+template <class Stream> void limitPings(const std::shared_ptr<Connection<Stream>>& c) {
+    c->ws.control_callback([weak = std::weak_ptr<Connection<Stream>>(c)](websocket::frame_type kind,
+                                                                         beast::string_view) {
+        const auto c = weak.lock();
+        if (!c || kind != websocket::frame_type::ping || !c->failure.empty()) return;
+        const auto now = Clock::now();
+        if (now - c->pingWindow > std::chrono::seconds(1)) {
+            c->pingWindow = now;
+            c->pings = 0;
+        }
+        if (++c->pings <= kMaxPingsPerSecond) return;
+        c->failure =
+            "ping flood: over " + std::to_string(kMaxPingsPerSecond) + " pings in a second";
+        asio::post(c->ws.get_executor(), [c] { c->cut(); });
+    });
 }
 
 } // namespace
 
-void acceptWebSocket(asio::ip::tcp::socket socket, UpgradeRequest request, std::uint32_t timeoutMs,
-                     Log& log, std::function<void(std::unique_ptr<Transport>)> onOpen) {
-    auto c = std::make_shared<Connection>(std::move(socket));
+template <class Stream>
+void acceptWebSocket(Stream stream, UpgradeRequest request, std::uint32_t timeoutMs, Log& log,
+                     std::function<void(std::unique_ptr<Transport>)> onOpen) {
+    auto c = std::make_shared<Connection<Stream>>(std::move(stream));
     c->ws.read_message_max(protocol::kHeaderBytes + protocol::kMaxClientPayloadBytes);
     c->ws.auto_fragment(false);
     c->ws.set_option(websocket::stream_base::decorator(
@@ -143,12 +148,17 @@ void acceptWebSocket(asio::ip::tcp::socket socket, UpgradeRequest request, std::
     c->ws.async_accept(*req, [c, req, &log, onOpen = std::move(onOpen)](const IoError& ec) {
         c->timer.cancel();
         if (ec) {
-            log.info("web: " + peerOf(c->ws.next_layer()) +
+            log.info("web: " + peerOf(beast::get_lowest_layer(c->ws)) +
                      ": WebSocket handshake refused: " + ec.message());
             return c->cut();
         }
-        onOpen(std::make_unique<WebSocketTransport>(c));
+        onOpen(std::make_unique<WebSocketTransport<Stream>>(c));
     });
 }
+
+template void acceptWebSocket(asio::ip::tcp::socket, UpgradeRequest, std::uint32_t, Log&,
+                              std::function<void(std::unique_ptr<Transport>)>);
+template void acceptWebSocket(asio::ssl::stream<asio::ip::tcp::socket>, UpgradeRequest,
+                              std::uint32_t, Log&, std::function<void(std::unique_ptr<Transport>)>);
 
 } // namespace bc::server::detail

@@ -28,7 +28,10 @@ inline constexpr unsigned kMaxPingsPerSecond = 50;
 /// Completes the WebSocket handshake of `request` (an upgrade the HTTP side routed here)
 /// within `timeoutMs`, then hands the connection to `onOpen`. A request Beast finds invalid
 /// (no Sec-WebSocket-Key, a version other than 13) is answered 400 or 426 and closed.
-void acceptWebSocket(asio::ip::tcp::socket socket, UpgradeRequest request, std::uint32_t timeoutMs,
-                     Log& log, std::function<void(std::unique_ptr<Transport>)> onOpen);
+/// `Stream`: asio::ip::tcp::socket, or asio::ssl::stream of one after its TLS handshake (the
+/// two instantiated in WebSocketTransport.cpp).
+template <class Stream>
+void acceptWebSocket(Stream stream, UpgradeRequest request, std::uint32_t timeoutMs, Log& log,
+                     std::function<void(std::unique_ptr<Transport>)> onOpen);
 
 } // namespace bc::server::detail

@@ -261,6 +261,64 @@ TEST_F(Hdf5BadInputTest, TruncatedFileIsNamed) {
     }
 }
 
+/// A file of `bytes` or fewer holding one u8 dataset "/v" of `shape` (z,y,x) whose voxels were
+/// never written: `layout` "chunked" (64^3 chunks, none allocated) or "contiguous".
+std::string declaredOnly(const test::TempDir& dir, const std::string& shape,
+                         const std::string& layout, std::uint64_t bytes) {
+    const std::string h5 = dir.file(layout + ".h5");
+    const std::string chunks = layout == "chunked" ? " chunks=64,64,64" : "";
+    EXPECT_TRUE(test::runPython(kWriter, {"file=" + h5, "name=/v dtype=uint8 shape=" + shape +
+                                                            " layout=" + layout + chunks}));
+    EXPECT_LE(std::filesystem::file_size(h5), bytes);
+    return h5;
+}
+
+// A dataspace whose voxels the file does not hold, refused when opened, within a second: the
+// ingest of either used to run for minutes on fill values.
+
+TEST(Hdf5ReaderTest, TerabyteDatasetWithoutChunksIsRefusedWhenOpened) {
+    if (!test::pythonHas(kModules)) return;
+    test::TempDir dir;
+    const std::string h5 = declaredOnly(dir, "1048576,1024,1024", "chunked", 1500);
+    const std::string what = test::expectRefusedAtOnce([&] { openHdf5(h5, "/v"); }, h5, "storage");
+    EXPECT_THAT(what, HasSubstr("\"/v\""));
+    EXPECT_THAT(what, HasSubstr("1024x1024x1048576 u8"));
+    EXPECT_THAT(what, HasSubstr("--max-expansion"));
+}
+
+TEST(Hdf5ReaderTest, UnwrittenDatasetOf4096CubedIsRefusedWhenOpened) {
+    if (!test::pythonHas(kModules)) return;
+    for (const std::string layout : {"chunked", "contiguous"}) {
+        test::TempDir dir;
+        const std::string h5 = declaredOnly(dir, "4096,4096,4096", layout, 2000);
+        EXPECT_THAT(
+            test::expectRefusedAtOnce([&] { openSource(hdf5Spec(h5, "/v")); }, h5, "storage"),
+            HasSubstr("4096x4096x4096 u8"))
+            << layout;
+    }
+}
+
+TEST(Hdf5ReaderTest, RaisedExpansionLimitLetsADatasetOfOneChunkOpen) {
+    if (!test::pythonHas(kModules)) return;
+    test::TempDir dir;
+    const std::string h5 = dir.file("one.h5");
+    ASSERT_TRUE(test::runPython(kWriter, {"file=" + h5, "name=/v dtype=uint8 "
+                                                        "shape=4096,4096,4096 layout=chunked "
+                                                        "chunks=64,64,64 first=64"}));
+    // One 64^3 chunk of 4096^3: 262144 times what it holds.
+    EXPECT_THAT(test::expectRefusedAtOnce([&] { openHdf5(h5, "/v"); }, h5, "storage"),
+                HasSubstr("hold only 262.1 kB"));
+    InputLimits limits;
+    limits.maxExpansion = 1ull << 18;
+    const test::InputLimitsGuard guard(limits);
+    auto source = openHdf5(h5, "/v");
+    EXPECT_EQ(source->info().dims, (std::array<std::uint64_t, 3>{4096, 4096, 4096}));
+    std::vector<std::byte> slice(4096 * 4096);
+    source->readSlices(1, slice);
+    EXPECT_EQ(slice[63], std::byte{7});
+    EXPECT_EQ(slice[64], std::byte{0});
+}
+
 TEST(Hdf5ReaderTest, NonHdf5FileWithAnH5NameIsNamed) {
     test::TempDir dir;
     const std::string path = dir.file("notes.h5");

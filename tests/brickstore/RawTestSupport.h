@@ -3,11 +3,13 @@
 // volume reads as plain bytes, and the FormatError check both suites apply to bad inputs.
 #include "brickstore/Error.h"
 #include "brickstore/VoxelType.h"
+#include "tests/TestSupport.h"
 #include "tests/brickstore/VolumeTestSupport.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -75,6 +77,18 @@ std::string expectFormatError(F&& f, const std::string& path, const std::string&
         return what;
     }
     return {};
+}
+
+/// expectFormatError for a refusal that must come at once: `f` (opening an input whose header
+/// asks for more work than its bytes back) throws within a few seconds, before any slice.
+template <class F>
+std::string expectRefusedAtOnce(F&& f, const std::string& path, const std::string& field) {
+    const auto start = std::chrono::steady_clock::now();
+    std::string what = expectFormatError(f, path, field);
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_LT(seconds, 3.0 * timeScale()) << what;
+    return what;
 }
 
 } // namespace bc::test

@@ -7,7 +7,13 @@
 #include "brickstore/Ingest.h"
 #include "brickstore/Readers.h"
 
+#include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include <fcntl.h>
+#include <sys/stat.h>
 
 namespace bc::brickstore {
 namespace {
@@ -76,6 +82,33 @@ TEST(StoreChange, AStoreReplacedByRenameKeepsServingTheOpenFileAndSaysSo) {
     std::filesystem::remove(path);
     ASSERT_TRUE(store->fileChange());
     EXPECT_EQ(store->fileChange()->rfind("gone: ", 0), 0u) << *store->fileChange();
+}
+
+TEST(StoreChange, ASameSizeRewriteThatKeepsTheModificationTimeIsSeen) {
+    // What `cp -p`, `rsync --inplace -t` or `touch -r` leave: the same inode, size and
+    // modification time, other bytes. Only the inode's change time, which no one can set, moves.
+    test::TempDir dir;
+    const std::string path = makeStore(dir, "s.bcs", 64);
+    struct stat before {};
+    ASSERT_EQ(::stat(path.c_str(), &before), 0);
+    auto store = BrickStore::open(path);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50)); // past the clock's tick
+    std::vector<std::uint8_t> bytes = test::readFile(path);
+    bytes[bytes.size() / 2] ^= 0xff;
+    {
+        std::fstream file(path, std::ios::in | std::ios::out | std::ios::binary);
+        file.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    }
+    const timespec times[2] = {before.st_atim, before.st_mtim};
+    ASSERT_EQ(::utimensat(AT_FDCWD, path.c_str(), times, 0), 0);
+    struct stat after {};
+    ASSERT_EQ(::stat(path.c_str(), &after), 0);
+    ASSERT_EQ(after.st_ino, before.st_ino);
+    ASSERT_EQ(after.st_size, before.st_size);
+    ASSERT_EQ(after.st_mtim.tv_nsec, before.st_mtim.tv_nsec);
+    ASSERT_EQ(after.st_mtim.tv_sec, before.st_mtim.tv_sec);
+    ASSERT_TRUE(store->fileChange()) << "an in-place rewrite went unseen";
+    EXPECT_EQ(store->fileChange()->rfind("rewritten in place", 0), 0u) << *store->fileChange();
 }
 
 } // namespace

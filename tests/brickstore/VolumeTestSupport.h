@@ -1,6 +1,6 @@
 #pragma once
 // Shared helpers of the brickstore tests that read volumes: whole-volume reads through the
-// slice stream, and an in-memory source.
+// slice stream, an in-memory source, and input limits set for one test.
 #include "brickstore/VolumeSource.h"
 
 #include <algorithm>
@@ -12,6 +12,21 @@
 #include <vector>
 
 namespace bc::test {
+
+/// Sets the process's input limits (brickstore::setInputLimits) while it lives.
+class InputLimitsGuard {
+  public:
+    explicit InputLimitsGuard(const brickstore::InputLimits& limits)
+        : mSaved(brickstore::inputLimits()) {
+        brickstore::setInputLimits(limits);
+    }
+    ~InputLimitsGuard() { brickstore::setInputLimits(mSaved); }
+    InputLimitsGuard(const InputLimitsGuard&) = delete;
+    InputLimitsGuard& operator=(const InputLimitsGuard&) = delete;
+
+  private:
+    brickstore::InputLimits mSaved;
+};
 
 /// Reads the whole volume, `chunkSlices[k % size]` slices at the k-th call (the list cycles;
 /// a chunk is cut short at the last slice), so uneven steps exercise slab boundaries.

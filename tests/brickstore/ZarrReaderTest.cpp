@@ -496,6 +496,79 @@ TEST(ZarrReaderTest, ZeroScaleThrows) {
                       "datasets[0].coordinateTransformations");
 }
 
+// A header that asks for far more work than the store's bytes back: refused when opened, in
+// well under a second, naming the .zarray and the field (the ingest of each ran for minutes).
+
+TEST(ZarrReaderTest, TerabyteShapeWithoutChunkFilesIsRefusedWhenOpened) {
+    // In chunks of 64^3, over four million of them; in chunks of 32 MiB, 32768, but all of the
+    // store's 8 kB would have to expand 2^27-fold.
+    for (const auto& [chunks, field] : std::vector<std::pair<std::string, std::string>>{
+             {"[64, 64, 64]", "chunks"}, {"[128, 512, 512]", "shape"}}) {
+        test::TempDir dir;
+        fs::create_directories(dir.path() / "vol");
+        test::writeFile(dir.file("vol/.zarray"), zarray({{"shape", "[1048576, 1024, 1024]"},
+                                                         {"chunks", chunks},
+                                                         {"dtype", "\"|u1\""},
+                                                         {"compressor", "{\"id\": \"zstd\"}"}}));
+        test::writeFile(dir.file("vol/notes.txt"), std::string(8000, 'n'));
+        const std::string what = test::expectRefusedAtOnce([&] { openZarr(dir.file("vol"), 0); },
+                                                           dir.file("vol/.zarray"), field);
+        contains(what, field == "chunks" ? "4194304 chunks" : "1024x1024x1048576 u8 (1.1 TB)");
+        contains(what, field == "chunks" ? "--max-chunks" : "--max-expansion");
+    }
+}
+
+TEST(ZarrReaderTest, ChunksOfOneVoxelAreRefusedByTheirCount) {
+    test::TempDir dir;
+    fs::create_directories(dir.path() / "vol");
+    test::writeFile(
+        dir.file("vol/.zarray"),
+        zarray({{"shape", "[512, 512, 512]"}, {"chunks", "[1, 1, 1]"}, {"dtype", "\"|u1\""}}));
+    ASSERT_LT(fs::file_size(dir.file("vol/.zarray")), 300u);
+    const std::string what = test::expectRefusedAtOnce([&] { openZarr(dir.file("vol"), 0); },
+                                                       dir.file("vol/.zarray"), "chunks");
+    contains(what, "134217728 chunks");
+    contains(what, "--max-chunks");
+}
+
+TEST(ZarrReaderTest, RaisedLimitsLetATinyStoreDeclareMore) {
+    test::TempDir dir;
+    fs::create_directories(dir.path() / "vol");
+    test::writeFile(
+        dir.file("vol/.zarray"),
+        zarray({{"shape", "[512, 512, 512]"}, {"chunks", "[1, 1, 1]"}, {"dtype", "\"|u1\""}}));
+    InputLimits limits;
+    limits.maxChunks = 1ull << 27;
+    {
+        const test::InputLimitsGuard guard(limits);
+        contains(test::expectRefusedAtOnce([&] { openZarr(dir.file("vol"), 0); },
+                                           dir.file("vol/.zarray"), "shape"),
+                 "512x512x512 u8 (134.2 MB) declared");
+    }
+    limits.maxExpansion = 1ull << 30;
+    const test::InputLimitsGuard guard(limits);
+    EXPECT_EQ(openZarr(dir.file("vol"), 0)->info().dims,
+              (std::array<std::uint64_t, 3>{512, 512, 512}));
+}
+
+TEST(ZarrReaderTest, SparseStoreWhoseChunksHoldDataOpens) {
+    // 1 GiB declared, four uncompressed 64^3 chunks present: 1/1024 of it, a sparse label map.
+    test::TempDir dir;
+    fs::create_directories(dir.path() / "vol");
+    test::writeFile(dir.file("vol/.zarray"), zarray({{"shape", "[1024, 1024, 1024]"},
+                                                     {"chunks", "[64, 64, 64]"},
+                                                     {"dtype", "\"|u1\""},
+                                                     {"fill_value", "3"}}));
+    const Bytes chunk = patternVoxels(VoxelType::U8, 64 * 64 * 64);
+    for (const std::string key : {"0.0.0", "0.0.1", "5.9.2", "15.15.15"})
+        test::writeFile(dir.file("vol/" + key), chunk.data(), chunk.size());
+    auto source = openZarr(dir.file("vol"), 0);
+    std::vector<std::byte> slice(1024 * 1024);
+    source->readSlices(1, slice);
+    EXPECT_EQ(std::memcmp(slice.data(), chunk.data(), 64), 0);
+    EXPECT_EQ(slice[200], std::byte{3}); // x 200: chunk 0.0.3, not stored
+}
+
 /// A store beside a folder it must not reach into.
 class ZarrEscapeTest : public ::testing::Test {
   protected:

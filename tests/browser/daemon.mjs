@@ -14,6 +14,7 @@ import { execFile, spawn } from 'node:child_process';
 import { mkdtemp, readFile, rm, writeFile } from 'node:fs/promises';
 import { once } from 'node:events';
 import net from 'node:net';
+import tls from 'node:tls';
 import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -35,7 +36,7 @@ export async function tempDir(prefix = 'bc-browser-') {
 }
 
 /** TOML for one [[volume]] per entry of `volumes`: {name, generate, dims} or {name, store} (a .bcs file). */
-export function configToml({ storeDir, token = '', volumes, frames = {} }) {
+export function configToml({ storeDir, token = '', volumes, frames = {}, webHosts = [], tlsFiles = null }) {
   const q = (s) => JSON.stringify(String(s)); // TOML basic strings accept JSON's escapes
   const lines = [
     '[server]',
@@ -43,7 +44,9 @@ export function configToml({ storeDir, token = '', volumes, frames = {} }) {
     `token = ${q(token)}`,
     `store_dir = ${q(storeDir)}`,
     'web = "auto"',
+    `web_hosts = [${webHosts.map(q).join(', ')}]`,
   ];
+  if (tlsFiles) lines.push(`tls_cert = ${q(tlsFiles.cert)}`, `tls_key = ${q(tlsFiles.key)}`);
   const frameKeys = Object.entries(frames);
   if (frameKeys.length) lines.push('', '[frames]', ...frameKeys.map(([k, v]) => `${k} = ${v}`));
   for (const v of volumes) {
@@ -77,18 +80,34 @@ async function waitForFile(file, child, what, timeoutMs) {
 }
 
 /**
+ * A self-signed certificate for 127.0.0.1 and localhost in `dir` (openssl req), valid a day:
+ * {cert, key} paths.
+ */
+export async function selfSignedCertificate(dir) {
+  const cert = path.join(dir, 'cert.pem');
+  const key = path.join(dir, 'key.pem');
+  await promisify(execFile)('openssl', ['req', '-x509', '-newkey', 'rsa:2048', '-nodes', '-days', '1',
+    '-keyout', key, '-out', cert, '-subj', '/CN=127.0.0.1',
+    '-addext', 'subjectAltName=IP:127.0.0.1,DNS:localhost']);
+  return { cert, key };
+}
+
+/**
  * Starts brickcastd. Options: token, volumes, storeDir (shared between daemons to ingest once;
  * default a fresh temporary folder), web ('auto' or '127.0.0.1:PORT'), frames ({key: value} for
- * [frames]), startTimeoutMs. Resolves once both port files are written:
- * {port, webPort, url, log(), stop(), kill(), dir, configFile}.
+ * [frames]), webHosts (server.web_hosts), tls (true: both addresses speak TLS with a fresh
+ * self-signed certificate), startTimeoutMs. Resolves once both port files are written:
+ * {port, webPort, url, log(), stop(), kill(), dir, configFile, ca (the certificate's PEM, with tls)}.
  */
 export async function startDaemon({
-  token = '', volumes = DEFAULT_VOLUMES, storeDir, web = 'auto', frames = {}, startTimeoutMs = 60000,
+  token = '', volumes = DEFAULT_VOLUMES, storeDir, web = 'auto', frames = {}, webHosts = [], tls: withTls = false,
+  startTimeoutMs = 60000,
 } = {}) {
   const dir = await tempDir('bc-daemon-');
   const store = storeDir ?? path.join(dir, 'stores');
   const configFile = path.join(dir, 'brickcastd.toml');
-  await writeFile(configFile, configToml({ storeDir: store, token, volumes, frames }));
+  const tlsFiles = withTls ? await selfSignedCertificate(dir) : null;
+  await writeFile(configFile, configToml({ storeDir: store, token, volumes, frames, webHosts, tlsFiles }));
   const portFile = path.join(dir, 'port');
   const webPortFile = path.join(dir, 'web-port');
   const args = ['--config', configFile, '--listen', '127.0.0.1:0', '--port-file', portFile,
@@ -137,7 +156,8 @@ export async function startDaemon({
     await daemon.dispose();
     throw new Error(`${e.message}\n--- brickcastd log ---\n${log}`);
   }
-  daemon.url = `http://127.0.0.1:${daemon.webPort}/`;
+  daemon.url = `${tlsFiles ? 'https' : 'http'}://127.0.0.1:${daemon.webPort}/`;
+  if (tlsFiles) daemon.ca = await readFile(tlsFiles.cert, 'utf8');
   return daemon;
 }
 
@@ -158,9 +178,10 @@ export async function ingestRaw(input, output, args = []) {
 
 /** One TCP session speaking protocol.js's messages: request(), waitFor(), close(). */
 export class TcpClient {
-  static async connect(port, { host = '127.0.0.1', token = '', software = 'browser-test' } = {}) {
-    const socket = net.connect({ port, host });
-    await once(socket, 'connect');
+  /** ca: speak TLS, trusting this PEM (the daemon's self-signed certificate). */
+  static async connect(port, { host = '127.0.0.1', token = '', software = 'browser-test', ca = null } = {}) {
+    const socket = ca ? tls.connect({ port, host, ca }) : net.connect({ port, host });
+    await once(socket, ca ? 'secureConnect' : 'connect');
     socket.setNoDelay(true);
     const c = new TcpClient(socket);
     c.send(Type.Hello, { versionMin: 1, versionMax: 1, capabilities: 0, codecs: [Codec.Raw, Codec.Jpeg, Codec.Png], software });
@@ -274,7 +295,7 @@ export class TcpClient {
 
 /** Renders camera/tf/options once on a fresh TCP session; returns the Frame body (image copied). */
 export async function directRender(daemon, volume, { camera, tf, options }, { token = '' } = {}) {
-  const c = await TcpClient.connect(daemon.port, { token });
+  const c = await TcpClient.connect(daemon.port, { token, ca: daemon.ca ?? null });
   try {
     await c.openVolume(volume);
     const f = await c.renderOnce({ camera, tf, options });
@@ -360,7 +381,9 @@ export async function useWebDir(context, baseUrl) {
 /** Launches Chromium through playwright-core (no browser download; --no-sandbox as root). */
 export async function launchChromium() {
   const { chromium } = await import('playwright-core');
-  const args = [];
+  // Names for the host-name tests: a configured name of the viewer, and one it was not given
+  // (what a DNS rebinding attack makes of the daemon's address).
+  const args = ['--host-resolver-rules=MAP viewer.test 127.0.0.1, MAP rebound.test 127.0.0.1'];
   if (process.getuid?.() === 0) args.push('--no-sandbox');
   // A page answered by useWebDir's route has no address Chromium knows, so it counts as public
   // and its WebSocket to 127.0.0.1 is blocked (ERR_BLOCKED_BY_LOCAL_NETWORK_ACCESS_CHECKS).

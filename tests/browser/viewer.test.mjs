@@ -93,7 +93,8 @@ async function withDaemon(daemonOptions, fn) {
  * WebSocket's included.
  */
 async function openViewer(daemon, { size = VIEW, viewport = { width: 900, height: 600 }, url = daemon.url } = {}) {
-  const context = await browser.newContext({ viewport, deviceScaleFactor: 1 });
+  // A daemon with TLS has a self-signed certificate: trusted for this context only.
+  const context = await browser.newContext({ viewport, deviceScaleFactor: 1, ignoreHTTPSErrors: !!daemon.ca });
   await useWebDir(context, daemon.url);
   const page = await context.newPage();
   const pageErrors = [];
@@ -475,6 +476,51 @@ test('a token is asked for: a wrong one is refused, the right one works, and it 
     const log = daemon.log();
     assert.ok(!log.includes(token), 'the token appears in the daemon\'s log');
     assert.ok(!log.includes(wrong), 'the wrong token appears in the daemon\'s log');
+  });
+});
+
+test('over TLS (a self-signed certificate) the page is https, its WebSocket wss, and it shows what the daemon renders', { timeout: 90000 }, async () => {
+  await withDaemon({ tls: true }, async ({ daemon, open }) => {
+    assert.ok(daemon.url.startsWith('https://'), daemon.url);
+    const v = await open();
+    const { page } = v;
+    await waitReady(page);
+    await chooseVolume(page, 'phantom');
+    await settleRefined(page);
+    const shown = await readView(page);
+    await assertMatchesDirect(daemon, 'phantom', shown, 'over TLS');
+    assert.ok(v.urls.some((u) => u.startsWith('wss://')), `no wss:// WebSocket: ${v.urls}`);
+    assert.ok(!v.urls.some((u) => u.startsWith('ws://') || u.startsWith('http://')), `a plain URL: ${v.urls}`);
+    await assertHealthy(v);
+  });
+});
+
+test('on a configured host name the page works; under a name it was not given (DNS rebinding) it is refused', { timeout: 90000 }, async () => {
+  await withDaemon({ webHosts: ['viewer.test'] }, async ({ daemon, open }) => {
+    const named = `http://viewer.test:${daemon.webPort}/`;
+    const v = await open({ url: named });
+    const { page } = v;
+    await waitReady(page);
+    await chooseVolume(page, 'phantom');
+    await settleRefined(page);
+    await assertMatchesDirect(daemon, 'phantom', await readView(page), 'under web_hosts');
+    await assertHealthy(v);
+
+    const context = await browser.newContext();
+    try {
+      const rebound = await context.newPage();
+      const answer = await rebound.goto(`http://rebound.test:${daemon.webPort}/`);
+      assert.equal(answer.status(), 403, 'the page under a name the daemon was not given');
+      // The rebound page's own script cannot open the daemon's WebSocket either.
+      const opened = await rebound.evaluate((port) => new Promise((resolve) => {
+        const ws = new WebSocket(`ws://rebound.test:${port}/ws`);
+        ws.onopen = () => resolve(true);
+        ws.onerror = () => resolve(false);
+      }), daemon.webPort);
+      assert.equal(opened, false, 'a WebSocket under the rebound name was opened');
+    } finally {
+      await context.close();
+    }
   });
 });
 

@@ -62,7 +62,11 @@ void writeSeeds(const std::string& seeds) {
 listen = "0.0.0.0:7411"
 token = "secret-token"
 max_clients = 4
+max_unauthenticated = 8
 metrics = "127.0.0.1:9100"
+web_hosts = ["viewer.example.org", "[::1]", "10.0.0.5"]
+tls_cert = "cert.pem"
+tls_key = "key.pem"
 
 [timeouts]
 handshake_ms = 1000

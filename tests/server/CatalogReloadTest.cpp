@@ -3,8 +3,8 @@
 // unchanged volume keeps its frames, one on a removed volume or one reopened with another
 // shape gets an Error, one on a volume reopened with the same name, voxel type, dims and
 // spacing moves to the new store unasked; a config that fails to parse keeps the old catalog.
-// The stores are opened off the network thread: clients are served while a store takes long
-// to open. The daemon no longer dies of SIGHUP.
+// The config and the stores are read off the network thread: clients are served while a file
+// takes long to open. The daemon no longer dies of SIGHUP.
 #include "ServerTestSupport.h"
 
 #include <csignal>
@@ -193,7 +193,7 @@ struct FifoWriter {
     }
 };
 
-TEST(CatalogReload, ClientsAreServedWhileAReloadWaitsForAStoreToOpen) {
+TEST(CatalogReload, ClientsAreServedWhileAReloadWaitsForAFileToOpen) {
     TempDir dir;
     makeStore(dir.file("keep.bcs"), 32);
     const std::string config = dir.file("brickcastd.toml");
@@ -202,15 +202,16 @@ TEST(CatalogReload, ClientsAreServedWhileAReloadWaitsForAStoreToOpen) {
     client::ClientConfig cc = daemon.clientConfig();
     cc.timeoutMs = 3000;
     {
-        // A store that is a FIFO: open() blocks until a writer comes, as long as the test
-        // wants (a store on a slow or hung file system, or a large generated one).
-        ASSERT_EQ(::mkfifo(dir.file("slow.bcs").c_str(), 0600), 0);
-        FifoWriter slow{dir.file("slow.bcs")}; // goes first: the reload ends before the daemon
+        // The config file read again is a FIFO: open() blocks until a writer comes, as long as
+        // the test wants (a file on a slow or hung file system; a store that is no regular file
+        // is refused without opening it).
+        std::filesystem::remove(config);
+        ASSERT_EQ(::mkfifo(config.c_str(), 0600), 0);
+        FifoWriter slow{config}; // goes first: the reload ends before the daemon
         client::Client keep(cc);
         const auto vk = keep.openVolume("keep");
         keep.setRenderOptions(smallCpuFrames(32));
         ASSERT_TRUE(frameArrives(keep, vk, 1));
-        writeConfig(config, {"keep", "slow"});
         daemon.daemon->reload();
         std::this_thread::sleep_for(std::chrono::milliseconds(300)); // the reload reaches open()
         const auto start = std::chrono::steady_clock::now();
@@ -224,25 +225,25 @@ TEST(CatalogReload, ClientsAreServedWhileAReloadWaitsForAStoreToOpen) {
             ADD_FAILURE() << "a client was not served during the reload: " << e.what();
         }
         EXPECT_GE(frames, 3u);
-        EXPECT_TRUE(slow.release()) << "the reload was not waiting in the store's open()";
+        EXPECT_TRUE(slow.release()) << "the reload was not waiting in the config's open()";
     }
-    // The FIFO is not a store: left out, the rest of the reload applied.
+    // The FIFO held no config: the reload failed and the old catalog is kept.
     EXPECT_TRUE(waitForCatalog(cc.port, {"keep"}));
 }
 
-// A daemon told to stop while a reload waits in a store's open() (a FIFO here; a hung network
-// mount in the field) exits after a bounded wait and leaves the reload behind.
-TEST(CatalogReload, StoppingDoesNotWaitForAReloadHungInAStoresOpen) {
+// A daemon told to stop while a reload waits in an open() (of its config file, a FIFO here; a
+// hung network mount in the field) exits after a bounded wait and leaves the reload behind.
+TEST(CatalogReload, StoppingDoesNotWaitForAReloadHungInAnOpen) {
     TempDir dir;
     makeStore(dir.file("keep.bcs"), 32);
     const std::string config = dir.file("brickcastd.toml");
     writeConfig(config, {"keep"});
-    ASSERT_EQ(::mkfifo(dir.file("slow.bcs").c_str(), 0600), 0);
-    FifoWriter slow{dir.file("slow.bcs")}; // outlives the daemon: the worker is released after
+    FifoWriter slow{config}; // outlives the daemon: the worker is released after
     double stopMs = 0;
     {
         auto daemon = std::make_unique<TestDaemon>(DaemonConfig::load(config));
-        writeConfig(config, {"keep", "slow"});
+        std::filesystem::remove(config);
+        ASSERT_EQ(::mkfifo(config.c_str(), 0600), 0);
         daemon->daemon->reload();
         std::this_thread::sleep_for(std::chrono::milliseconds(300)); // the reload reaches open()
         const auto start = std::chrono::steady_clock::now();
@@ -253,7 +254,7 @@ TEST(CatalogReload, StoppingDoesNotWaitForAReloadHungInAStoresOpen) {
     std::printf("[reload] stopped in %.0f ms with a reload waiting in open()\n", stopMs);
     EXPECT_LT(stopMs, 3000.0) << "the daemon waited for the hung reload";
     // The reload was still waiting: released now, its worker finds no daemon and ends.
-    EXPECT_TRUE(slow.release()) << "the reload was not waiting in the store's open()";
+    EXPECT_TRUE(slow.release()) << "the reload was not waiting in the config's open()";
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
 }
 

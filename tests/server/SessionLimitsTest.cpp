@@ -111,18 +111,26 @@ TEST_F(SessionLimits, AClientThatNeverReadsItsRepliesHoldsABoundedQueueAndIsCut)
             attacker.send(burst);
         sent = true;
     });
-    double queuedMax = 0;
+    double queuedMax = 0, worstGapS = 0;
     std::uint32_t id = 2;
-    for (auto until = Clock::now() + std::chrono::seconds(2); Clock::now() < until;) {
+    auto last = Clock::now();
+    for (auto until = last + std::chrono::seconds(2); Clock::now() < until;) {
         witnessFrame(id++);
         queuedMax = std::max(queuedMax, statOf(*mWitness, "write_queue_bytes_max"));
+        worstGapS = std::max(worstGapS, std::chrono::duration<double>(Clock::now() - last).count());
+        last = Clock::now();
     }
+    std::printf("[doors] witness's worst gap %.3f s, largest queue %.0f bytes\n", worstGapS,
+                queuedMax);
+    // Loose: a loaded machine may be slow; what is bounded is that the flood takes no turns.
+    EXPECT_LT(worstGapS, 5.0) << "the witness waited behind the flood";
     EXPECT_LE(queuedMax, double(detail::Session::kMaxQueuedReplyBytes + (64 << 10)))
         << "replies queued for a client that does not read them";
     EXPECT_EQ(sessionsDownTo(*mWitness, 1.0, 30), 1.0) << "not cut at the write deadline";
     flood.join();
     witnessFrame(id++);
     const double grewMb = (double(residentBytes()) - double(before)) / double(1 << 20);
+    std::printf("[doors] resident memory grew %.1f MiB\n", grewMb);
     EXPECT_LT(grewMb, 64.0) << "the daemon grew by " << grewMb << " MiB";
 }
 

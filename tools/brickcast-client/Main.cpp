@@ -26,11 +26,11 @@ using namespace bc;
 
 struct Options {
     std::string host = "127.0.0.1", token, volume, tf, tfSwitch, codec = "zstd", renderer = "auto",
-                outputDir, cameraFile, size = "256,256";
+                outputDir, cameraFile, size = "256,256", tlsCa;
     std::uint16_t port = 7411;
     int frames = 36, saveEvery = 1, quality = 0;
     double step = 1.0, elevation = 20.0, distance = 1.0;
-    bool list = false, continuous = false;
+    bool list = false, continuous = false, tls = false, tlsInsecure = false;
     std::uint32_t timeoutMs = 60000;
 };
 
@@ -140,6 +140,9 @@ int fly(const Options& o) {
     config.port = o.port;
     config.token = o.token;
     config.timeoutMs = o.timeoutMs;
+    config.tls = o.tls || !o.tlsCa.empty() || o.tlsInsecure;
+    config.tlsCaFile = o.tlsCa;
+    config.tlsVerify = !o.tlsInsecure;
     client::Client c(config);
     const auto volumes = c.listVolumes();
     if (o.list) {
@@ -222,6 +225,16 @@ int main(int argc, char** argv) {
     app.add_option("--host", o.host, "Server address")->capture_default_str();
     app.add_option("--port", o.port, "Server port")->capture_default_str();
     app.add_option("--token", o.token, "Token, when the server requires one");
+    app.add_flag(
+        "--tls", o.tls,
+        "Speak TLS (a server with tls_cert), trusting the system's certificate authorities");
+    app.add_option(
+           "--tls-ca", o.tlsCa,
+           "Speak TLS, trusting this PEM file (a CA, or the server's self-signed certificate)")
+        ->check(CLI::ExistingFile);
+    app.add_flag(
+        "--tls-insecure", o.tlsInsecure,
+        "Speak TLS without checking the server's certificate (encrypted, not authenticated)");
     app.add_flag("--list", o.list, "List the server's volumes and exit");
     app.add_option("--volume", o.volume, "Catalog name (default: the first)");
     app.add_option("--frames", o.frames, "Orbit frames")

@@ -30,6 +30,9 @@ struct IngestOptions {
     std::uint64_t memoryBudgetMb = 0;
     std::uint64_t parserMemoryMb = brickstore::ParserSandboxLimits{}.addressSpaceBytes >> 20;
     std::uint32_t parserTimeS = brickstore::ParserSandboxLimits{}.parseSeconds;
+    std::uint64_t maxVolumeGb = brickstore::InputLimits{}.maxVolumeBytes >> 30;
+    std::uint64_t maxExpansion = brickstore::InputLimits{}.maxExpansion;
+    std::uint64_t maxChunks = brickstore::InputLimits{}.maxChunks;
     bool quiet = false;
 };
 
@@ -86,6 +89,10 @@ constexpr const char* kLimitsHelp =
     "  volume of at most 2^42 voxels and 1 PiB; a raw or uncompressed file must hold exactly\n"
     "  the declared bytes, a gzip payload at least 1/1032 and a zstd one 1/32768 of them (the\n"
     "  codecs' largest ratios; zstd frames that declare their size must declare exactly them);\n"
+    "  a volume over 64 MiB at most --max-expansion (32768) times the bytes its input holds (a\n"
+    "  Zarr, HDF5, TIFF, VDB or DICOM header cannot ask for work its files do not back), at\n"
+    "  most --max-chunks (2^20) chunks and --max-volume-gb; inputs that are not regular files\n"
+    "  (a FIFO, a device) are refused;\n"
     "  every DICOM slice's PixelData must hold Rows x Columns x bytes per pixel; and the\n"
     "  memory ingest needs (2B+2A slices of every pyramid level, or B+2A if only that fits,\n"
     "  the workers' bricks, the brick index) must fit --memory-budget-mb (default: half of\n"
@@ -120,6 +127,7 @@ std::unique_ptr<brickstore::VolumeSource> openInput(const IngestOptions& o) {
     limits.addressSpaceBytes = o.parserMemoryMb << 20;
     limits.parseSeconds = o.parserTimeS;
     brickstore::setParserSandboxLimits(limits);
+    brickstore::setInputLimits({o.maxVolumeGb << 30, o.maxExpansion, o.maxChunks});
     try {
         return brickstore::openSource(toSpec(o));
     } catch (const std::bad_alloc&) {
@@ -272,6 +280,19 @@ void addIngestCommand(CLI::App& app) {
                     "DICOM, TIFF: per file read) before it is killed")
         ->capture_default_str()
         ->check(CLI::Range(1u, 86400u));
+    cmd->add_option("--max-volume-gb", o->maxVolumeGb,
+                    "Most voxel bytes an input may declare, in GiB")
+        ->capture_default_str()
+        ->check(CLI::Range(std::uint64_t(1), brickstore::kMaxVolumeBytes >> 30));
+    cmd->add_option("--max-expansion", o->maxExpansion,
+                    "Most voxel bytes a volume over 64 MiB may declare per byte its input holds "
+                    "(unwritten Zarr or HDF5 chunks, compressed data)")
+        ->capture_default_str()
+        ->check(CLI::PositiveNumber);
+    cmd->add_option("--max-chunks", o->maxChunks,
+                    "Most chunks a Zarr array or HDF5 dataset may declare")
+        ->capture_default_str()
+        ->check(CLI::PositiveNumber);
     cmd->add_option("--mosaic", o->mosaic, "I,J,K: tile the input I x J x K times");
     cmd->add_option("--seed", o->seed, "Generator seed")->capture_default_str();
     cmd->add_option("--threads", o->threads, "Compression workers (0 = all cores)")

@@ -4,6 +4,7 @@
 #include "brickstore/readers/detail/RawStream.h"
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
+#include "brickstore/detail/RegularFile.h"
 #include "brickstore/readers/detail/ReadAhead.h"
 
 #include <algorithm>
@@ -21,6 +22,7 @@
 
 #include <sys/stat.h>
 #include <sys/types.h>
+#include <unistd.h>
 // ZSTD_getFrameHeader: exported by libzstd, declared only in the static section.
 #define ZSTD_STATIC_LINKING_ONLY
 #include <zstd.h>
@@ -53,9 +55,7 @@ class FileStream final : public ByteStream {
   public:
     /// `readAhead`: a large file is read ahead of this stream on a thread of its own.
     FileStream(const std::string& path, std::uint64_t offsetBytes, bool readAhead = false)
-        : mPath(path), mFile(std::fopen(path.c_str(), "rb")), mPosition(offsetBytes) {
-        if (!mFile)
-            throw FormatError(path, "path", std::string("cannot open: ") + std::strerror(errno));
+        : mPath(path), mFile(openFile(path)), mPosition(offsetBytes) {
         if (offsetBytes > std::uint64_t(std::numeric_limits<off_t>::max()) ||
             ::fseeko(mFile.get(), off_t(offsetBytes), SEEK_SET) != 0)
             throw FormatError(path, "path", "cannot seek to byte " + std::to_string(offsetBytes));
@@ -64,6 +64,20 @@ class FileStream final : public ByteStream {
             std::uint64_t(st.st_size) >= kReadAheadMinBytes)
             mAhead = std::make_unique<ReadAhead>(::fileno(mFile.get()), offsetBytes,
                                                  std::uint64_t(st.st_size));
+    }
+
+    /// The file, never blocking on a FIFO (which would wait for a writer forever).
+    static std::FILE* openFile(const std::string& path) {
+        std::string why;
+        const int fd = openRegularFile(path, why);
+        if (fd < 0) throw FormatError(path, "path", "cannot open: " + why);
+        std::FILE* file = ::fdopen(fd, "rb");
+        if (!file) {
+            why = std::strerror(errno);
+            ::close(fd);
+            throw FormatError(path, "path", "cannot open: " + why);
+        }
+        return file;
     }
 
     std::size_t read(std::span<std::byte> out) override {

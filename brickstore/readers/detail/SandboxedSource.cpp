@@ -2,6 +2,7 @@
 // and streams it over a pipe, and the parent's VolumeSource that reads that stream.
 #include "brickstore/readers/detail/SandboxedSource.h"
 
+#include "brickstore/detail/RegularFile.h"
 #include "brickstore/readers/detail/ReadAhead.h"
 
 #include <algorithm>
@@ -391,6 +392,9 @@ class SandboxedSource final : public VolumeSource {
         mInfo.valueOffset = value<double>();
         mInfo.description = text();
         validateVolumeInfo(mInfo, mParser.path);
+        const bool folder = S_ISDIR(::bc::brickstore::detail::fileMode(mParser.path));
+        checkInputHolds(mInfo, ::bc::brickstore::detail::fileOrFolderBytes(mParser.path),
+                        folder ? "the folder's files" : "the file's bytes", mParser.path, "dims");
     }
 
     /// The next 'S' slab or 'X' extents; the bytes they announce may not pass the volume's.
@@ -616,6 +620,8 @@ namespace detail {
 std::unique_ptr<VolumeSource> openSandboxed(const SandboxedParser& parser,
                                             const ParserSandboxLimits& limits,
                                             SandboxedOpener open) {
+    // The child's open() of a FIFO would wait for a writer until the parse alarm.
+    if (!S_ISDIR(fileMode(parser.path))) requireRegularFile(parser.path);
     return std::make_unique<SandboxedSource>(parser, limits, open);
 }
 

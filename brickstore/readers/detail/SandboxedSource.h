@@ -78,7 +78,10 @@ class SliceLocator {
 /// again during each ReadingFile call's file, never while the child waits on the pipe.
 /// Call it before starting threads of your own where you can (fork copies only the calling
 /// thread; see the header comment).
-/// @throw FormatError when the child cannot be started or ends before the description.
+/// @throw FormatError when the child cannot be started or ends before the description;
+/// FormatError(parser.path, "path") unforked when it is neither a folder nor a regular file;
+/// FormatError(parser.path, "dims") when the volume declares more than the file, or the
+/// folder's files, hold (checkInputHolds).
 std::unique_ptr<VolumeSource> openSandboxed(const SandboxedParser& parser,
                                             const ParserSandboxLimits& limits,
                                             SandboxedOpener open);

@@ -3,6 +3,7 @@
 // FormatError in one place: zlibDecode, zstdDecode, bloscDecode.
 #include "brickstore/readers/detail/ZarrChunks.h"
 #include "brickstore/Error.h"
+#include "brickstore/detail/RegularFile.h"
 
 #include <cerrno>
 #include <cstring>
@@ -175,7 +176,9 @@ int ZarrChunkReader::openChunk(const std::string& key, const std::string& path) 
         const std::size_t to = key.find('/', from);
         const int dir = folders.empty() ? mFolder.fd() : folders.back().get();
         const std::string part = key.substr(from, to == std::string::npos ? to : to - from);
-        const int flags = O_RDONLY | O_NOFOLLOW | O_CLOEXEC | (to == key.npos ? 0 : O_DIRECTORY);
+        // O_NONBLOCK: a FIFO's open would wait for a writer; read() checks what was opened.
+        const int flags =
+            O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC | (to == key.npos ? 0 : O_DIRECTORY);
         fd = ::openat(dir, part.c_str(), flags);
         err = errno;
         if (fd < 0 || to == std::string::npos) break;
@@ -189,7 +192,7 @@ int ZarrChunkReader::openChunk(const std::string& key, const std::string& path) 
     const std::string rel =
         (fs::path(mArray.folder).lexically_relative(mArray.root) / key).lexically_normal().string();
     const std::string real = resolveInside(mArray.root, rel, path, "chunk");
-    fd = ::open(real.c_str(), O_RDONLY | O_CLOEXEC);
+    fd = ::open(real.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
     if (fd < 0 && errno == ENOENT) return -1;
     if (fd < 0) badChunk(path, std::string("cannot open: ") + std::strerror(errno));
     return fd;
@@ -202,7 +205,7 @@ bool ZarrChunkReader::read(const ZarrChunkIndex& index, std::span<std::byte> out
     if (fd.get() < 0) return false;
     struct stat st {};
     if (::fstat(fd.get(), &st) != 0 || !S_ISREG(st.st_mode))
-        badChunk(path, "is not a regular file");
+        badChunk(path, "not a regular file (" + fileKindText(st.st_mode) + ")");
     const std::uint64_t bytes = std::uint64_t(st.st_size), bound = fileBound(mArray);
     if (mArray.codec == ZarrCodec::None && bytes != mArray.chunkBytes)
         badChunk(path, "holds " + std::to_string(bytes) + " bytes; an uncompressed chunk holds " +

@@ -362,6 +362,34 @@ ZarrImage readMultiscales(const std::string& root, const std::string& path, std:
     return image;
 }
 
+/// Bytes of the regular files in the array's folder and below, counted until `enough`: what
+/// the store holds of the array. Symlinks are not counted: one could name any file outside.
+std::uint64_t arrayFileBytes(const ZarrArray& a, std::uint64_t enough) {
+    std::uint64_t bytes = 0;
+    std::error_code ec;
+    fs::recursive_directory_iterator it(a.folder, fs::directory_options::skip_permission_denied,
+                                        ec);
+    for (; !ec && it != fs::recursive_directory_iterator() && bytes < enough; it.increment(ec)) {
+        std::error_code statError;
+        if (it->symlink_status(statError).type() == fs::file_type::regular)
+            bytes += it->file_size(statError);
+    }
+    return bytes;
+}
+
+/// The work the array's header asks for, against the limits: its chunks' count, and its
+/// voxels against the bytes of its files (a .zarray alone can declare a terabyte).
+void checkBacked(const ZarrImage& image) {
+    const ZarrArray& a = image.array;
+    checkChunkCount(image.info, {a.chunkDim(0), a.chunkDim(1), a.chunkDim(2)}, a.metaFile,
+                    "chunks");
+    const std::uint64_t declared = image.info.voxelCount() * voxelBytes(a.type);
+    if (declared <= kExpansionFreeBytes) return;
+    const std::uint64_t enough = declared / inputLimits().maxExpansion + 1;
+    checkInputHolds(image.info, arrayFileBytes(a, enough), "the array's files", a.metaFile,
+                    "shape");
+}
+
 } // namespace
 
 ZarrImage readZarrImage(const std::string& path, std::uint32_t level) {
@@ -386,6 +414,7 @@ ZarrImage readZarrImage(const std::string& path, std::uint32_t level) {
     image.info.type = a.type;
     image.info.description += ", " + std::string(voxelTypeName(a.type)) + ", " + a.codecName;
     validateVolumeInfo(image.info, a.metaFile, "shape");
+    checkBacked(image);
     return image;
 }
 

@@ -4,7 +4,10 @@ Usage: write_hdf5.py file=OUT.h5 [patch_filter=ID] DATASET... [file=OUT2.h5 DATA
 
 Each DATASET is one argument of space-separated key=value pairs:
   name=/entry/data/volume   the dataset's path; groups on the way are created
-  raw=PATH dtype=uint16     the voxels: a raw file, C order [z][y][x], of that NumPy dtype
+  raw=PATH dtype=uint16     the voxels: a raw file, C order [z][y][x], of that NumPy dtype;
+                            without raw= the dataset is declared only: no voxel (and, chunked,
+                            no chunk) is written, and it reads as its fill value
+  first=N                   declared only but for its first N voxels (x), set to 7
   shape=Z,Y,X               its shape (any rank: shape=5,6 writes a 2D dataset)
   store=>u2                 the dtype stored in the file (default: dtype), e.g. >f4 or <i8
   layout=contiguous|chunked|compact   (default contiguous)
@@ -34,10 +37,16 @@ def write_dataset(f, spec):
         other, path = opts["external"].split(":", 1)
         f[opts["name"]] = h5py.ExternalLink(other, path)
         return
-    data = np.fromfile(opts["raw"], dtype=opts["dtype"]).reshape(ints(opts["shape"]))
     store = np.dtype(opts.get("store", opts["dtype"]))
     layout = opts.get("layout", "contiguous")
     name = opts["name"]
+    if "raw" not in opts:
+        chunks = ints(opts["chunks"]) if layout == "chunked" else None
+        dset = f.create_dataset(name, shape=ints(opts["shape"]), dtype=store, chunks=chunks)
+        if "first" in opts:
+            dset[0, 0, :int(opts["first"])] = 7
+        return
+    data = np.fromfile(opts["raw"], dtype=opts["dtype"]).reshape(ints(opts["shape"]))
     if layout == "compact":
         dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
         dcpl.set_layout(h5py.h5d.COMPACT)
