@@ -134,8 +134,8 @@ std::uint64_t BrickStore::storedBricks(std::uint32_t level) const {
     return level < mStoredPerLevel.size() ? mStoredPerLevel[level] : 0;
 }
 
-std::optional<std::string> BrickStore::fileChange() const {
-    return mFile->changeAtPath();
+std::optional<std::string> BrickStore::fileChange(bool changeTime) const {
+    return mFile->changeAtPath(changeTime);
 }
 
 std::uint64_t BrickStore::brickBytes() const {

@@ -71,8 +71,9 @@ class BrickStore {
     /// What changed between the file opened and the one at path() now ("replaced by another
     /// file", "size A -> B bytes", "modified", "rewritten in place..." when only the inode's
     /// change time moved, "gone: ..."); nullopt when it is the same file, unchanged. One stat;
-    /// what a reload asks before reopening a store.
-    std::optional<std::string> fileChange() const;
+    /// what a reload asks before reopening a store. Without `changeTime`, a moved change time
+    /// alone (a chmod as well as a rewrite that kept the modification time) is no change.
+    std::optional<std::string> fileChange(bool changeTime = true) const;
     /// Bytes of one decompressed brick ((B+2A)^3 voxels).
     std::uint64_t brickBytes() const;
 

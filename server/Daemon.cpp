@@ -196,7 +196,9 @@ struct Daemon::Impl {
     void watchStores() {
         for (const auto& [name, volume] : catalog.snapshot()) {
             if (volume->failure() || !volume->store) continue;
-            if (const auto change = volume->store->fileChange())
+            // Not the change time: a chmod of a served store must not take it out of service
+            // (a rewrite that kept the modification time fails the bricks' checksums).
+            if (const auto change = volume->store->fileChange(false))
                 if (catalog.markFailed(*volume,
                                        volume->store->path() +
                                            ": changed on disk since it was opened: " + *change,

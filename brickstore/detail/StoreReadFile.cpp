@@ -83,7 +83,7 @@ void StoreReadFile::checkUnchanged() const {
                            "; reload the daemon (SIGHUP) to serve the new store");
 }
 
-std::optional<std::string> StoreReadFile::changeAtPath() const {
+std::optional<std::string> StoreReadFile::changeAtPath(bool changeTime) const {
     struct stat st {};
     if (::stat(mPath.c_str(), &st) != 0) return std::string("gone: ") + std::strerror(errno);
     const FileIdentity now = identityOf(st);
@@ -91,7 +91,7 @@ std::optional<std::string> StoreReadFile::changeAtPath() const {
         return std::string("replaced by another file");
     std::string change = contentChange(mOpened, now);
     if (!change.empty()) return change;
-    if (now.ctimeNs != mOpened.ctimeNs)
+    if (changeTime && now.ctimeNs != mOpened.ctimeNs)
         return std::string("rewritten in place with its size and modification time kept, or "
                            "its owner or permissions changed (new inode change time)");
     return std::nullopt;

@@ -43,8 +43,9 @@ class StoreReadFile {
     void checkUnchanged() const;
     /// What changed between the opened file and whatever `path` names now ("replaced by
     /// another file", "size A -> B bytes", "modified", "rewritten in place...", "gone: ...");
-    /// nullopt when nothing did. One stat.
-    std::optional<std::string> changeAtPath() const;
+    /// nullopt when nothing did. One stat. Without `changeTime` the inode's change time is not
+    /// compared.
+    std::optional<std::string> changeAtPath(bool changeTime = true) const;
 
   private:
     std::string mPath;

@@ -29,9 +29,9 @@ class ClusterError : public std::runtime_error {
 void checkMpi(int code, const std::string& what);
 
 /// Waits for `requests` (request i is with rank `peers[i]`; `receives[i]`: it is a receive)
-/// until `deadline`. @throw ClusterError "what: rank a did not answer in time" ("ranks a, b ..."), naming
-/// the ranks whose requests are not complete (their receives are cancelled first), or
-/// "what: MPI's text" when MPI fails.
+/// until `deadline`. @throw ClusterError "what: rank a did not answer in time" ("ranks a, b ..."),
+/// naming the ranks whose requests are not complete (their receives are cancelled first), or "what:
+/// MPI's text" when MPI fails.
 void waitForRanks(std::vector<MPI_Request>& requests, const std::vector<int>& peers,
                   const std::vector<bool>& receives, std::chrono::steady_clock::time_point deadline,
                   const std::string& what);

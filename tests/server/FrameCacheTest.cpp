@@ -30,7 +30,8 @@ class FrameCacheTest : public ::testing::Test {
         metricsPort = daemon->daemon->metricsPort();
     }
     double metric(const std::string& name) {
-        const std::string reply = scrape(metricsPort, "GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n");
+        const std::string reply =
+            scrape(metricsPort, "GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n");
         return sampleOf(reply.substr(reply.find("\r\n\r\n") + 4), "brickcast_" + name);
     }
     double drawn() { return metric("frames_total{renderer=\"cpu\"}"); }
