@@ -115,6 +115,12 @@ interactive_ms = 66
 # camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick
 # of its last frame.
 prefetch = true
+# Encoded frames kept, in MiB (0..1048576; 0 turns the cache off), for any session that asks
+# for the same frame again: same store, camera, transfer function, options and codec (a second
+# viewer of a view, a client that reconnects). Such a frame is sent without drawing it
+# (FrameHeader cached = 1). Least recently used frames go first; a frame over a quarter of
+# this is not kept.
+cache_mb = 64
 # Under mpirun (several ranks): how long rank 0 waits for another rank's part of a frame
 # (100..600000 ms). A rank that has not answered by then fails the frame (RenderFailed, naming
 # the rank) and every cluster frame after it; restart the job. Ignored by one process.

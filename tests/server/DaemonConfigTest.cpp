@@ -62,6 +62,9 @@ TEST(DaemonConfigTest, ShippedConfigFileEqualsTheEmbeddedDefault) {
     file.source = "<embedded default>";
     file.file.clear();
     EXPECT_EQ(file, DaemonConfig::embeddedDefault());
+    // Byte for byte, comments included: --print-default-config prints what the file says.
+    const auto bytes = bc::test::readFile(path);
+    EXPECT_EQ(std::string(bytes.begin(), bytes.end()), DaemonConfig::defaultToml());
 }
 
 // host_mb = "auto" (the default) is a quarter of the memory the daemon may use, at least
