@@ -3,9 +3,6 @@
 #include "client/Error.h"
 #include "client/detail/Channel.h"
 
-#include <cerrno>
-#include <cstring>
-
 namespace bc::client {
 
 namespace {

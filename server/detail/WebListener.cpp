@@ -109,11 +109,8 @@ class HttpConnection final : public HttpPeer,
         if constexpr (std::is_same_v<Stream, asio::ip::tcp::socket>) {
             readRequest();
         } else {
-            mWaiting = mL->waiting.insert(mL->waiting.end(), this->weak_from_this());
-            mTimer.expires_after(std::chrono::milliseconds(mL->config.handshakeTimeoutMs));
-            mTimer.async_wait([weak = this->weak_from_this()](const IoError& ec) {
-                if (auto self = weak.lock(); self && !ec) self->cut();
-            });
+            startWaiting();
+            cutAfter(mL->config.handshakeTimeoutMs);
             mStream.async_handshake(asio::ssl::stream_base::server,
                                     [self = this->shared_from_this()](const IoError& ec) {
                                         self->mTimer.cancel();
@@ -124,17 +121,13 @@ class HttpConnection final : public HttpPeer,
     }
 
     void readRequest() {
-        stopWaiting();
-        mWaiting = mL->waiting.insert(mL->waiting.end(), this->weak_from_this());
+        startWaiting();
         mParser.emplace();
         mParser->header_limit(WebListener::kMaxHeaderBytes);
         mParser->body_limit(0);
         // The whole request (every header) within the handshake timeout: a client that
         // trickles bytes holds a connection that long at most.
-        mTimer.expires_after(std::chrono::milliseconds(mL->config.handshakeTimeoutMs));
-        mTimer.async_wait([weak = this->weak_from_this()](const IoError& ec) {
-            if (auto self = weak.lock(); self && !ec) self->cut();
-        });
+        cutAfter(mL->config.handshakeTimeoutMs);
         http::async_read(mStream, mBuffer, *mParser,
                          [self = this->shared_from_this()](const IoError& ec, std::size_t) {
                              self->mTimer.cancel();
@@ -144,6 +137,21 @@ class HttpConnection final : public HttpPeer,
     }
 
   private:
+    /// Cuts the connection unless mTimer is cancelled within `ms`.
+    void cutAfter(std::uint32_t ms) {
+        mTimer.expires_after(std::chrono::milliseconds(ms));
+        mTimer.async_wait([weak = this->weak_from_this()](const IoError& ec) {
+            if (auto self = weak.lock(); self && !ec) self->cut();
+        });
+    }
+
+    /// The connection waits for a request (or its TLS handshake): a newer one may take its
+    /// place (makeRoom).
+    void startWaiting() {
+        stopWaiting();
+        mWaiting = mL->waiting.insert(mL->waiting.end(), this->weak_from_this());
+    }
+
     void stopWaiting() {
         if (!mWaiting) return;
         mL->waiting.erase(*mWaiting);
@@ -225,10 +233,7 @@ class HttpConnection final : public HttpPeer,
         mL->responses[unsigned(response.result())] += 1;
         auto res = std::make_shared<http::response<Body>>(std::move(response));
         // A reader that stops reading is cut at the write deadline.
-        mTimer.expires_after(std::chrono::milliseconds(mL->config.writeTimeoutMs));
-        mTimer.async_wait([weak = this->weak_from_this()](const IoError& ec) {
-            if (auto self = weak.lock(); self && !ec) self->cut();
-        });
+        cutAfter(mL->config.writeTimeoutMs);
         http::async_write(mStream, *res,
                           [self = this->shared_from_this(), res](const IoError& ec, std::size_t) {
                               self->mTimer.cancel();
