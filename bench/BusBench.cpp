@@ -1,4 +1,4 @@
-// Bus/residency benchmark (issue 7): a brickcastd in this process on loopback, serving a
+// Bus/residency benchmark: a brickcastd in this process on loopback, serving a
 // generated "vessels" volume several times the GPU budget, driven by clients flying 1 degree
 // a frame orbits with the GPU raycaster. Each run is a fresh daemon (a cold pool) on the same
 // ingested store. Tables (markdown on stdout):
@@ -542,7 +542,7 @@ void runAll(Bench& bench) {
     const StoreFacts& f = bench.store = prepareStore(o.storeDir, o.edge);
     const double nominal = o.gpuBudgetMb * kMiB;
     std::printf(
-        "# bc_bench_bus: the bus/residency model (issue 7)\n\n"
+        "# bc_bench_bus: the bus/residency model\n\n"
         "brickcastd in process on loopback; GPU raycaster (EGL: whatever this machine has, "
         "llvmpipe without a GPU), %d^2 refined frames at brick level %s, zstd; %u hardware "
         "threads. Orbit: 1 degree a frame about the volume centre, elevation %.0f deg, eye at "
@@ -644,7 +644,7 @@ void runAll(Bench& bench) {
                            fmt("%.2f", b.s.renderMs), fmt("%.1f", b.s.p50), fmt("%.1f", b.s.p99)});
     }
     printTable(t3);
-    // The issue's target, over the budgets asked for (the pool may hold a slot less).
+    // The target, over the budgets asked for (the pool may hold a slot less).
     std::string pass, fail, strict;
     for (const auto& b : runs) {
         const double m = std::isnan(b.multiple) ? nominal / w : b.multiple;
@@ -654,16 +654,15 @@ void runAll(Bench& bench) {
         (b.s.gpuHitRate >= 0.95 ? pass : fail) += " " + name;
         if (double(f.voxelBytes) >= 4 * b.s.poolBytes) strict += " " + name;
     }
-    std::printf(
-        "\nTarget (issue 7): GPU hit rate >= 95%% on the 1 degree/frame orbit when the budget "
-        ">= 1.5 W: %s.%s%s\nOf those, budgets with the volume >= 4x the pool (the issue's "
-        "exact setting):%s\n",
-        pass.empty() && fail.empty() ? "NOT CHECKED (no budget >= 1.5 W)"
-        : fail.empty()               ? "HOLDS"
-                                     : "FAILS",
-        pass.empty() ? "" : (" Met at" + pass + ".").c_str(),
-        fail.empty() ? "" : (" Missed at" + fail + ".").c_str(),
-        strict.empty() ? " none" : strict.c_str());
+    std::printf("\nTarget: GPU hit rate >= 95%% on the 1 degree/frame orbit when the budget "
+                ">= 1.5 W: %s.%s%s\nOf those, budgets with the volume >= 4x the pool (the strict "
+                "setting):%s\n",
+                pass.empty() && fail.empty() ? "NOT CHECKED (no budget >= 1.5 W)"
+                : fail.empty()               ? "HOLDS"
+                                             : "FAILS",
+                pass.empty() ? "" : (" Met at" + pass + ".").c_str(),
+                fail.empty() ? "" : (" Missed at" + fail + ".").c_str(),
+                strict.empty() ? " none" : strict.c_str());
 
     // 4. Clients at 2 W.
     std::vector<std::pair<int, Summary>> clientRuns;
@@ -863,7 +862,7 @@ void validate(const Options& o) {
 } // namespace
 
 int main(int argc, char** argv) {
-    CLI::App app{"Bus/residency benchmark (issue 7): hit rates, bytes and latency against the GPU "
+    CLI::App app{"Bus/residency benchmark: hit rates, bytes and latency against the GPU "
                  "budget and clients, prefetch, and a bandwidth model"};
     Options o;
     auto* gpu = app.add_option("--gpu-budget-mb", o.gpuBudgetMb,

@@ -1,4 +1,4 @@
-// Gather probe (issue 18): what one vector gather costs on this machine, against plain loads of
+// Gather probe: what one vector gather costs on this machine, against plain loads of
 // the same elements, for the two gathers the CPU raycaster's march is made of
 // (render/detail/CpuMarchSimd.cpp): 32-bit lanes (a 16-bit voxel pair, an octree word, a TF
 // entry) and 64-bit lanes (a 32-bit voxel pair, a TF pair), from a 68^3-float brick in cache at

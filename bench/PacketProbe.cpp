@@ -1,4 +1,4 @@
-// Packet probe (issue 18): what marching 16 rays per vector (one sample per lane per step)
+// Packet probe: what marching 16 rays per vector (one sample per lane per step)
 // would gain over the CPU raycaster's layout (16 consecutive samples of one ray per vector,
 // composited lane by lane), measured on a real scan with the same sample work in both: trilinear
 // u16, a 4096-entry TF, central-difference gradient and Blinn-Phong, early termination, and

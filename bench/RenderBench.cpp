@@ -1,4 +1,4 @@
-// bc_bench_render (formerly `brickcast bench`): run time against error (issue 4). For each
+// bc_bench_render (formerly `brickcast bench`): run time against error. For each
 // real dataset and transfer function, each technique set, each camera path and image size: median
 // ms/frame, samples per pixel, samples taken / oracle samples, speed-up over plain in the same run,
 // PSNR and SSIM against the CPU reference, octree rebuild ms, occlusion-frustum build ms and
@@ -14,9 +14,9 @@
 #include "render/BrickPlan.h"
 #include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
+#include "render/GpuRaycaster.h"
 #include "render/ImageMetrics.h"
 #include "render/Occupancy.h"
-#include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
 #include "tools/Parse.h"
@@ -102,13 +102,13 @@ BenchRow measure(Scene& s, const TechniqueSet& t, const std::string& renderer,
                  std::uint64_t budgetBytes, const render::Image* reference,
                  const render::FrameStats& referenceStats) {
     const bool cpu = renderer == "cpu";
-    render::Raycaster* gpu = nullptr;
-    std::optional<render::Raycaster> gpuRaycaster;
+    render::GpuRaycaster* gpu = nullptr;
+    std::optional<render::GpuRaycaster> gpuRaycaster;
     std::optional<render::CpuRaycaster> cpuRaycaster;
     if (cpu)
         cpuRaycaster.emplace();
     else
-        gpu = &gpuRaycaster.emplace(render::RaycasterConfig{budgetBytes});
+        gpu = &gpuRaycaster.emplace(render::GpuRaycasterConfig{budgetBytes});
     o.skip = t.skip;
     o.earlyTermination = t.ert;
     o.occlusionFrustums = t.frustums;

@@ -1,4 +1,4 @@
-// Ray-guided residency benchmark (issue 7, render/RESIDENCY.md): the GPU raycaster flies a
+// Ray-guided residency benchmark (render/RESIDENCY.md): the GPU raycaster flies a
 // 1 degree a frame orbit around dense volumes under opaque and see-through transfer functions,
 // with pools from half the plan to more than all of it, ray-guided residency on and off.
 // Prints, per volume and transfer function: the plan P (bricks in view the TF can show) and
@@ -12,8 +12,8 @@
 #include "brickstore/Readers.h"
 #include "render/BrickPlan.h"
 #include "render/EglContext.h"
+#include "render/GpuRaycaster.h"
 #include "render/ImageMetrics.h"
-#include "render/Raycaster.h"
 #include "render/TransferFunction.h"
 #include "tools/TransferFunctionFile.h"
 
@@ -164,7 +164,7 @@ struct Run {
 /// One orbit with a fresh raycaster; the figures are means over the frames after the warm-up.
 Run fly(Volume& v, const render::TransferFunction& tf, std::uint64_t budgetBytes, bool guided,
         const Options& o, const std::vector<render::Image>* reference) {
-    render::Raycaster r({budgetBytes});
+    render::GpuRaycaster r({budgetBytes});
     render::RenderOptions ro;
     ro.width = ro.height = std::uint32_t(o.size);
     ro.rayGuided = guided;

@@ -1,5 +1,5 @@
 // bc_bench_splat (formerly `brickcast bench-splat`): the hybrid splatter's timings in the layout of
-// Yuan et al. 2003, Figure 9 (issue 6), beside the raycaster at equal error. For each dataset three
+// Yuan et al. 2003, Figure 9, beside the raycaster at equal error. For each dataset three
 // views on one orbit: "all splats" (every visible voxel projects to at least the point threshold;
 // the framing view when that holds, else as close as it must be), "mixed" (the volume centre at the
 // threshold) and "all points" (the nearest voxel below it). Per view: the splatter's median ms, the

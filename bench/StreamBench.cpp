@@ -1,4 +1,4 @@
-// Streaming load benchmark (issue 5): a brickcastd in this process on loopback, N concurrent
+// Streaming load benchmark: a brickcastd in this process on loopback, N concurrent
 // clients each flying its own orbit (one request per camera, the next camera once the frame
 // is decoded), for N in --clients. Prints frames/s and request-to-decoded latency (p50, p99)
 // against N; then, one client per codec, render ms against encode ms and bytes a frame.

@@ -1,7 +1,7 @@
 // Time to the first frame after a transfer-function change, with N sessions on one volume
-// (issue 15): a brickcastd in this process on loopback serves a store (or a generated
-// phantom); N clients each open it and draw one warm frame; then, round after round, every
-// client sets the same new transfer function (a threshold that moves each round, so every
+// (one shared classification): a brickcastd in this process on loopback serves a store (or a
+// generated phantom); N clients each open it and draw one warm frame; then, round after round,
+// every client sets the same new transfer function (a threshold that moves each round, so every
 // round is a function no one has seen) and asks for a frame. Prints, per round, the time from
 // the change to the first and to the last session's frame, and medians over the rounds.
 #include "client/Client.h"

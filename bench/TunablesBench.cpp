@@ -1,4 +1,4 @@
-// bc_bench_tunables (issue 21): the skipping tunables swept one at a time from the defaults,
+// bc_bench_tunables: the skipping tunables swept one at a time from the defaults,
 // on the real scans of each kind (dense CT, sparse vessels, smoke), so that the defaults are
 // chosen from measurements. Tunables: the store's brick edge and leaf edge (ingest geometry),
 // the distance maps' cell edge (RenderOptions::cellVoxels), the octree's ratio threshold and

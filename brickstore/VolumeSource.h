@@ -30,7 +30,7 @@ struct VolumeInfo {
 
 /// Input limits: the one place they live. No reader allocates from a size a file declares
 /// before these, the file-size checks of its reader and ingest's memory budget (Ingest.h) have
-/// passed. README.md "Limits" and `brickcast ingest --help` list them.
+/// passed. docs/guide/formats.md "Limits" and `brickcast ingest --help` list them.
 constexpr std::uint64_t kMaxDimVoxels = 1ull << 20;    ///< any one edge
 constexpr std::uint64_t kMaxSliceVoxels = 1ull << 30;  ///< x*y of a slice (32768 x 32768)
 constexpr std::uint64_t kMaxVolumeVoxels = 1ull << 42; ///< x*y*z (about 4.4 T voxels)

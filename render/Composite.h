@@ -1,5 +1,5 @@
 #pragma once
-// Sort-last compositing (issue 19, render/SCALEOUT.md): the parts of a Partition each draw
+// Sort-last compositing (render/SCALEOUT.md): the parts of a Partition each draw
 // their own segment of every ray as premultiplied RGBA over their footprint; laid front to
 // back with the over operator they give the frame one renderer draws (within float rounding,
 // and early termination's bound when it is on).

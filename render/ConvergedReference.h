@@ -1,5 +1,5 @@
 #pragma once
-// The true image (issue 18): the reference renderer's frame at a step small enough that
+// The true image: the reference renderer's frame at a step small enough that
 // halving it no longer changes the image by more than a tolerance. The reference at the same
 // step as a renderer shows that the renderer implements the model; only the converged frame
 // shows how far a frame is from the image the model converges to (render/OPTICS.md).

@@ -1,5 +1,5 @@
 #pragma once
-// Leaps below the octree's leaves (issue 21): per brick, a chessboard distance map over cells
+// Leaps below the octree's leaves: per brick, a chessboard distance map over cells
 // of 1, 2 or 4 voxels, so that a ray in a non-empty 8-voxel leaf still leaps the empty space
 // around thin structures (vessels, roots, bone surfaces) instead of sampling it step by step,
 // and leaps it far in one go: a cell at distance d lies at the centre of a cube of 2d - 1

@@ -1,5 +1,5 @@
 #pragma once
-// Hybrid forward splatting on the GPU (Yuan et al. 2003; issue 6): the model of
+// Hybrid forward splatting on the GPU (Yuan et al. 2003): the model of
 // HybridSplatter (spheres of radius radiusVoxels * max spacing, the SplatFootprint kernel,
 // points below pointThresholdPixels summed in slabs of one voxel's depth, splats composited
 // 'over', front to back), drawn by OpenGL so that both images agree. The CPU side is the

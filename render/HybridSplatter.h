@@ -1,5 +1,5 @@
 #pragma once
-// Hybrid forward splatting on the CPU (Yuan et al. 2003; issue 6): object order, front to
+// Hybrid forward splatting on the CPU (Yuan et al. 2003): object order, front to
 // back. Every voxel the transfer function makes visible is a sphere of radius
 // radiusVoxels (1.25) * max(spacing) carrying the kernel of SplatFootprint, weighted so that
 // overlapping spheres reconstruct the voxel values (a uniform region reconstructs a constant).

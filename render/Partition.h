@@ -1,5 +1,5 @@
 #pragma once
-// Sort-last scale-out (issue 19, render/SCALEOUT.md): one level's brick grid split into convex
+// Sort-last scale-out (render/SCALEOUT.md): one level's brick grid split into convex
 // parts, one per rank, by a k-d tree of planes on brick faces; the parts' front-to-back order
 // for a view; and the pixels a part can cover. A part draws only the samples of its own bricks
 // (RenderOptions::parts), so the parts' samples are exactly one renderer's, and their images

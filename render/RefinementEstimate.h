@@ -1,5 +1,5 @@
 #pragma once
-// The error of a frame at rest, estimated as it is refined (issue 22). A frame at rest is
+// The error of a frame at rest, estimated as it is refined. A frame at rest is
 // refined by halving the step: the session's step, then half of it, a quarter... Each pass
 // after the first is compared with the one before, and that difference estimates the pass's
 // own error against the converged image (render/ConvergedReference.h): where halving the step
@@ -17,7 +17,7 @@
 // that step would have it. The estimate is then the same formula over the lattice's pixels, a
 // sample of the frame's. The sparse frame costs about kCheckPixels rays, where the whole frame
 // at the session's step cost a ray per pixel (a 512^2 frame: a sixteenth).
-// What was measured: README "Frames on a budget"; the test: tests/render/RefinementEstimateTest.
+// What was measured: docs/benchmarks/budgets.md; the test: tests/render/RefinementEstimateTest.
 #include <cstddef>
 #include <cstdint>
 #include <span>

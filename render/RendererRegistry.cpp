@@ -1,9 +1,9 @@
 #include "render/RendererRegistry.h"
 
 #include "render/CpuRaycaster.h"
+#include "render/GpuRaycaster.h"
 #include "render/GpuSplatter.h"
 #include "render/HybridSplatter.h"
-#include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 
 #include <stdexcept>
@@ -18,7 +18,7 @@ const RendererRegistry& RendererRegistry::builtin() {
                .needsGl = true,
                .regions = true,
                .parts = true,
-               .create = [] { return std::make_unique<Raycaster>(); }});
+               .create = [] { return std::make_unique<GpuRaycaster>(); }});
         r.add({.name = "cpu",
                .description = "CPU raycaster",
                .regions = true,

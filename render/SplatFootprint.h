@@ -2,7 +2,7 @@
 // The footprint of a spherical splat: the line integral of a radially symmetric kernel along
 // an eye ray, as a function of the ray's distance d from the sphere centre (in radii), looked
 // up by the splat's index i and cone half-angle alpha through d = correctedDistance(i, alpha)
-// (issue 6; paper section 4.2).
+// (paper section 4.2).
 //
 // Kernel, in units of the sphere radius: h(s) = exp(-s^2 / 2 sigma^2) - exp(-1 / 2 sigma^2)
 // for s < 1, else 0; sigma = sigmaOverRadius. Shifting the Gaussian down by its rim value makes

@@ -1,6 +1,6 @@
 #pragma once
 // The screen ellipse of a sphere seen in perspective and the footprint index inside it, for
-// hybrid forward splatting (Yuan et al. 2003, section 4.2 and appendix A; issue 6). Plain
+// hybrid forward splatting (Yuan et al. 2003, section 4.2 and appendix A). Plain
 // double-precision geometry without GL: the CPU path, the tests and the shader constants
 // share these definitions.
 //

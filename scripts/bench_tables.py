@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Condenses the CSV of `bc_bench_render` (build/bench/) into the README's tables.
+"""Condenses the CSV of `bc_bench_render` (build/bench/) into the tables of docs/benchmarks/rendering.md.
 
 usage: scripts/bench_tables.py BENCH.csv [CPU.csv]
 A run with --renderer both holds GPU and CPU rows ("... (CPU)") in one file, so the CPU

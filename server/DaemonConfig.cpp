@@ -108,8 +108,8 @@ slice_ms = 50
 # own, SetFrameBudget): each such frame is drawn at the finest pyramid level whose bricks fit
 # the volume's host cache share, then the requested size divided by 1, 2, 3, 4, 6 or 8,
 # whichever the frames drawn so far predict to fit (sessions moving at once share it), and
-# scaled back up. 66 ms (15 frames/s) is what the README's measurements chose. 0: half size,
-# whatever it takes.
+# scaled back up. 66 ms (15 frames/s) is what the measurements chose (docs/benchmarks/
+# budgets.md). 0: half size, whatever it takes.
 interactive_ms = 66
 # While the render thread is idle, upload the bricks of each GPU session's next view (its
 # camera's motion extrapolated one frame) that the GPU pool lacks, without evicting any brick

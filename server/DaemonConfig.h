@@ -75,13 +75,13 @@ struct DaemonConfig {
     std::uint64_t maxFrameSamples = 64ull << 30;   ///< a frame's cost cap (RenderServiceConfig)
     std::uint64_t maxUnslicedSamples = 4ull << 30; ///< for renderers that cannot slice
     std::uint32_t sliceMs = 50;                    ///< target length of one slice of a long frame
-    /// While a camera moves, the time a frame should take (server/FrameBudget.h); 0: frames
-    /// are drawn at half size, whatever they take. 66 ms: README, "Frames on a budget".
+    /// While a camera moves, the time a frame should take (server/InteractiveBudget.h); 0: frames
+    /// are drawn at half size, whatever they take. 66 ms: docs/benchmarks/budgets.md.
     std::uint32_t interactiveMs = 66;
     bool prefetch = true; ///< bricks of each GPU session's predicted next view, while idle
     /// Encoded frames kept for identical requests of any session (server/FrameCache.h); 0: off.
     std::uint64_t frameCacheBytes = 64ull << 20;
-    /// Under MPI: how long rank 0 waits for any rank's part of a frame (issue 19).
+    /// Under MPI: how long rank 0 waits for any rank's part of a frame.
     std::uint32_t clusterTimeoutMs = 30000;
     std::string storeDir; ///< where generated volumes are ingested
     std::vector<CatalogEntry> volumes;

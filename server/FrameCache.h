@@ -1,5 +1,5 @@
 #pragma once
-// Frames answered again (issue 21): a frame is a function of what its session asked for (camera,
+// Frames answered again: a frame is a function of what its session asked for (camera,
 // transfer function, render options, codec) and of the store it is drawn from, so an identical
 // request (a second viewer of the same view, a client that reconnects, a refined frame asked for
 // again) is answered with the bytes drawn before instead of being drawn again. Shared by every

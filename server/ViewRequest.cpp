@@ -1,7 +1,7 @@
 #include "server/ViewRequest.h"
 
 #include "render/Error.h"
-#include "server/FrameBudget.h"
+#include "server/InteractiveBudget.h"
 
 #include <algorithm>
 #include <cmath>

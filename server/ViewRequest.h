@@ -22,7 +22,7 @@ render::Camera toCamera(const protocol::SetCamera& camera);
 /// The renderer's options for a protocol request, drawn at its width and height over `divisor`
 /// (rounded up; InteractiveBudget::drawnEdge): 1 for a refined frame; an interactive frame's
 /// (the camera is moving) is 2 (half size) or what the server's frame-time budget allows
-/// (server/FrameBudget.h), and the frame is scaled back up by upscaleBy.
+/// (server/InteractiveBudget.h), and the frame is scaled back up by upscaleBy.
 render::RenderOptions toRenderOptions(const protocol::RenderOptions& options,
                                       std::uint32_t divisor);
 

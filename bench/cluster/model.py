@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""A model of sort-last frames past this machine (issue 19): frame time and memory per node for
+"""A model of sort-last frames past this machine: frame time and memory per node for
 8 to 1024 nodes and 1 to 100 GB volumes, from the figures sortlast_bench.py measured here.
 
 It is fitted on the 1- and 2-rank rows of a `sortlast_bench.py --json` file and checked against

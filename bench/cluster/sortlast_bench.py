@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Sort-last over MPI ranks (issue 19): per-rank render time, compositing time and bytes moved
+"""Sort-last over MPI ranks: per-rank render time, compositing time and bytes moved
 against ranks and image size, beside one process drawing the same frame.
 
 For every --ranks count and --sizes edge it runs `mpirun -np N brickcast render --mpi

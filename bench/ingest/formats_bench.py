@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Ingest at disk speed, format by format (issue 20).
+"""Ingest at disk speed, format by format.
 
 Generates one multi-gigabyte volume (the project's synth:phantom generator, ingested and
 extracted back to raw), writes it in every input format brickcast reads (tifffile, zarr and

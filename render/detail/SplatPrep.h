@@ -1,5 +1,5 @@
 #pragma once
-// What the CPU and GPU hybrid splatters share (issue 6), so both draw one model: the frame's
+// What the CPU and GPU hybrid splatters share, so both draw one model: the frame's
 // constants, the visible voxels of each brick (classified, shaded, sorted front to back)
 // prepared on every core, and the per-voxel decisions (point or splat, a point's filter
 // weights). The drawing itself (the CPU canvas, the GPU primitive list) stays with each

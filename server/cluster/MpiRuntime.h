@@ -1,5 +1,5 @@
 #pragma once
-// The MPI library's lifetime in a process (issue 19): MPI_Init_thread on construction,
+// The MPI library's lifetime in a process: MPI_Init_thread on construction,
 // MPI_Finalize on destruction. One per process, made by the program's main path; the
 // libraries never initialise MPI themselves.
 #include <mpi.h>

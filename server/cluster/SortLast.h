@@ -1,5 +1,5 @@
 #pragma once
-// Sort-last compositing over MPI ranks by direct send (issue 19, render/SCALEOUT.md): rank r
+// Sort-last compositing over MPI ranks by direct send (render/SCALEOUT.md): rank r
 // has drawn part r of a Partition over its footprint; the frame's rows are cut into one band
 // per rank, each rank sends every band owner the piece of its image that falls in that band,
 // each band owner lays the pieces it receives front to back, and the root gathers the bands.

@@ -287,7 +287,7 @@ TEST(BrickCacheTest, CountsLoadedEvictedResidentAndPinnedBytes) {
     EXPECT_EQ(s.residentBricks, 2u);
 }
 
-// Resident bytes per pyramid level (how warm a level is, server/FrameBudget.h): loads add to
+// Resident bytes per pyramid level (how warm a level is, server/InteractiveBudget.h): loads add to
 // their level's count, evictions take from it, and levels never loaded count nothing.
 TEST(BrickCacheTest, CountsResidentBytesPerLevel) {
     FakeLoader fake;

@@ -233,7 +233,7 @@ TEST(DicomReaderTest, DifferentRowsAreRejected) {
     expectFolderError(dir.path().string(), "Rows/Columns", "256");
 }
 
-// Issue 16: a slice whose PixelData is short, by its declared length or by the bytes the file
+// A slice whose PixelData is short, by its declared length or by the bytes the file
 // really holds, is refused when the series is opened (every slice is checked before the first
 // is decoded), naming that file; gdcm would otherwise pad it or leave the previous slice's
 // pixels in place.
@@ -434,7 +434,7 @@ std::string sliceCutInMetaHeader(int number) {
     return bytes;
 }
 
-// Issue 16: GDCM runs in the sandboxed child, so its assertion is an error naming the file
+// GDCM runs in the sandboxed child, so its assertion is an error naming the file
 // and quoting GDCM's assertion text, not the end of the process; and the input still makes GDCM
 // abort in process (else this test would no longer test the sandbox).
 TEST(DicomReaderTest, FileThatMakesGdcmAssertIsAnErrorNamingIt) {

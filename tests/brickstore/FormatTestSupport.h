@@ -1,5 +1,5 @@
 #pragma once
-// Shared helpers of the readers' round trips (issue 20): each shared scan, read by the readers
+// Shared helpers of the readers' round trips: each shared scan, read by the readers
 // already trusted, dumped as raw voxels; an independent writer (a Debian Python module, run
 // by /usr/bin/python3) writes them in the format under test; the new reader must then ingest
 // and extract to exactly the source voxels.

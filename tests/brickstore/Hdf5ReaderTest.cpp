@@ -1,7 +1,7 @@
 // openHdf5: every shared scan written by h5py (tests/brickstore/writers/write_hdf5.py) in the
-// layouts issue 20 names (contiguous; chunked, gzip and shuffle; chunks that do not divide the
+// layouts that matter (contiguous; chunked, gzip and shuffle; chunks that do not divide the
 // volume; nested groups; big-endian types) ingests to exactly its voxels; direct reads of every
-// type in every layout, spacing and uneven slice counts; and every bad input of the issue.
+// type in every layout, spacing and uneven slice counts; and every bad input it refuses.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "tests/TestSupport.h"
@@ -54,7 +54,7 @@ SourceSpec hdf5Spec(const std::string& path, const std::string& dataset) {
     return spec;
 }
 
-/// How one shared scan is written: the issue's variants spread over the scans.
+/// How one shared scan is written: the format's variants spread over the scans.
 struct RoundTrip {
     std::string scan;    ///< SharedScan::name
     std::string dataset; ///< where it is stored

@@ -1,4 +1,4 @@
-// Issue 16: the input limits of VolumeSource.h and ingest's memory budget, checked before
+// The input limits of VolumeSource.h and ingest's memory budget, checked before
 // anything is allocated.
 #include "brickstore/Error.h"
 #include "brickstore/Ingest.h"

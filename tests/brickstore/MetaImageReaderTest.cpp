@@ -1,7 +1,7 @@
 // openMetaImage: .mha (LOCAL data) and .mhd (a data file beside it), raw and zlib, every stored
 // type in both byte orders, spacing and origin, HeaderSize, uneven slice reads; the shared
-// scans written by VTK's vtkMetaImageWriter ingest to the same voxels; and every bad input of
-// the issue: too little data, a data file outside the header's folder, NDims 2, an unknown
+// scans written by VTK's vtkMetaImageWriter ingest to the same voxels; and every bad input it
+// refuses: too little data, a data file outside the header's folder, NDims 2, an unknown
 // ElementType, a CompressedDataSize that lies, a zlib payload cut short.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"

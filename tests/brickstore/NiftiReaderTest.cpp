@@ -398,7 +398,7 @@ TEST(NiftiReaderTest, FourDimensionalFileGivesItsFirstVolume) {
 }
 
 } // namespace
-// Issue 16: a non-finite scl_slope or scl_inter is an error naming the file and that field,
+// A non-finite scl_slope or scl_inter is an error naming the file and that field,
 // worded plainly (it used to be read as "no scaling" with a description that ran two type
 // names together).
 TEST(NiftiReaderTest, NonFiniteScalingIsAClearErrorNamingTheField) {

@@ -1,5 +1,5 @@
 // openNrrd: attached and detached headers, raw and gzip data, every stored type in both byte
-// orders, spacing and origin, slice-by-slice reads, and every bad header named in the issue:
+// orders, spacing and origin, slice-by-slice reads, and every bad header it refuses:
 // sizes, types, spacings, truncated or overlong data, data files outside the header's folder.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"

@@ -1,5 +1,5 @@
 // openRaw: every stored type in both byte orders, zstd input (one frame, several, no declared
-// size), slice-by-slice reads, every bad layout or file named in the issue, and a real scan.
+// size), slice-by-slice reads, every bad layout or file it refuses, and a real scan.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"
 #include "tests/TestSupport.h"

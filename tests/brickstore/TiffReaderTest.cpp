@@ -2,7 +2,7 @@
 // LZW and zstd) as multi-page classic and BigTIFF files and as folders of one-slice files, in
 // strips and tiles, uncompressed, LZW, deflate (both codes) and zstd, with predictors and both
 // byte orders, ingests to exactly the source voxels; info() and spacing from the resolution
-// tags and ImageJ's description; and every bad input of the issue is a FormatError naming the
+// tags and ImageJ's description; and every bad input it refuses is a FormatError naming the
 // file (and page) and the field.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"

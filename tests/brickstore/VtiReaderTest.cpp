@@ -1,7 +1,7 @@
 // openVti: appended raw, appended base64 and inline base64 arrays, uncompressed and in
 // vtkZLibDataCompressor blocks, UInt32 and UInt64 headers, both byte orders, extents not at 0,
 // the Scalars array among several, uneven slice reads; the shared scans written by VTK's
-// vtkXMLImageDataWriter ingest to the same voxels; and every bad input of the issue: two
+// vtkXMLImageDataWriter ingest to the same voxels; and every bad input it refuses: two
 // pieces, three components, block sizes past the file, a truncated block, XML that is not well
 // formed or too long.
 #include "brickstore/Error.h"

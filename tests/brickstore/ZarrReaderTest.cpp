@@ -2,7 +2,7 @@
 // both chunk key separators, both byte orders, edge chunks, sparse and deleted chunks, an
 // OME-Zarr image's two levels) ingests to the same voxels; stores made here chunk by chunk
 // check the reader's own paths (the slab, decoding straight into the caller's slices, fill
-// values, OME-NGFF axes, units and transformations); and every bad input the issue names is a
+// values, OME-NGFF axes, units and transformations); and every bad input the reader refuses is a
 // FormatError naming the file and the field.
 #include "brickstore/Error.h"
 #include "brickstore/Readers.h"

@@ -1,5 +1,5 @@
 // The GPU brick pool's counters on scripted access patterns whose hits, uploads, evictions
-// and re-fetches can be counted by hand (issue 7: the host -> GPU tier of the bus model).
+// and re-fetches can be counted by hand (the host -> GPU tier of the bus model).
 #include "render/BrickPool.h"
 #include "RenderTestSupport.h"
 

@@ -1,4 +1,4 @@
-// The converged reference (issue 18): the reference at smaller and smaller steps until halving
+// The converged reference: the reference at smaller and smaller steps until halving
 // the step changes the image by under a tolerance; a tolerance it cannot reach stops at the
 // floor step or the time limit and says so; bad tolerances are refused before any frame.
 #include "render/ConvergedReference.h"

@@ -55,7 +55,7 @@ TEST_P(CpuVersusReference, MatchesTheDoublePrecisionReferenceAndTheGpuFrame) {
     EXPECT_GT(alpha, 0.01 * 128 * 128) << "the view shows almost nothing, so proves nothing";
     // The GPU raycaster draws the same samples: the two agree to rounding.
     test::glContext();
-    Raycaster gpu;
+    GpuRaycaster gpu;
     const Image g = test::gpuFrame(*t, gpu, tf, camera, options());
     const auto cg = compareImages(image, g);
     test::printComparison(scan.name + " CPU vs GPU raycaster", cg);

@@ -1,4 +1,4 @@
-// Leaps below the leaf (issue 21): per-brick chessboard distance maps over cells of 1, 2 and 4
+// Leaps below the leaf: per-brick chessboard distance maps over cells of 1, 2 and 4
 // voxels, from the drawn bricks' voxels (render/FineOccupancy.h). A cell at distance d > 0
 // holds only transparent samples, wherever in it (and a rounding error outside it) a sample
 // falls; the distances are exact (1-Lipschitz, one neighbour nearer); and the CPU raycaster's
@@ -8,8 +8,8 @@
 #include "render/FineOccupancy.h"
 #include "RenderTestSupport.h"
 #include "render/CpuRaycaster.h"
+#include "render/GpuRaycaster.h"
 #include "render/Occupancy.h"
-#include "render/Raycaster.h"
 #include "render/detail/CpuSampling.h"
 
 #include <optional>
@@ -316,9 +316,9 @@ TEST_P(GpuCellsInvariant, GpuFramesWithCellsAreThoseOfTheOctreeAloneOverAnOrbitA
     for (int f = 0; f < 8; ++f)
         path.push_back(Camera::orbit(box, az(rng), el(rng), dist(rng)));
     constexpr std::uint32_t kCells[] = {0, 1, 2, 4}; // 0: the octree alone, the reference
-    std::vector<std::unique_ptr<Raycaster>> raycasters;
+    std::vector<std::unique_ptr<GpuRaycaster>> raycasters;
     for (std::size_t i = 0; i < std::size(kCells); ++i)
-        raycasters.push_back(std::make_unique<Raycaster>());
+        raycasters.push_back(std::make_unique<GpuRaycaster>());
     std::vector<std::uint64_t> samples(std::size(kCells), 0), cellBricks(std::size(kCells), 0);
     for (std::size_t f = 0; f < path.size(); ++f) {
         Image octree;

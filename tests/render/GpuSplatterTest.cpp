@@ -1,4 +1,4 @@
-// The GPU hybrid splatter (issue 6) against the CPU one: the same model, so the same image up
+// The GPU hybrid splatter against the CPU one: the same model, so the same image up
 // to float rounding (early termination off), within the unterminated tail (on), on real scans
 // that draw only splats, both, and only points; a uniform block without holes; and the
 // footprint texture against SplatFootprint::lookup. GL (llvmpipe in CI): small images.

@@ -1,4 +1,4 @@
-// Every CPU-side renderer honours the host cache's budget (issue 16): a frame whose bricks do
+// Every CPU-side renderer honours the host cache's budget: a frame whose bricks do
 // not fit is drawn in front-to-back batches that do, the cache never holds more pinned bytes
 // than the budget (the splatters: than one chunk that fits it), no pin outlives render(), and
 // the image is the one drawn with room for everything, bit for bit (the reference's: the one
@@ -131,7 +131,7 @@ TEST(HostBudget, CpuRaycasterDrawsInBatchesThatFitAndTheSameImage) {
 // the budget holds the view or not; and
 // under a budget the level outgrows, some of the bricks behind cthead's opaque skin are left
 // out. (On the 2.36 GiB mosaic at
-// 512^2: 1100-1300 of 3546, bench/README.md.)
+// 512^2: 1100-1300 of 3546, docs/benchmarks/budgets.md.)
 TEST(HostBudget, CpuRaycasterLeavesOutBricksNoMarchingRayMeetsAndDrawsTheSameImage) {
     auto t = cthead();
     if (!t) return test::missingData("scan cthead");

@@ -1,4 +1,4 @@
-// The hybrid splatter (issue 6) against the CPU reference on real scans, on a uniform block
+// The hybrid splatter against the CPU reference on real scans, on a uniform block
 // (no holes between splats), on a minified checkerboard (aliasing against a supersampled
 // raycaster), and with occlusion culling on and off. No GL.
 #include "render/HybridSplatter.h"

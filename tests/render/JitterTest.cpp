@@ -100,7 +100,7 @@ TEST(JitterGl, GpuRaycasterTakesTheSameJitteredSamples) {
     const Camera c = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
     RenderOptions o = jittered(128);
     o.earlyTermination = false;
-    Raycaster gpu;
+    GpuRaycaster gpu;
     const Image g = test::gpuFrame(*t, gpu, tf, c, o);
     const Image p = cpu(*t, tf, c, o);
     const auto cmp = compareImages(g, p);

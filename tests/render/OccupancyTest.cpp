@@ -1,4 +1,4 @@
-// Per-brick octrees (issue 4), without a GPU: emptiness decided from the stored leaf ranges
+// Per-brick octrees, without a GPU: emptiness decided from the stored leaf ranges
 // alone and never missing a visible value, the ratio threshold and level limit of the
 // traversal, incremental rebuilds equal to full ones, and a corrupt leaf table named.
 #include "render/Occupancy.h"

@@ -1,4 +1,4 @@
-// Sort-last scale-out's rendering core (issue 19): the k-d split of a brick grid into parts,
+// Sort-last scale-out's rendering core: the k-d split of a brick grid into parts,
 // their front-to-back order, their footprints, and the CPU raycaster drawing one part's
 // samples: the parts' frames composited front to back give the one-part frame (within float
 // rounding, measured under 1e-6; early termination's bound with it on), and the parts take
@@ -297,7 +297,7 @@ TEST(PartitionFramesGl, GpuPartsCompositeToTheOnePartFrameWithItsSamples) {
     test::glContext();
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const LevelGeometry g = LevelGeometry::of(*t->store, 0);
-    Raycaster whole, parted;
+    GpuRaycaster whole, parted;
     for (const double az : {30.0, 200.0})
         for (std::uint32_t parts : {2u, 3u}) {
             const Camera cam = Camera::orbit(g.box, az, 20);

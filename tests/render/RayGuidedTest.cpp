@@ -45,8 +45,8 @@ std::uint64_t slotBytes(const TestStore& t) {
 }
 
 /// A pool budget of `slots` bricks of `t`.
-RaycasterConfig budgetOf(const TestStore& t, std::uint64_t slots) {
-    return RaycasterConfig{slots * slotBytes(t)};
+GpuRaycasterConfig budgetOf(const TestStore& t, std::uint64_t slots) {
+    return GpuRaycasterConfig{slots * slotBytes(t)};
 }
 
 struct PlanSize {
@@ -55,7 +55,7 @@ struct PlanSize {
 
 /// What a frame at `camera` plans and what its rays enter, drawn with room for everything.
 PlanSize planSize(TestStore& t, const TransferFunction& tf, const Camera& camera) {
-    Raycaster big({1ull << 30});
+    GpuRaycaster big({1ull << 30});
     FrameStats s;
     test::gpuFrame(t, big, tf, camera, frameOptions(true), &s);
     return {s.bricksVisited - s.bricksConstant, s.bricksEntered};
@@ -71,7 +71,7 @@ void checkOrbit(TestStore& t, const TransferFunction& tf, const std::string& wha
                 what.c_str(), (unsigned long long)size.sampled, (unsigned long long)size.entered);
     ASSERT_LT(size.entered * 10, size.sampled * 8) << "too little is hidden to test deferral";
     const std::uint64_t slots = (size.entered * 3 / 2 + size.sampled) / 2;
-    Raycaster guided(budgetOf(t, slots)), plain(budgetOf(t, slots)), big({1ull << 30});
+    GpuRaycaster guided(budgetOf(t, slots)), plain(budgetOf(t, slots)), big({1ull << 30});
     std::uint64_t uploadsGuided = 0, uploadsPlain = 0, deferred = 0, requested = 0;
     std::uint32_t resumes = 0, passesGuided = 0, passesPlain = 0;
     double worst = 0.0;
@@ -136,7 +136,7 @@ TEST(RayGuided, JumpToTheFarSideAsksForWhatTheLastFrameHid) {
     const Box box = LevelGeometry::of(*t->store, 0).box;
     const PlanSize size = planSize(*t, tf, Camera::orbit(box, 0, 20));
     const std::uint64_t slots = (size.entered * 3 / 2 + size.sampled) / 2;
-    Raycaster guided(budgetOf(*t, slots)), plain(budgetOf(*t, slots));
+    GpuRaycaster guided(budgetOf(*t, slots)), plain(budgetOf(*t, slots));
     FrameStats s;
     for (double az : {0.0, 180.0}) {
         const Camera camera = Camera::orbit(box, az, 20);
@@ -160,7 +160,7 @@ TEST(RayGuided, ANewTransferFunctionStartsWithoutDeferral) {
     const auto bone = TransferFunction::preset("ct-bone", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     const PlanSize size = planSize(*t, skin, Camera::orbit(box, 0, 20));
-    Raycaster guided(budgetOf(*t, (size.entered * 3 / 2 + size.sampled) / 2));
+    GpuRaycaster guided(budgetOf(*t, (size.entered * 3 / 2 + size.sampled) / 2));
     const Camera camera = Camera::orbit(box, 0, 20);
     FrameStats s;
     test::gpuFrame(*t, guided, skin, camera, frameOptions(true), &s);
@@ -177,7 +177,7 @@ TEST(RayGuided, PoolSmallerThanWhatRaysEnterFallsBackToBatches) {
     const auto tf = opaqueSkin(t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     const PlanSize size = planSize(*t, tf, Camera::orbit(box, 0, 20));
-    Raycaster guided(budgetOf(*t, size.entered / 2)), plain(budgetOf(*t, size.entered / 2));
+    GpuRaycaster guided(budgetOf(*t, size.entered / 2)), plain(budgetOf(*t, size.entered / 2));
     const Camera camera = Camera::orbit(box, 0, 20);
     FrameStats s;
     for (int f = 0; f < 2; ++f) {
@@ -196,11 +196,11 @@ TEST(RayGuided, PrefetchSkipsBricksBehindSaturatedRays) {
     const Box box = LevelGeometry::of(*t->store, 0).box;
     const PlanSize size = planSize(*t, tf, Camera::orbit(box, 0, 20));
     const std::uint64_t slots = (size.entered * 3 / 2 + size.sampled) / 2;
-    Raycaster skips(budgetOf(*t, slots)), loadsAll(budgetOf(*t, slots));
+    GpuRaycaster skips(budgetOf(*t, slots)), loadsAll(budgetOf(*t, slots));
     FrameStats s;
     std::uint64_t lastFrame = 0;
     for (double az : {0.0, 4.0}) {
-        for (Raycaster* r : {&skips, &loadsAll})
+        for (GpuRaycaster* r : {&skips, &loadsAll})
             test::gpuFrame(*t, *r, tf, Camera::orbit(box, az, 20), frameOptions(true), &s);
         lastFrame = residentBricks(s);
     }

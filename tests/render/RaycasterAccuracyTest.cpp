@@ -1,5 +1,5 @@
 // The GPU raycaster against the CPU reference, and every acceleration against no
-// acceleration, on the real scans (issue 3, "Accuracy and stability").
+// acceleration, on the real scans (accuracy and stability).
 #include "RenderTestSupport.h"
 
 namespace bc::render {
@@ -25,7 +25,7 @@ TEST_P(GpuVersusReference, MatchesTheDoublePrecisionReferenceAt256) {
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20, 1.0);
     RenderOptions o;
     o.earlyTermination = false;
-    Raycaster raycaster;
+    GpuRaycaster raycaster;
     FrameStats stats;
     const Image gpu = test::gpuFrame(*t, raycaster, tf, camera, o, &stats);
     const Image ref = test::referenceFrame(*t, tf, camera, o);
@@ -63,7 +63,7 @@ TEST(RaycasterSeams, BrickedEqualsSingleBrickOnCthead) {
     ASSERT_EQ(single->store->layout().levels()[0].brickCount(), 1u);
     const auto tf = TransferFunction::preset("ct-bone", bricked->stats);
     const auto tf1 = TransferFunction::preset("ct-bone", single->stats);
-    Raycaster raycaster;
+    GpuRaycaster raycaster;
     for (double az : {0.0, 37.0, 90.0}) {
         const Camera camera =
             Camera::orbit(LevelGeometry::of(*bricked->store, 0).box, az, az == 90.0 ? 0.0 : 25.0);
@@ -86,7 +86,7 @@ TEST(RaycasterOutOfCore, BudgetSmallerThanTheWorkingSetGivesTheSameImage) {
     const auto tf = TransferFunction::preset("ct-skin", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 60, 30);
     RenderOptions o;
-    Raycaster unlimited({256ull << 20}), small({4ull << 20}); // 4 MiB: 44 slots of 36^3 u16
+    GpuRaycaster unlimited({256ull << 20}), small({4ull << 20}); // 4 MiB: 44 slots of 36^3 u16
     FrameStats su, ss;
     const Image a = test::gpuFrame(*t, unlimited, tf, camera, o, &su);
     const Image b = test::gpuFrame(*t, small, tf, camera, o, &ss);
@@ -108,7 +108,7 @@ TEST(RaycasterEarlyTermination, ChangesNoPixelByMoreThanOneMinusThreshold) {
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("ct-skin", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 10, 10);
-    Raycaster raycaster;
+    GpuRaycaster raycaster;
     RenderOptions off;
     off.earlyTermination = false;
     FrameStats sOff;
@@ -134,7 +134,7 @@ TEST(RaycasterBrickSkipping, ChangesNoPixelOnSparseAngiography) {
     auto t = test::ingestSpec(*spec, {32, 2, 8});
     const auto tf = TransferFunction::preset("vessels", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 120, 15);
-    Raycaster plain, skipping; // separate pools, so each frame uploads what it needs
+    GpuRaycaster plain, skipping; // separate pools, so each frame uploads what it needs
     RenderOptions none, bricks;
     none.skip = SkipMode::None;
     bricks.skip = SkipMode::Bricks;

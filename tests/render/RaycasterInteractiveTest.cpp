@@ -13,7 +13,7 @@ TEST(RaycasterInteractive, DrawsACoarserLevelWhenTheViewExceedsTheBudgetAndRepor
     auto t = test::ingestStore(*source, {16, 2, 8});
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30, 20);
-    Raycaster raycaster({1ull << 20}); // 1 MiB: 64 slots of 20^3 u8... fewer than level 0 needs
+    GpuRaycaster raycaster({1ull << 20}); // 1 MiB: 64 slots of 20^3 u8... fewer than level 0 needs
     RenderOptions o;
     o.width = o.height = 96;
     FrameStats full, fast;

@@ -1,4 +1,4 @@
-// Stress cases of issue 3: each test name says what it guards. "No NaN, no holes, no seams":
+// Stress cases of the raycasters: each test name says what it guards. "No NaN, no holes, no seams":
 // every image is finite, agrees with the CPU reference, and a bricked store renders like a
 // single-brick store of the same volume. Each case runs on the GPU raycaster, the CPU
 // raycaster's SIMD march and its scalar loop (the parameter).
@@ -46,7 +46,7 @@ class RaycasterStress : public ::testing::TestWithParam<std::string> {
         FrameStats s;
         Image image;
         if (GetParam() == "gpu") {
-            Raycaster r;
+            GpuRaycaster r;
             image = r.render(*t.store, *t.cache, tf, camera, o, s);
         } else {
             o.simd = GetParam() != "cpu_scalar";

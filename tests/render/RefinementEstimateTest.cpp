@@ -1,4 +1,4 @@
-// The error bound at rest (issue 22, render/RefinementEstimate.h): a frame at rest is refined by
+// The error bound at rest (render/RefinementEstimate.h): a frame at rest is refined by
 // halving the step, and each pass after the first carries an estimate of its PSNR against the
 // converged image, taken from the pass before. On every shared scan and its presets, at the
 // daemon's defaults (jittered ray starts, early termination), these tests draw the passes the

@@ -3,14 +3,14 @@
 // pool large or small (one pass or many); a slice neither uses nor disturbs what whole frames
 // keep (occlusion frustums, ray guidance).
 #include "RenderTestSupport.h"
-#include "render/Raycaster.h"
+#include "render/GpuRaycaster.h"
 
 namespace bc::render {
 namespace {
 
 /// The frame assembled from regions (test::drawnInRegions); each slice says it is one and
 /// defers no brick (ray guidance is whole-frame state).
-Image gpuInRegions(Raycaster& r, test::TestStore& t, const TransferFunction& tf,
+Image gpuInRegions(GpuRaycaster& r, test::TestStore& t, const TransferFunction& tf,
                    const Camera& camera, const RenderOptions& o, std::vector<FrameStats>* parts) {
     std::vector<FrameStats> own;
     std::vector<FrameStats>& stats = parts ? *parts : own;
@@ -40,7 +40,7 @@ TEST(RegionGl, GpuRaycasterDrawsEachPixelOfARegionAsInTheWholeFrame) {
     const std::uint64_t bricks = LevelGeometry::of(*t->store, 0).brickCount();
     for (const std::uint64_t slots : {bricks, std::uint64_t(3)}) {
         SCOPED_TRACE(slots);
-        Raycaster gpu({slots * slotBytes(*t)});
+        GpuRaycaster gpu({slots * slotBytes(*t)});
         FrameStats whole;
         const Image image = gpu.render(*t->store, *t->cache, tf, camera, o, whole);
         std::vector<FrameStats> parts;
@@ -72,9 +72,9 @@ TEST(RegionGl, SlicesLeaveOcclusionFrustumsToWholeFrames) {
     const Box box = LevelGeometry::of(*t->store, 0).box;
     RenderOptions o;
     o.width = o.height = 128; // rays denser than the occupancy cells
-    Raycaster withSlices, without;
+    GpuRaycaster withSlices, without;
     FrameStats s;
-    for (Raycaster* r : {&withSlices, &without})
+    for (GpuRaycaster* r : {&withSlices, &without})
         r->render(*t->store, *t->cache, tf, Camera::orbit(box, 30, 20), o, s);
     gpuInRegions(withSlices, *t, tf, Camera::orbit(box, 120, 20), o, nullptr);
     FrameStats a, b;

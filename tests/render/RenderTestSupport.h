@@ -10,8 +10,8 @@
 #include "render/BrickPlan.h"
 #include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
+#include "render/GpuRaycaster.h"
 #include "render/ImageMetrics.h"
-#include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/TransferFunction.h"
 
@@ -123,7 +123,7 @@ inline std::unique_ptr<TestStore> ingestRealScan(const std::string& name) {
 }
 
 /// GPU frame of a test store.
-inline render::Image gpuFrame(TestStore& t, render::Raycaster& raycaster,
+inline render::Image gpuFrame(TestStore& t, render::GpuRaycaster& raycaster,
                               const render::TransferFunction& tf, const render::Camera& camera,
                               const render::RenderOptions& options,
                               render::FrameStats* statsOut = nullptr) {

@@ -1,4 +1,4 @@
-// The invariant of issue 4: the image with any combination of accelerations equals the image
+// The skipping invariant: the image with any combination of accelerations equals the image
 // with none within max abs 2/255 (early termination keeps its own bound, so it is off on
 // both sides here), over a 72-frame orbit and over 50 random camera jumps, on every real
 // dataset and preset. Small images (64^2) keep llvmpipe fast enough for CI.
@@ -57,10 +57,10 @@ RenderOptions options(SkipMode skip, bool frustums = false) {
 /// every frame against plain. Returns the technique sets' samples summed over the path.
 std::vector<std::uint64_t> checkPath(TestStore& t, const TransferFunction& tf,
                                      const std::vector<Camera>& cameras, const std::string& what) {
-    Raycaster plain;
-    std::vector<std::unique_ptr<Raycaster>> accelerated;
+    GpuRaycaster plain;
+    std::vector<std::unique_ptr<GpuRaycaster>> accelerated;
     for (std::size_t i = 0; i < std::size(kTechniques); ++i)
-        accelerated.push_back(std::make_unique<Raycaster>());
+        accelerated.push_back(std::make_unique<GpuRaycaster>());
     std::vector<std::uint64_t> samples(std::size(kTechniques) + 1, 0);
     std::vector<double> worst(std::size(kTechniques), 0.0);
     std::vector<int> frustumFrames(std::size(kTechniques), 0);
@@ -152,7 +152,7 @@ TEST(OctreeSkipping, LeapsInsideBricksOfSparseAngiographyWithoutChangingAPixel) 
     auto t = test::ingestSpec(*spec, {64, 2, 8});
     const auto tf = TransferFunction::preset("vessels", t->stats);
     const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 120, 15);
-    Raycaster bricksOnly, octree;
+    GpuRaycaster bricksOnly, octree;
     RenderOptions b = options(SkipMode::Bricks), a = options(SkipMode::All);
     b.width = b.height = a.width = a.height = 128;
     FrameStats sb, sa;
@@ -192,7 +192,7 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
     const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     gEdge = 128;
-    Raycaster plain, octree, frustums;
+    GpuRaycaster plain, octree, frustums;
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> az(0, 360), el(-80, 80), dist(0.35, 1.6);
     std::uint64_t sPlain = 0, sOctree = 0, sFrustums = 0;
@@ -267,7 +267,7 @@ TEST(FrustumInvariant, ObjectEnteringFromOutsideThePreviousViewIsNeverLost) {
     test::glContext();
     auto t = test::ingestSpec(spec, {16, 2, 4});
     const auto tf = TransferFunction::preset("ct-bone", t->stats);
-    Raycaster plain, frustums;
+    GpuRaycaster plain, frustums;
     RenderOptions a = options(SkipMode::None), b = options(SkipMode::All, true);
     a.width = a.height = b.width = b.height = 96;
     int used = 0;

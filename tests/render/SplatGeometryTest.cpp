@@ -1,4 +1,4 @@
-// The geometric and numeric core of hybrid forward splatting (issue 6): the exact screen
+// The geometric and numeric core of hybrid forward splatting: the exact screen
 // ellipse of a sphere against its numerically traced silhouette, the corrected footprint
 // index against the exact ray-to-centre distance, and the footprint table against direct
 // evaluation. Worst errors are printed so the figures quoted in the headers can be checked.
@@ -74,7 +74,7 @@ SplatCase makeCase(std::mt19937_64& rng, double thetaRad, double alphaRad) {
     return c;
 }
 
-/// Hundreds of spheres of each kind the issue names: general, near the view axis (exactly on
+/// Hundreds of spheres of each kind that matters: general, near the view axis (exactly on
 /// it included), wide cones (alpha around and beyond 15 deg) and far off the axis.
 std::vector<SplatCase> splatCases(std::size_t perKind) {
     std::mt19937_64 rng(20030601);

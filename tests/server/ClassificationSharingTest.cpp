@@ -1,4 +1,4 @@
-// Derived state is committed once (issue 15): sessions viewing one volume under one transfer
+// Derived state is committed once: sessions viewing one volume under one transfer
 // function share one classification (TF table and per-brick octrees), counted by the daemon's
 // classification_builds_total and held once in host memory.
 #include "ServerTestSupport.h"

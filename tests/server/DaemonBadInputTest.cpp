@@ -1,5 +1,5 @@
-// Every bad input of issue 5, each against one running daemon: the offender gets the Error
-// PROTOCOL.md names (and is closed when it is fatal), and a witness client that connected
+// Every bad input of the protocol's table, each against one running daemon: the offender gets the
+// Error PROTOCOL.md names (and is closed when it is fatal), and a witness client that connected
 // before it still gets frames afterwards.
 #include "ServerTestSupport.h"
 

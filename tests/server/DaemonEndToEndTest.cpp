@@ -8,9 +8,9 @@
 
 #include "../render/RenderTestSupport.h"
 #include "render/CpuRaycaster.h"
+#include "render/GpuRaycaster.h"
 #include "render/GpuSplatter.h"
 #include "render/HybridSplatter.h"
-#include "render/Raycaster.h"
 #include "server/ViewRequest.h"
 
 #include <mutex>
@@ -64,7 +64,7 @@ std::vector<Received> fly(const TestDaemon& d, const ClientPlan& plan, int seed)
 
 /// The frame a fresh renderer draws for the same request.
 std::vector<std::uint8_t> directRender(bc::test::TestStore& t, const Received& r,
-                                       render::Raycaster& gpu, render::CpuRaycaster& cpu,
+                                       render::GpuRaycaster& gpu, render::CpuRaycaster& cpu,
                                        render::HybridSplatter& splat,
                                        render::GpuSplatter& gpuSplat) {
     const auto tf =
@@ -155,7 +155,7 @@ TEST(DaemonEndToEnd, TenConcurrentClientsEachReceiveTheDirectRenderOfTheirReques
     for (std::size_t i = 0; i < plans.size(); ++i) {
         const auto& plan = plans[i];
         ASSERT_EQ(got[i].size(), 4u) << "client " << i;
-        render::Raycaster gpu;
+        render::GpuRaycaster gpu;
         render::CpuRaycaster cpu;
         render::HybridSplatter splat;
         render::GpuSplatter gpuSplat;

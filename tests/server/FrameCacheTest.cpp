@@ -1,4 +1,4 @@
-// The frame cache (issue 21): a second session asking for a view already drawn gets the frame
+// The frame cache: a second session asking for a view already drawn gets the frame
 // drawn before, without a render and with the same bytes; a delta-coded frame is each session's
 // own delta; a change of transfer function, options or store is drawn anew; the cache is held
 // under its byte budget; frames.cache_mb = 0 turns it off.

@@ -1,4 +1,4 @@
-// The metrics brickcastd exports (issue 7): the Prometheus text format and histograms on
+// The metrics brickcastd exports: the Prometheus text format and histograms on
 // their own; then a daemon's counters against a scripted path whose misses can be counted
 // by hand, the same numbers through GET /metrics and the Stats message, and bad scrapes
 // answered with a status while a client keeps getting frames.

@@ -1,4 +1,4 @@
-// Prefetch (issue 7): while the render thread is idle, the bricks of each GPU session's
+// Prefetch: while the render thread is idle, the bricks of each GPU session's
 // predicted next view that the pool lacks are uploaded ahead of need. A close-up orbit that
 // brings new bricks into view every frame, with think time between frames: with prefetch on,
 // frames wait for far fewer uploads, and every frame is the one drawn without it.

@@ -1,6 +1,6 @@
-// The browser viewer's address (issue 17): the embedded files and nothing else over HTTP, and
+// The browser viewer's address: the embedded files and nothing else over HTTP, and
 // the protocol over WebSocket as one more transport of the same sessions. Every piece of bad
-// input of the issue's list ends only the connection that sent it: a witness WebSocket
+// input tested below ends only the connection that sent it: a witness WebSocket
 // session and a witness TCP client keep being answered after each.
 #include "WebTestSupport.h"
 

@@ -1,4 +1,4 @@
-// Nothing that arrives on the wire names a file (issue 15). Every hostile preset string and
+// Nothing that arrives on the wire names a file. Every hostile preset string and
 // every bad set of points gets an Error that names the field and no path; a folder of sentinel
 // files, watched with inotify while the hostile names point into it, sees no open; a witness
 // client that connected first gets exactly the frame it got before.

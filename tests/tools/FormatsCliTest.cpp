@@ -1,6 +1,6 @@
-// `brickcast ingest` on the formats of issue 20, end to end: the dispatch by extension and
-// folder content, --dataset (HDF5), --level (OME-Zarr), --spacing over a TIFF's own, --stats.
-// One small volume written by the independent writers (tests/tools/writers/
+// `brickcast ingest` on the TIFF, Zarr, HDF5, MetaImage and .vti formats, end to end: the dispatch
+// by extension and folder content, --dataset (HDF5), --level (OME-Zarr), --spacing over a TIFF's
+// own, --stats. One small volume written by the independent writers (tests/tools/writers/
 // write_cli_inputs.py: h5py, zarr, tifffile, VTK) must ingest and extract to its raw bytes.
 #include "tests/TestSupport.h"
 

@@ -1,4 +1,4 @@
-// Issue 16: hostile inputs fail fast, in bounded memory, naming the file and the field. Each
+// Hostile inputs fail fast, in bounded memory, naming the file and the field. Each
 // damaged input is made in a temp folder from a real scan and ingested by the real `brickcast`
 // under a 4 GiB address-space limit; it must fail within 10 s. Also: SIGTERM during an ingest
 // removes the partial store, and a stale partial file of a killed ingest is reported.
@@ -258,7 +258,7 @@ TEST(HostileInput, DicomSliceCutShortFails) {
     EXPECT_TRUE(contains(r.out.text, "truncated")) << r.out.text;
 }
 
-// Issue 16: a slice cut inside its file meta group makes Debian's GDCM assert (abort); GDCM
+// A slice cut inside its file meta group makes Debian's GDCM assert (abort); GDCM
 // runs in the sandboxed child, so ingest fails with a short error naming that file; GDCM's
 // assertion text is in that error line only, not printed above it.
 TEST(HostileInput, DicomSliceThatMakesGdcmAssertFailsNamingIt) {

@@ -66,7 +66,7 @@ TEST(LoadtestCli, ClientsSharingAPathAskForViewsOfTheirOwn) {
     EXPECT_NE(out.find("Server: 9 frames, 0 from the frame cache"), std::string::npos) << out;
 }
 
-// Frames on a budget (issue 22): clients fly in continuous mode under a frame-time target, then
+// Frames on a budget: clients fly in continuous mode under a frame-time target, then
 // rest until a refined pass's estimate reaches the bound, and each such pass is measured
 // against the true image the server draws.
 TEST(LoadtestCli, AdaptiveClientsRestUntilTheBoundAndThePassIsMeasured) {

@@ -23,7 +23,8 @@ bool contains(const std::string& text, const std::string& part) {
     return text.find(part) != std::string::npos;
 }
 
-/// The whole `brickcast` process limited to 3 GiB of address space (the bound).
+/// The whole `brickcast` process limited to 3 GiB of address space (what a hostile store may
+/// cost at most).
 const std::string kLimited = "prlimit --as=3221225472 ";
 
 TEST(StoreFaultCli, RenderReportsACorruptLeafTableNamingTheBrickAndStore) {

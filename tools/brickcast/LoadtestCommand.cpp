@@ -1,4 +1,4 @@
-// brickcast loadtest: N clients against a running brickcastd on loopback (issue 7). Each
+// brickcast loadtest: N clients against a running brickcastd on loopback. Each
 // client flies its own camera path (round robin over --paths):
 //   orbit     1 degree a frame about the volume (the slow orbit of the bus-model benchmark)
 //   zoom      from 2.5 to 0.4 times the framing distance over the run, slowly turning
@@ -16,7 +16,7 @@
 // uploaded over bytes of distinct bricks (uploads that were not re-fetches). Per path and
 // overall: frames, frames/s, latency p50/p99, bytes a frame. --csv writes every frame.
 //
-// Frames on a budget (issue 22): --quality adaptive flies in continuous mode, each camera's
+// Frames on a budget: --quality adaptive flies in continuous mode, each camera's
 // frame awaited before the next camera is sent, as a viewer's drag; --interactive-ms sets the
 // session's frame-time target (SetFrameBudget). With --rest-psnr DB each client, after its
 // flight, rests: the time from its last camera to the refined pass whose estimated PSNR

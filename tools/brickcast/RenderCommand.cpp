@@ -9,10 +9,10 @@
 #include "render/ConvergedReference.h"
 #include "render/CpuRaycaster.h"
 #include "render/EglContext.h"
+#include "render/GpuRaycaster.h"
 #include "render/GpuSplatter.h"
 #include "render/HybridSplatter.h"
 #include "render/Image.h"
-#include "render/Raycaster.h"
 #include "render/ReferenceRenderer.h"
 #include "render/Renderer.h"
 #include "render/RendererChoice.h"
@@ -301,7 +301,7 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
     std::unique_ptr<render::Renderer> drawer;
     if (o.renderer == "gpu") {
         context = std::make_unique<render::EglContext>();
-        drawer = std::make_unique<render::Raycaster>();
+        drawer = std::make_unique<render::GpuRaycaster>();
     } else {
         drawer = std::make_unique<render::CpuRaycaster>();
     }
@@ -504,8 +504,8 @@ void runRender(const RenderCliOptions& o) {
                        ", " + std::to_string(std::thread::hardware_concurrency()) + " threads)";
             };
         } else {
-            auto raycaster =
-                std::make_shared<render::Raycaster>(render::RaycasterConfig{o.gpuBudgetMb << 20});
+            auto raycaster = std::make_shared<render::GpuRaycaster>(
+                render::GpuRaycasterConfig{o.gpuBudgetMb << 20});
             draw = [&, raycaster](render::FrameStats& s) {
                 return raycaster->render(*store, *cache, tf, camera, options, s);
             };

@@ -55,7 +55,7 @@ export class FrameStats {
 /**
  * Divisors of the edges of an interactive frame the server sends unscaled (RenderOptions flags
  * bit 0): 2 (half of each edge, rounded up) without a frame-time budget, any of them under one
- * (frames.interactive_ms, server/FrameBudget.h).
+ * (frames.interactive_ms, server/InteractiveBudget.h).
  */
 export const INTERACTIVE_DIVISORS = Object.freeze([1, 2, 3, 4, 6, 8]);
 

@@ -1,8 +1,8 @@
-// The CPU raycaster under the host budget on a 2.36 GiB volume (label "slow", not run by CI;
-// issue 16): the shared pancreas DICOM series mosaicked 3x3x4 (1536x1536x536 i16), rendered
-// at 512^2 by the real `brickcast` with --host-budget-mb 256 and 4096. The peak anonymous
-// memory (RssAnon, polled every 2 ms; the mapped store is file memory and not counted) stays
-// within the budget plus the stated overhead, and the images are the same bytes.
+// The CPU raycaster under the host budget on a 2.36 GiB volume (label "slow", not run by CI): the
+// shared pancreas DICOM series mosaicked 3x3x4 (1536x1536x536 i16), rendered at 512^2 by the real
+// `brickcast` with --host-budget-mb 256 and 4096. The peak anonymous memory (RssAnon, polled every
+// 2 ms; the mapped store is file memory and not counted) stays within the budget plus the stated
+// overhead, and the images are the same bytes.
 #include "tests/TestSupport.h"
 
 #include <chrono>
@@ -17,8 +17,8 @@ namespace {
 // Measured on this store at 512^2 with a 1 MiB budget (one brick per batch): 72 MiB = the
 // process with the store's index (9 MiB), the classification's octree tables (46 MiB: 5184
 // bricks x 512 leaves x 17 B), the rays' state between batches and the image (17 MiB: 52 +
-// 16 B per pixel), the cache's spare buffers (at most 8 bricks, 5 MiB) and the rest; since
-// issue 21 also the classification's cell maps (FineOccupancy's pool, at most 64 MiB: 324 MiB
+// 16 B per pixel), the cache's spare buffers (at most 8 bricks, 5 MiB) and the rest; and
+// the classification's cell maps (FineOccupancy's pool, at most 64 MiB: 324 MiB
 // peak with --cells 0, 374-395 MiB with them at 256 MiB). Stated with room for other builds.
 constexpr long kFixedOverheadMiB = 160;
 // Bricks the cache evicts are reused for its next loads (CacheCore::mSpare): freed, they stayed

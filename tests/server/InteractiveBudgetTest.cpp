@@ -1,8 +1,8 @@
-// Interactive frames on a time budget (issue 22, server/FrameBudget.h): the level and scale of a
+// Interactive frames on a time budget (server/InteractiveBudget.h): the level and scale of a
 // moving camera's frames follows the time its frames take. The controller is driven here by
 // frame times from a cost model of its own (a fixed part and a part per drawn pixel, as the
 // raycasters' frames have), so that what it decides is checked exactly, not timed.
-#include "server/FrameBudget.h"
+#include "server/InteractiveBudget.h"
 #include "ServerTestSupport.h"
 #include "server/ViewRequest.h"
 

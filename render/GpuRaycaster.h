@@ -27,17 +27,17 @@ struct LevelGeometry;
 struct BrickPlan;
 struct TransferFunctionTable;
 
-struct RaycasterConfig {
+struct GpuRaycasterConfig {
     std::uint64_t gpuBudgetBytes = 512ull << 20; ///< brick pool bytes (of a pool of its own)
 };
 
-class Raycaster final : public Renderer, public GpuResidency {
+class GpuRaycaster final : public Renderer, public GpuResidency {
   public:
     /// @throw RenderError if the shaders do not build on this context.
-    explicit Raycaster(const RaycasterConfig& config = {});
-    ~Raycaster() override;
-    Raycaster(const Raycaster&) = delete;
-    Raycaster& operator=(const Raycaster&) = delete;
+    explicit GpuRaycaster(const GpuRaycasterConfig& config = {});
+    ~GpuRaycaster() override;
+    GpuRaycaster(const GpuRaycaster&) = delete;
+    GpuRaycaster& operator=(const GpuRaycaster&) = delete;
 
     std::string_view name() const override { return "gpu"; }
     /// Renders one frame of the scene (bricks come through its cache). Fills `stats`.
@@ -122,7 +122,7 @@ class Raycaster final : public Renderer, public GpuResidency {
                               const TransferFunctionTable& table, const ViewBasis& view,
                               const RenderOptions& options);
 
-    RaycasterConfig mConfig;
+    GpuRaycasterConfig mConfig;
     std::unique_ptr<Gpu> mGpu;
     std::shared_ptr<BrickPool> mPool;
     std::shared_ptr<BrickPool> mSharedPool;

@@ -1,12 +1,12 @@
 #pragma once
-// Interactive frames on a time budget (issue 22): while a camera moves, the daemon draws each
+// Interactive frames on a time budget: while a camera moves, the daemon draws each
 // frame at a pyramid level and at the requested size divided by a whole number (1, 2, 3, 4, 6,
 // 8), scaled back up, choosing both so that the frame is expected to take at most its share of
 // `[frames] interactive_ms`.
 //
 // What is given up first: image scale, then level. On the shared scans a quarter-size frame at
 // level 0 is both faster and closer to the converged image than a full-size frame of level 1
-// (README, "Frames on a budget"): a coarser level moves the surfaces the transfer function
+// (docs/benchmarks/budgets.md): a coarser level moves the surfaces the transfer function
 // picks out, a smaller image only blurs them. So the candidates are tried level by level, finest
 // first, and within a level largest image first; the first expected within the target is drawn,
 // except that the level drawn last is kept, at its smallest image, while that is expected within

@@ -1,4 +1,4 @@
-#include "render/Raycaster.h"
+#include "render/GpuRaycaster.h"
 
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
@@ -37,7 +37,7 @@ constexpr int kMaxRequestRounds = 6;
 
 } // namespace
 
-struct Raycaster::Gpu {
+struct GpuRaycaster::Gpu {
     gl::Program program;
     gl::VertexArray vao;
     gl::Texture tf;
@@ -95,7 +95,7 @@ struct Raycaster::Gpu {
     }
 };
 
-Raycaster::Raycaster(const RaycasterConfig& config)
+GpuRaycaster::GpuRaycaster(const GpuRaycasterConfig& config)
     : mConfig(config), mGpu(std::make_unique<Gpu>()) {
     mGpu->program = detail::buildShaderProgram(detail::ShaderProgram::Raycast);
     GLuint vao = 0;
@@ -108,21 +108,21 @@ Raycaster::Raycaster(const RaycasterConfig& config)
     gl::glCheck("creating the raycaster");
 }
 
-Raycaster::~Raycaster() = default;
+GpuRaycaster::~GpuRaycaster() = default;
 
-void Raycaster::setGpuBudgetBytes(std::uint64_t budgetBytes) {
+void GpuRaycaster::setGpuBudgetBytes(std::uint64_t budgetBytes) {
     if (budgetBytes == mConfig.gpuBudgetBytes) return;
     mConfig.gpuBudgetBytes = budgetBytes;
     mPool.reset();
 }
 
-void Raycaster::setSharedPool(std::shared_ptr<BrickPool> pool) {
+void GpuRaycaster::setSharedPool(std::shared_ptr<BrickPool> pool) {
     if (pool == mSharedPool) return;
     mSharedPool = std::move(pool);
     mPool.reset();
 }
 
-void Raycaster::ensurePool(const brickstore::BrickStore& store) {
+void GpuRaycaster::ensurePool(const brickstore::BrickStore& store) {
     const auto type = store.info().volume.type;
     const std::uint32_t edge = store.layout().storedEdge();
     if (mSharedPool) {
@@ -144,9 +144,9 @@ void Raycaster::ensurePool(const brickstore::BrickStore& store) {
     mPoolStorePath = store.path();
 }
 
-std::uint32_t Raycaster::chooseLevel(const brickstore::BrickStore& store,
-                                     const TransferFunctionTable& table, const ViewBasis& view,
-                                     const RenderOptions& options) {
+std::uint32_t GpuRaycaster::chooseLevel(const brickstore::BrickStore& store,
+                                        const TransferFunctionTable& table, const ViewBasis& view,
+                                        const RenderOptions& options) {
     const auto levels = std::uint32_t(store.layout().levels().size());
     std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     if (!options.interactive) return level;
@@ -234,10 +234,10 @@ struct BatchPins {
 
 } // namespace
 
-std::vector<std::uint64_t> Raycaster::fillBatch(const BrickPlan& plan, std::size_t& next,
-                                                std::uint64_t levelFirst,
-                                                brickstore::BrickCache& cache,
-                                                std::vector<std::int32_t>& pages) {
+std::vector<std::uint64_t> GpuRaycaster::fillBatch(const BrickPlan& plan, std::size_t& next,
+                                                   std::uint64_t levelFirst,
+                                                   brickstore::BrickCache& cache,
+                                                   std::vector<std::int32_t>& pages) {
     const TexelMapping mapping = mPool->texelMapping();
     std::vector<std::uint64_t> batch;
     for (; next < plan.drawn.size(); ++next) {
@@ -263,7 +263,7 @@ std::vector<std::uint64_t> Raycaster::fillBatch(const BrickPlan& plan, std::size
     return batch;
 }
 
-void Raycaster::drawPass(int pass) {
+void GpuRaycaster::drawPass(int pass) {
     const GLuint program = mGpu->program.get();
     glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[(pass + 1) % 2].get());
     glBindTextureUnit(2, mGpu->accum[pass % 2].get());
@@ -275,8 +275,8 @@ void Raycaster::drawPass(int pass) {
     gl::glCheck("raycasting a batch");
 }
 
-Image Raycaster::readBack(int passes, const PixelRect& region, std::uint32_t imageHeight,
-                          bool clamp, FrameStats& stats) {
+Image GpuRaycaster::readBack(int passes, const PixelRect& region, std::uint32_t imageHeight,
+                             bool clamp, FrameStats& stats) {
     const std::uint32_t width = region.width, height = region.height;
     Image image(width, height);
     std::vector<float> rows(std::size_t(width) * height * 4);
@@ -299,7 +299,7 @@ Image Raycaster::readBack(int passes, const PixelRect& region, std::uint32_t ima
     return image;
 }
 
-void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount, bool feedback) {
+void GpuRaycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount, bool feedback) {
     const GLuint program = mGpu->program.get();
     if (mGpu->feedbackBricks != brickCount || !mGpu->feedback) {
         mGpu->feedback = gl::createBuffer();
@@ -342,10 +342,10 @@ void Raycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount, bool f
     glViewport(0, 0, GLsizei(mGpu->width), GLsizei(mGpu->height));
 }
 
-void Raycaster::uploadCells(const Scene& scene, const FrameClassification& classified,
-                            const RenderOptions& options, const BrickPlan& plan,
-                            const std::vector<std::size_t>& deferred, std::uint64_t brickCount,
-                            FrameStats& stats) {
+void GpuRaycaster::uploadCells(const Scene& scene, const FrameClassification& classified,
+                               const RenderOptions& options, const BrickPlan& plan,
+                               const std::vector<std::size_t>& deferred, std::uint64_t brickCount,
+                               FrameStats& stats) {
     const GLuint program = mGpu->program.get();
     const OccupancyTrees* occupancy = classified.occupancy;
     FineOccupancy* fine = occupancy && occupancy->depth() > 0 && classified.classification
@@ -438,7 +438,7 @@ void Raycaster::uploadCells(const Scene& scene, const FrameClassification& class
     gl::glCheck("uploading distance maps");
 }
 
-void Raycaster::uploadOccupancy(const FrameClassification& classified) {
+void GpuRaycaster::uploadOccupancy(const FrameClassification& classified) {
     const OccupancyTrees* occupancy = classified.occupancy;
     if (!occupancy || occupancy->depth() == 0) return; // brick roots only, no bits
     const Classification& c = *classified.classification;
@@ -462,9 +462,9 @@ void Raycaster::uploadOccupancy(const FrameClassification& classified) {
     mGpu->occupancyId = c.occupancyId();
 }
 
-std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint32_t level,
-                                  const TransferFunctionTable& table,
-                                  const RenderOptions& options) const {
+std::uint64_t GpuRaycaster::sceneKey(const brickstore::BrickStore& store, std::uint32_t level,
+                                     const TransferFunctionTable& table,
+                                     const RenderOptions& options) const {
     // What the first hits depend on: the volume, the level, which values are visible, the
     // skipping that decides "occupied", and the sample lattice.
     std::uint64_t h = 1469598103934665603ull;
@@ -488,9 +488,9 @@ std::uint64_t Raycaster::sceneKey(const brickstore::BrickStore& store, std::uint
     return h;
 }
 
-bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, std::uint64_t scene,
-                                 const RenderOptions& options, const OccupancyTrees* octree,
-                                 FrameStats& stats) {
+bool GpuRaycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
+                                    std::uint64_t scene, const RenderOptions& options,
+                                    const OccupancyTrees* octree, FrameStats& stats) {
     if (!options.occlusionFrustums) {
         if (mGpu->occlusion) mGpu->occlusion->invalidate();
         stats.occlusionReason = "off";
@@ -515,13 +515,13 @@ bool Raycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, 
 
 /// The level a frame of `scene` draws at and what it classifies through (chooseLevel plans
 /// with the table of the asked level: tables do not depend on the level).
-struct Raycaster::Prepared {
+struct GpuRaycaster::Prepared {
     std::uint32_t level = 0;
     FrameClassification classified;
 };
 
-Raycaster::Prepared Raycaster::prepare(const Scene& scene, const View& view,
-                                       const RenderOptions& options, FrameStats& stats) {
+GpuRaycaster::Prepared GpuRaycaster::prepare(const Scene& scene, const View& view,
+                                             const RenderOptions& options, FrameStats& stats) {
     options.validate();
     checkView(view, options, true, true);
     refusePreintegration(options, "GPU raycaster");
@@ -541,8 +541,8 @@ Raycaster::Prepared Raycaster::prepare(const Scene& scene, const View& view,
     return p;
 }
 
-std::uint32_t Raycaster::prefetch(const Scene& scene, const View& view,
-                                  const RenderOptions& options, std::uint32_t maxUploads) {
+std::uint32_t GpuRaycaster::prefetch(const Scene& scene, const View& view,
+                                     const RenderOptions& options, std::uint32_t maxUploads) {
     FrameStats ignored;
     const Prepared p = prepare(scene, view, options, ignored);
     const brickstore::BrickStore& store = scene.store;
@@ -574,8 +574,8 @@ std::uint32_t Raycaster::prefetch(const Scene& scene, const View& view,
     return uploaded;
 }
 
-Image Raycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
-                        FrameStats& stats) {
+Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
+                           FrameStats& stats) {
     const auto frameStart = Clock::now();
     stats = FrameStats{};
     const Prepared p = prepare(scene, view, options, stats);
@@ -675,9 +675,9 @@ Image Raycaster::render(const Scene& scene, const View& view, const RenderOption
     return image;
 }
 
-void Raycaster::drawBatches(const BrickPlan& plan, std::uint64_t levelFirst,
-                            brickstore::BrickCache& cache, std::vector<std::int32_t>& pages,
-                            int& pass, FrameStats& stats) {
+void GpuRaycaster::drawBatches(const BrickPlan& plan, std::uint64_t levelFirst,
+                               brickstore::BrickCache& cache, std::vector<std::int32_t>& pages,
+                               int& pass, FrameStats& stats) {
     std::size_t next = 0;
     const int first = pass;
     do { // one batch: consecutive bricks of the front-to-back order while slots last
@@ -696,9 +696,9 @@ void Raycaster::drawBatches(const BrickPlan& plan, std::uint64_t levelFirst,
     stats.batches = std::uint32_t(pass - first);
 }
 
-bool Raycaster::drawGuided(const BrickPlan& plan, const std::vector<std::size_t>& deferred,
-                           std::uint64_t levelFirst, brickstore::BrickCache& cache,
-                           std::vector<std::int32_t>& pages, int& pass, FrameStats& stats) {
+bool GpuRaycaster::drawGuided(const BrickPlan& plan, const std::vector<std::size_t>& deferred,
+                              std::uint64_t levelFirst, brickstore::BrickCache& cache,
+                              std::vector<std::int32_t>& pages, int& pass, FrameStats& stats) {
     // One batch of everything but the deferred bricks, or nothing (the caller draws batches).
     BrickPlan now;
     now.drawn.reserve(plan.drawn.size() - deferred.size());

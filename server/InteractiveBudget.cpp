@@ -1,4 +1,4 @@
-#include "server/FrameBudget.h"
+#include "server/InteractiveBudget.h"
 
 #include <algorithm>
 #include <cmath>
