@@ -1,6 +1,7 @@
-# Embeds the browser viewer (web/: .html .js .css .svg .json, not web/test/) and the
-# transfer-function presets (configs/tf/*.json, served as /presets.json) into bc_server as raw
-# string literals: the daemon serves exactly these paths and never reads a file for a URL.
+# Embeds the browser viewer (web/: .html .js .css .svg .json, not web/test/ nor the package.json
+# that tells Node its .js are ES modules) and the transfer-function presets (configs/tf/*.json,
+# served as /presets.json) into bc_server as raw string literals: the daemon serves exactly these
+# paths and never reads a file for a URL.
 #
 # Included from server/CMakeLists.txt: adds a build step that regenerates WebAssets.cpp in the
 # build tree whenever an asset changes (a new file is picked up by the glob at configure time).
@@ -61,7 +62,7 @@ endif()
 set(BC_WEB_DIR ${PROJECT_SOURCE_DIR}/web)
 file(GLOB_RECURSE BC_WEB_FILES CONFIGURE_DEPENDS ${BC_WEB_DIR}/*.html ${BC_WEB_DIR}/*.js
      ${BC_WEB_DIR}/*.css ${BC_WEB_DIR}/*.svg ${BC_WEB_DIR}/*.json)
-list(FILTER BC_WEB_FILES EXCLUDE REGEX "/web/test/")
+list(FILTER BC_WEB_FILES EXCLUDE REGEX "/web/test/|/web/package\\.json$")
 file(GLOB BC_WEB_PRESETS CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/configs/tf/*.json)
 set(BC_WEB_ASSETS_CPP ${CMAKE_CURRENT_BINARY_DIR}/WebAssets.cpp)
 add_custom_command(

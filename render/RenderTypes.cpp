@@ -1,5 +1,6 @@
 #include "render/RenderTypes.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -79,6 +80,45 @@ void OcclusionConfig::validate() const {
                                     std::to_string(blockPixels));
     if (probeEvery < 2)
         throw std::invalid_argument("occlusion probe interval must be at least 2 frames");
+}
+
+void addSlice(FrameStats& frame, const FrameStats& slice) {
+    FrameStats& f = frame;
+    const FrameStats& s = slice;
+    f.samples += s.samples;
+    f.oracleSamples += s.oracleSamples;
+    f.bricksCulled = std::min(f.bricksCulled, s.bricksCulled);
+    f.bricksSkipped = std::max(f.bricksSkipped, s.bricksSkipped);
+    f.bricksVisited = std::max(f.bricksVisited, s.bricksVisited);
+    f.bricksConstant = std::max(f.bricksConstant, s.bricksConstant);
+    f.bricksUploaded += s.bricksUploaded;
+    f.bytesUploaded += s.bytesUploaded;
+    f.batches += s.batches;
+    f.bricksEntered = std::max(f.bricksEntered, s.bricksEntered);
+    f.bricksDeferred += s.bricksDeferred;
+    f.bricksRequested += s.bricksRequested;
+    f.resumePasses += s.resumePasses;
+    f.guidedFallback = f.guidedFallback || s.guidedFallback;
+    f.bricksUnreached += s.bricksUnreached;
+    f.hostKeptBytes += s.hostKeptBytes;
+    f.octreeLeaps += s.octreeLeaps;
+    f.octreeBricksRebuilt += s.octreeBricksRebuilt;
+    f.octreeRebuildMs += s.octreeRebuildMs;
+    f.cellBricksBuilt += s.cellBricksBuilt;
+    f.cellBuildMs += s.cellBuildMs;
+    f.cellBricks = std::max(f.cellBricks, s.cellBricks);
+    if (s.occlusionUsed && !f.occlusionUsed) {
+        f.occlusionUsed = true;
+        f.occlusionReason = s.occlusionReason;
+    }
+    f.occlusionFrustums += s.occlusionFrustums;
+    f.occlusionTriangles += s.occlusionTriangles;
+    f.occlusionBuildMs += s.occlusionBuildMs;
+    f.samplesSavedByStart += s.samplesSavedByStart;
+    f.uploadMs += s.uploadMs;
+    f.renderMs += s.renderMs;
+    f.readbackMs += s.readbackMs;
+    f.totalMs += s.totalMs;
 }
 
 } // namespace bc::render

@@ -20,7 +20,7 @@ enum class SkipMode { None, Bricks, All };
 SkipMode parseSkipMode(const std::string& text);
 const char* toString(SkipMode mode);
 
-/// Occlusion-frustum ray starts (issue 4; render/OCCLUSION.md).
+/// Occlusion-frustum ray starts (render/OCCLUSION.md).
 struct OcclusionConfig {
     std::uint32_t blockPixels = 4; ///< k: occlusion blocks of k x k pixels
     /// Policy, measured: a frame with frustums that takes longer than the last frame without
@@ -224,5 +224,13 @@ struct FrameStats {
     /// empty when nobody did.
     std::string renderer, rendererChoice;
 };
+
+/// Adds to `frame` the statistics of `slice`: a further region of the same frame, drawn by
+/// another call of the same renderer (the daemon draws long frames in slices). Work adds up
+/// (samples, loads, uploads, deferrals, passes, leaps, frustums, times); each slice plans the
+/// bricks its own rays reach, so a count of bricks (visited, skipped, constant, entered, cells)
+/// is the largest of one slice, a lower bound of the frame's (slices share bricks), and culled
+/// the smallest; a flag holds when it held for any slice.
+void addSlice(FrameStats& frame, const FrameStats& slice);
 
 } // namespace bc::render

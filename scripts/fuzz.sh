@@ -7,12 +7,14 @@
 # `BUILD/fuzz/TARGET/TARGET_fuzz FILE`.
 #
 #   scripts/fuzz.sh TARGET [SECONDS] [BUILD_DIR]     (defaults: 30, ./build)
+#   scripts/fuzz.sh TARGET build [BUILD_DIR]         (build it only: the CMake build does)
 #   scripts/fuzz.sh list                             (the targets)
 #
 # Targets: protocol_decoder, nrrd_header, nifti_header, dicom, metaimage, vti, brick_store,
-# frame_codec, daemon_config. Each is compiled from the sources it needs only (object files
-# cached by ccache when present), and rebuilt when one of its module's sources or headers is
-# newer.
+# frame_codec, daemon_config. Each is compiled from the sources it needs only, into object
+# files that the targets share (BUILD/fuzz/obj; also cached by ccache when present), and
+# rebuilt when one of its module's sources or headers is newer. The build (tests/CMakeLists.txt)
+# builds every target, so that the tests only fuzz.
 # The corpus (BUILD/fuzz/TARGET/corpus) is kept between runs and re-seeded each time from
 # the real scans (BC_SHARED_DATA_DIR, default ../shared/data) and configs/. CTest runs every
 # target for 30 s (label fuzz); a long run is e.g. `scripts/fuzz.sh nifti_header 600 build`.
@@ -28,7 +30,8 @@ seconds=${2:-30}
 src=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 build=$(mkdir -p "${3:-$src/build}" && cd "${3:-$src/build}" && pwd)
 out=$build/fuzz/$target
-mkdir -p "$out/corpus" "$out/obj"
+objdir=$build/fuzz/obj
+mkdir -p "$out/corpus" "$objdir"
 
 cxx=${CXX_FUZZ:-}
 if [[ -z $cxx ]]; then
@@ -144,7 +147,7 @@ daemon_config)
     read -ra toml_libs <<<"$(pkg-config --libs tomlplusplus)"
     cflags+=("${toml_cflags[@]}")
     libs+=("${toml_libs[@]}")
-    # The TIFF, HDF5, Zarr (blosc) and .vti (expat) readers of issue 20.
+    # The TIFF, HDF5, Zarr (blosc) and .vti (expat) readers (their libraries).
     read -ra reader_cflags <<<"$(pkg-config --cflags hdf5 libtiff-4 blosc expat)"
     read -ra reader_libs <<<"$(pkg-config --libs hdf5 libtiff-4 blosc expat)"
     cflags+=("${reader_cflags[@]/#-I/-isystem}")
@@ -177,18 +180,32 @@ stale() {
 
 flags=(-std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined
     -Wall -Wextra -Wno-unused-parameter -I"$src" "${cflags[@]}")
+# The newest header of the target's folders: a shared object older than it is compiled again.
+newest_header=
+for d in "${folders[@]}"; do
+    for f in "$d"/*.h "$d"/detail/*.h; do
+        [[ -e $f ]] && [[ -z $newest_header || $f -nt $newest_header ]] && newest_header=$f
+    done
+done
 if stale; then
     echo "building $fuzzer with $cxx"
     objects=()
     for s in "${sources[@]}" "$harness_src"; do
-        o=$out/obj/$(echo "${s#"$out"/}" | tr / _).o
-        # One object per source (cached by ccache); -fsanitize=fuzzer at link time brings
+        o=$objdir/$(echo "${s#"$build"/}" | tr / _).o
+        # One object per source, shared by the targets that use it (the flags are the same but
+        # for include folders); written under another name and renamed, so that two targets
+        # built at once never link half an object. -fsanitize=fuzzer at link time brings
         # libFuzzer's main.
-        "${launcher[@]}" "$cxx" "${flags[@]}" -c "$s" -o "$o"
+        if [[ ! -e $o || $s -nt $o || (-n $newest_header && $newest_header -nt $o) ]]; then
+            "${launcher[@]}" "$cxx" "${flags[@]}" -c "$s" -o "$o.$$.tmp"
+            mv -f "$o.$$.tmp" "$o"
+        fi
         objects+=("$o")
     done
-    "$cxx" "${flags[@]}" "${objects[@]}" "${libs[@]}" -o "$fuzzer"
+    "$cxx" "${flags[@]}" "${objects[@]}" "${libs[@]}" -o "$fuzzer.$$.tmp"
+    mv -f "$fuzzer.$$.tmp" "$fuzzer"
 fi
+[[ $seconds == build ]] && exit 0
 
 echo "fuzzing $target for ${seconds}s"
 # BC_FUZZ_SEED_DIR: the binary writes its seeds into the corpus first.

@@ -18,10 +18,11 @@ packages=(
   libopenmpi-dev openmpi-bin                          # OpenMPI: sort-last scale-out over ranks (mpirun)
   libboost-dev libtomlplusplus-dev libturbojpeg0-dev  # brickcastd: Asio + Beast (network, HTTP, WebSocket), config file, JPEG frames
   libssl-dev openssl                                  # TLS (server, thin client); tests make self-signed certificates
-  libgtest-dev clang libclang-rt-14-dev               # tests; the protocol fuzzer (libFuzzer)
+  libgtest-dev libgmock-dev clang libclang-rt-14-dev  # tests (GoogleTest, GoogleMock); the fuzzers (libFuzzer)
   clang-format                                        # the formatting check (test clang_format)
   gnuplot-nox                                         # bc_bench_render --plot
   chromium                                            # the browser viewer's tests (tests/browser)
+  mkdocs mkdocs-material                              # the documentation site (docs/, test docs_site)
 )
 missing=()
 for p in "${packages[@]}"; do

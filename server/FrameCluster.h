@@ -1,12 +1,12 @@
 #pragma once
-// The daemon's side of scale-out (issue 19, render/SCALEOUT.md): the render thread of rank 0
+// The daemon's side of scale-out (render/SCALEOUT.md): the render thread of rank 0
 // hands each frame (or slice of one) of a raycaster that draws parts to a FrameCluster, which
 // has every rank draw its part of the volume and composites the parts. The interface knows
 // nothing of MPI: server/cluster/ implements it over MPI ranks, and a daemon without one is
 // today's single process.
-#include "protocol/Messages.h"
 #include "render/Image.h"
 #include "render/RenderTypes.h"
+#include "server/ClusterOrder.h"
 
 #include <algorithm>
 #include <cstdint>
@@ -23,21 +23,6 @@ struct View;
 }
 
 namespace bc::server {
-
-/// What every rank needs to draw its part of one slice of a frame, in the protocol's own
-/// messages: the workers resolve them with the functions the front end uses (ViewRequest.h),
-/// so every rank draws with the same options, camera and transfer function.
-struct ClusterOrder {
-    std::string volume;   ///< catalog name (every rank serves the same config)
-    std::string renderer; ///< resolved ("cpu", "gpu"; never "auto")
-    protocol::SetCamera camera;
-    protocol::SetTransferFunction tf;
-    protocol::RenderOptions options;
-    /// The frame is drawn at options' size over this (toRenderOptions): 1 refined, more for an
-    /// interactive frame (InteractiveBudget::kDivisors).
-    std::uint32_t divisor = 1;
-    render::PixelRect region; ///< the slice of the frame this order draws
-};
 
 /// One rank's share of a frame (or slice).
 struct RankFrameStats {
@@ -93,10 +78,10 @@ class FrameCluster {
                                                  render::FrameStats& stats)>;
 
     /// Has every rank draw its part of `order` and composites the parts front to back.
-    /// `options` and `view` are what rank 0 resolved from the order (options.region is the
-    /// slice). Returns the slice (order.region's size), clamped premultiplied RGBA, as a
-    /// one-process renderer draws it; `stats` gets rank 0's part stats in `mine` and every
-    /// rank's in `cluster`. Render thread only.
+    /// `options` and `view` are the order's (options.region is the slice). Returns the slice
+    /// (order.region's size), clamped premultiplied RGBA, as a one-process renderer draws it;
+    /// `stats` gets rank 0's part stats in `mine` and every rank's in `cluster`. Render thread
+    /// only.
     /// @throw ClusterFailed when a rank did not answer within the timeout or MPI failed (the
     /// cluster is out of service from then on: every later call throws at once, saying why);
     /// what `drawMine` throws (the other ranks' parts are still composited and dropped).

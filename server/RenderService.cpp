@@ -10,9 +10,9 @@
 #include "render/RendererRegistry.h"
 #include "render/View.h"
 #include "server/Catalog.h"
-#include "server/FrameBudget.h"
 #include "server/FrameCache.h"
 #include "server/FrameCluster.h"
+#include "server/InteractiveBudget.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
 #include "server/ViewRequest.h"
@@ -231,6 +231,8 @@ void RenderSlot::delivering(std::uint64_t bytes) {
 
 // ---- RenderService -------------------------------------------------------------------------
 
+namespace {
+
 using RendererMap = std::map<std::string, std::unique_ptr<render::Renderer>, std::less<>>;
 
 /// What the sessions of one volume share (render thread only): the bricks resident on the GPU
@@ -242,6 +244,8 @@ struct VolumeRenderers {
     std::uint64_t poolBudgetBytes = 0;
     RendererMap shared;
 };
+
+} // namespace
 
 /// A frame being drawn (render thread only): what its first turn resolved, the image so far and
 /// where the next slice starts. A frame that fits one slice lives for one turn.
@@ -299,6 +303,8 @@ struct FrameDrawing {
     }
 };
 
+namespace {
+
 /// A session's own renderers, by name: each keeps what is the session's (its previous frame's
 /// occlusion frustums and ray feedback); bricks come from the volume's shared pool and
 /// classifications from the service's cache.
@@ -324,6 +330,8 @@ struct SessionRenderers {
     std::vector<std::uint8_t> lastPass;
     std::uint32_t lastPassIndex = 0;
 };
+
+} // namespace
 
 struct RenderService::Renderers {
     std::unique_ptr<render::EglContext> context;
@@ -361,10 +369,17 @@ struct RenderService::Renderers {
     }
 };
 
+namespace {
+
 /// Bricks a frame held resident: those it drew, less constant ones (no texture) and those
 /// ray-guided residency left unloaded.
 std::uint64_t residentBricks(const render::FrameStats& s) {
-    return s.bricksVisited - s.bricksConstant - s.bricksDeferred + s.bricksRequested;
+    // A sliced frame's counts of bricks are its largest slice's, its deferrals the sum of its
+    // slices': the difference is a lower bound (and never below zero).
+    const std::uint64_t drawn = s.bricksVisited - s.bricksConstant;
+    const std::uint64_t unloaded =
+        s.bricksDeferred > s.bricksRequested ? s.bricksDeferred - s.bricksRequested : 0;
+    return drawn > unloaded ? drawn - unloaded : 0;
 }
 
 /// Bytes of one stored brick (apron included), as the pool and the host cache hold it.
@@ -388,6 +403,8 @@ std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume&
     }
     return v.pool;
 }
+
+} // namespace
 
 struct RenderService::Counters {
     std::map<std::string, double> frames; ///< per renderer
@@ -926,35 +943,12 @@ void paste(std::vector<std::uint8_t>& frame, std::uint32_t frameWidth, const ren
         std::copy_n(&bytes[y * row], row, &frame[(std::size_t(at.y + y) * frameWidth + at.x) * 4]);
 }
 
-/// What the next slice adds to the frame's statistics. Work adds up (samples, uploads, passes,
-/// times); each slice plans the bricks its own rays reach, so a brick count is the largest of
-/// one slice (a lower bound of the frame's: slices share bricks).
+/// The frame's statistics with those of its next slice (the first is the frame's so far).
 void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool first) {
-    if (first) {
+    if (first)
         total = slice;
-        return;
-    }
-    total.samples += slice.samples;
-    total.oracleSamples += slice.oracleSamples;
-    total.octreeLeaps += slice.octreeLeaps;
-    total.octreeBricksRebuilt += slice.octreeBricksRebuilt;
-    total.octreeRebuildMs += slice.octreeRebuildMs;
-    total.cellBricksBuilt += slice.cellBricksBuilt;
-    total.cellBuildMs += slice.cellBuildMs;
-    total.cellBricks = std::max(total.cellBricks, slice.cellBricks);
-    total.bricksUploaded += slice.bricksUploaded;
-    total.bytesUploaded += slice.bytesUploaded;
-    total.batches += slice.batches;
-    total.bricksUnreached += slice.bricksUnreached;
-    total.hostKeptBytes += slice.hostKeptBytes;
-    total.bricksCulled = std::min(total.bricksCulled, slice.bricksCulled);
-    total.bricksSkipped = std::max(total.bricksSkipped, slice.bricksSkipped);
-    total.bricksVisited = std::max(total.bricksVisited, slice.bricksVisited);
-    total.bricksConstant = std::max(total.bricksConstant, slice.bricksConstant);
-    total.uploadMs += slice.uploadMs;
-    total.renderMs += slice.renderMs;
-    total.readbackMs += slice.readbackMs;
-    total.totalMs += slice.totalMs;
+    else
+        render::addSlice(total, slice);
 }
 
 /// The bytes of `level` of `volume` (the last level past it) a host cache can hold: its
@@ -1242,14 +1236,14 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     // same store).
     if (!cluster || cluster->ranks() < 2 || !d.kind->parts || options.stride > 1)
         return renderer.render(scene, d.view, options, stats);
-    ClusterOrder order{s.volume->name, d.kind->name, *s.camera,     s.tfMessage,
-                       s.options,      d.divisor,    options.region};
-    if (order.region.whole()) order.region = {0, 0, options.width, options.height};
-    // The level the frame-time budget chose (the workers keep no budget of their own).
-    if (order.options.level == protocol::kLevelAutomatic && options.level > 0)
-        order.options.level = std::uint8_t(options.level);
+    // Every rank draws with rank 0's options as they stand (the level the frame-time budget
+    // chose, a refinement pass's step, shading) and its camera.
+    ClusterOrder order{s.volume->name, d.kind->name, d.view.camera, s.tfMessage, options};
+    if (order.options.region.whole()) order.options.region = {0, 0, options.width, options.height};
+    // Rank 0's host cache keeps what its own earlier slices loaded; the workers keep their own.
+    order.options.hostKeptBefore = 0;
     render::RenderOptions whole = options;
-    whole.region = order.region;
+    whole.region = order.options.region;
     ClusterFrameStats ranks;
     const auto start = Clock::now();
     render::Image image;

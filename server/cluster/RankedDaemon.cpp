@@ -1,6 +1,5 @@
 #include "server/cluster/RankedDaemon.h"
 
-#include "protocol/Decoder.h"
 #include "render/BrickPool.h"
 #include "render/Classification.h"
 #include "render/EglContext.h"
@@ -8,7 +7,6 @@
 #include "render/RendererRegistry.h"
 #include "render/View.h"
 #include "server/Catalog.h"
-#include "server/FrameBudget.h"
 #include "server/Log.h"
 #include "server/ViewRequest.h"
 
@@ -73,93 +71,6 @@ bool waitUntil(MPI_Request& request, Clock::time_point deadline, const std::stri
         if (Clock::now() >= deadline) return false;
         std::this_thread::yield();
     }
-}
-
-// ---- the order's payload --------------------------------------------------------------------
-
-void putU32(std::vector<std::uint8_t>& out, std::uint32_t v) {
-    for (int i = 0; i < 4; ++i)
-        out.push_back(std::uint8_t(v >> (8 * i)));
-}
-
-void putName(std::vector<std::uint8_t>& out, const std::string& name) {
-    if (name.size() > 255) throw std::invalid_argument("cluster order: name over 255 bytes");
-    out.push_back(std::uint8_t(name.size()));
-    out.insert(out.end(), name.begin(), name.end());
-}
-
-std::vector<std::uint8_t> encodeOrder(const ClusterOrder& o) {
-    std::vector<std::uint8_t> out;
-    for (std::uint32_t v : {o.region.x, o.region.y, o.region.width, o.region.height})
-        putU32(out, v);
-    out.push_back(std::uint8_t(o.divisor));
-    putName(out, o.volume);
-    putName(out, o.renderer);
-    protocol::encode(o.camera, 0, out);
-    protocol::encode(o.tf, 0, out);
-    protocol::encode(protocol::SetRenderOptions{o.options}, 0, out);
-    return out;
-}
-
-/// The order in `bytes`, every field checked (an order is rank 0's, but a rank of another
-/// build or a torn message must not be drawn from). @throw std::runtime_error naming the field.
-ClusterOrder decodeOrder(std::span<const std::uint8_t> bytes) {
-    std::size_t at = 0;
-    auto need = [&](std::size_t n, const char* field) {
-        if (bytes.size() - at < n)
-            throw std::runtime_error(std::string("cluster order: truncated at ") + field);
-    };
-    auto u32 = [&](const char* field) {
-        need(4, field);
-        std::uint32_t v = 0;
-        for (int i = 0; i < 4; ++i)
-            v |= std::uint32_t(bytes[at + std::size_t(i)]) << (8 * i);
-        at += 4;
-        return v;
-    };
-    auto name = [&](const char* field) {
-        need(1, field);
-        const std::size_t n = bytes[at++];
-        need(n, field);
-        std::string s(reinterpret_cast<const char*>(bytes.data() + at), n);
-        at += n;
-        return s;
-    };
-    ClusterOrder o;
-    o.region.x = u32("region.x");
-    o.region.y = u32("region.y");
-    o.region.width = u32("region.width");
-    o.region.height = u32("region.height");
-    need(1, "divisor");
-    o.divisor = bytes[at++];
-    if (std::find(std::begin(InteractiveBudget::kDivisors), std::end(InteractiveBudget::kDivisors),
-                  o.divisor) == std::end(InteractiveBudget::kDivisors))
-        throw std::runtime_error("cluster order: divisor " + std::to_string(o.divisor) +
-                                 " is not 1, 2, 3, 4, 6 or 8");
-    o.volume = name("volume");
-    o.renderer = name("renderer");
-    protocol::Decoder decoder(protocol::kMaxClientPayloadBytes);
-    decoder.feed(bytes.subspan(at));
-    auto next = [&]<typename M>(M& into, const char* what) {
-        auto r = decoder.next();
-        if (r.status == protocol::Decoder::Status::Error)
-            throw std::runtime_error("cluster order: " + r.error.message);
-        if (r.status != protocol::Decoder::Status::Message || !std::holds_alternative<M>(r.message))
-            throw std::runtime_error(std::string("cluster order: no ") + what);
-        into = std::get<M>(r.message);
-    };
-    next(o.camera, "SetCamera");
-    next(o.tf, "SetTransferFunction");
-    protocol::SetRenderOptions options;
-    next(options, "SetRenderOptions");
-    o.options = options.options;
-    if (decoder.next().status != protocol::Decoder::Status::NeedMore || decoder.buffered() != 0)
-        throw std::runtime_error("cluster order: bytes after SetRenderOptions");
-    if (o.region.width == 0 || o.region.height == 0 ||
-        std::uint64_t(o.region.x) + o.region.width > o.options.width ||
-        std::uint64_t(o.region.y) + o.region.height > o.options.height)
-        throw std::runtime_error("cluster order: region outside the frame");
-    return o;
 }
 
 // ---- a slice on one rank ----------------------------------------------------------------------
@@ -296,7 +207,8 @@ render::Image MpiFrameCluster::draw(const ClusterOrder& order, const brickstore:
     if (!mArmed) throw ClusterFailed("the cluster has not started");
     try {
         send(kFrame, encodeOrder(order));
-        const SliceLayout s = layoutOf(mPartitions, store, view, options, order.region, ranks(), 0);
+        const SliceLayout s =
+            layoutOf(mPartitions, store, view, options, options.region, ranks(), 0);
         std::exception_ptr error;
         const render::PartialImage part = drawPart(
             s, 0,
@@ -478,11 +390,10 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
                 tfVolume = &volume;
                 tfMessage = order.tf;
             }
-            render::RenderOptions options = toRenderOptions(order.options, order.divisor);
-            options.shading = shadingFor(order.options, order.tf, *tf);
+            render::RenderOptions options = order.options;
             const render::View view =
-                render::View::ofDecoded(toCamera(order.camera), options.width, options.height);
-            s = layoutOf(partitions, *volume.store, view, options, order.region,
+                render::View::ofDecoded(order.camera, options.width, options.height);
+            s = layoutOf(partitions, *volume.store, view, options, options.region,
                          std::uint32_t(ranks), std::uint32_t(me));
             const render::Scene scene{*volume.store, *volume.cache, *tf, classifications};
             auto drawer = renderers.find(order.renderer);

@@ -1,4 +1,4 @@
-// brickcastd under mpirun (issue 19): 2 and 4 ranks serve every frame of an orbit as one
+// brickcastd under mpirun: 2 and 4 ranks serve every frame of an orbit as one
 // brickcastd process does (two real scans and a generated volume larger than each rank's host
 // budget; exact but for float rounding with early termination off, within its bound on), a
 // volume of fewer bricks than ranks; SIGTERM to rank 0 stops every rank; a rank killed or
@@ -170,6 +170,35 @@ std::vector<client::ReceivedFrame> orbit(const client::ClientConfig& config,
     return out;
 }
 
+/// The first `passes` refined frames at rest of one view under an error bound at rest, early
+/// termination off: the pass at the session's step, then at half of it, and so on (72^2 frames
+/// are too small for the sparse check that would start at half the step).
+std::vector<client::ReceivedFrame> passesAtRest(const client::ClientConfig& config,
+                                                const std::string& volume, const std::string& tf,
+                                                std::size_t passes) {
+    client::Client c(config);
+    const auto v = c.openVolume(volume);
+    protocol::SetTransferFunction t;
+    t.kind = protocol::TfKind::Preset;
+    t.preset = tf;
+    c.setTransferFunction(t);
+    protocol::RenderOptions o = smallCpuFrames(72);
+    o.codec = protocol::Codec::Raw;
+    o.quality = protocol::Quality::Adaptive;
+    o.stepVoxels = 2;
+    o.techniques &= ~protocol::kTechEarlyTermination;
+    c.setRenderOptions(o);
+    c.setFrameBudget({0, protocol::kMaxRestPsnrDb});
+    c.requestFrame(protocol::FrameMode::ContinuousOn);
+    c.setCamera(orbitCamera(v, 40, 1));
+    std::vector<client::ReceivedFrame> out;
+    while (out.size() < passes) {
+        client::ReceivedFrame f = c.nextFrame();
+        if (f.header.refined) out.push_back(std::move(f));
+    }
+    return out;
+}
+
 /// Largest difference of two 8-bit frames, in levels.
 int maxLevels(const client::ReceivedFrame& a, const client::ReceivedFrame& b) {
     if (a.rgba.size() != b.rgba.size()) return 256;
@@ -229,6 +258,10 @@ class MpiDaemon : public ::testing::Test {
     struct Case {
         std::string volume, tf;
     };
+
+    /// The GPU raycaster's frames over `ranks` (every case): on llvmpipe in CI, where every
+    /// rank makes its own GL context.
+    void expectRanksServeTheOneProcessGpuFrames(int ranks);
 
     /// Every frame of an orbit of each case, drawn by one brickcastd process and by jobs of
     /// each rank count, early termination off and on; then SIGTERM to rank 0 ends each job.
@@ -321,14 +354,56 @@ TEST_F(MpiDaemon, TwoAndFourRanksServeTheOneProcessFrames) {
                                         protocol::Renderer::CpuRaycaster, cases, {2, 4});
 }
 
-TEST_F(MpiDaemon, TwoAndFourRanksServeTheOneProcessGpuFrames) {
-    // On llvmpipe in CI (every rank makes its own GL context).
+void MpiDaemon::expectRanksServeTheOneProcessGpuFrames(int ranks) {
     const std::string volumes = realScans() + kGenerated;
     std::vector<Case> cases{{"tiny", "ct-skin"}, {"vessels", "vessels"}};
     if (volumes.find("\"cthead\"") != std::string::npos) cases.push_back({"cthead", "ct-skin"});
     if (volumes.find("\"headsq\"") != std::string::npos) cases.push_back({"headsq", "ct-bone"});
     expectRanksServeTheOneProcessFrames(writeConfig("c.toml", volumes),
-                                        protocol::Renderer::GpuRaycaster, cases, {2, 4});
+                                        protocol::Renderer::GpuRaycaster, cases, {ranks});
+}
+
+TEST_F(MpiDaemon, TwoRanksServeTheOneProcessGpuFrames) {
+    expectRanksServeTheOneProcessGpuFrames(2);
+}
+
+// Four ranks of llvmpipe on a 2-core machine take minutes: label "slow" (the CPU frames cover
+// four ranks in the fast suite).
+using MpiDaemonSlow = MpiDaemon;
+TEST_F(MpiDaemonSlow, FourRanksServeTheOneProcessGpuFrames) {
+    expectRanksServeTheOneProcessGpuFrames(4);
+}
+
+// Under an error bound at rest, each refinement pass halves the step: the worker ranks draw
+// their parts at the pass's step, as rank 0 draws its own, so that every pass is the one
+// process's pass.
+TEST_F(MpiDaemon, RefinedPassesAtRestDrawEveryRankAtThePassStep) {
+#ifdef BC_MPIEXEC
+    const std::string config = writeConfig(
+        "c.toml", "[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [96, 96, 96]\n");
+    const std::string onePort = dir.file("one.port"), port = dir.file("ranks.port");
+    Job one = startJob(
+        dir, {"-np", "1", BC_BRICKCASTD_EXE, "--config", config, "--port-file", onePort, "--quiet"},
+        onePort, 120);
+    JobGuard oneGuard{one};
+    ASSERT_TRUE(one.started) << one.text();
+    const auto want = passesAtRest(one.client, "p", "ct-skin", 2);
+    Job job = startJob(
+        dir, {"-np", "2", BC_BRICKCASTD_EXE, "--config", config, "--port-file", port, "--quiet"},
+        port, 120);
+    JobGuard guard{job};
+    ASSERT_TRUE(job.started) << job.text();
+    const auto got = passesAtRest(job.client, "p", "ct-skin", 2);
+    for (std::size_t i = 0; i < want.size(); ++i) {
+        std::printf("[mpi] pass %zu at rest: %llu samples over 2 ranks, %llu in one process\n", i,
+                    static_cast<unsigned long long>(got[i].header.samples),
+                    static_cast<unsigned long long>(want[i].header.samples));
+        EXPECT_EQ(got[i].header.samples, want[i].header.samples) << "pass " << i;
+        EXPECT_LE(maxLevels(got[i], want[i]), 1) << "pass " << i;
+    }
+    // The second pass took more samples than the first (the step halved).
+    EXPECT_GT(want[1].header.samples, want[0].header.samples);
+#endif
 }
 
 TEST_F(MpiDaemon, ARankKilledOrStoppedFailsItsFramesWithinTheTimeout) {

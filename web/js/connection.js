@@ -71,8 +71,7 @@ export class Connection extends EventTarget {
 
   /** Opens the socket (closing any current one) and starts the handshake. */
   connect() {
-    clearTimeout(this.retryTimer);
-    this.retryTimer = null;
+    this.cancelRetry();
     this.dropSocket();
     this.autoReconnect = true;
     this.serverHello = null;
@@ -101,7 +100,7 @@ export class Connection extends EventTarget {
   /** Says Bye and closes; no reconnection follows. */
   close() {
     this.autoReconnect = false;
-    clearTimeout(this.retryTimer);
+    this.cancelRetry();
     if (this.ws && this.ws.readyState === 1) this.sendRaw(encode(Type.Bye, { reason: 0 }, 0));
     this.dropSocket();
     this.setState('disconnected', 'closed');
@@ -152,6 +151,13 @@ export class Connection extends EventTarget {
 
   sendRaw(buffer) {
     if (this.ws && this.ws.readyState === 1) this.ws.send(buffer);
+  }
+
+  // Only a pending retry is cleared (Node 18's fake timers, which the unit tests use, lose
+  // every later timeout after a clearTimeout(null)).
+  cancelRetry() {
+    if (this.retryTimer !== null) clearTimeout(this.retryTimer);
+    this.retryTimer = null;
   }
 
   emit(name, detail) {

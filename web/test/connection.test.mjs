@@ -4,6 +4,15 @@ import assert from 'node:assert/strict';
 import { Connection, ServerError, socketUrl } from '../js/connection.js';
 import { Type, encode, decode, Capability, ErrorCode } from '../js/protocol.js';
 
+// Browsers and Node 19+ have CustomEvent; Debian 12's Node 18 does not (connection.js only
+// dispatches it).
+globalThis.CustomEvent ??= class CustomEvent extends Event {
+  constructor(type, init = {}) {
+    super(type, init);
+    this.detail = init.detail ?? null;
+  }
+};
+
 class FakeSocket {
   static all = [];
   constructor(url) {
@@ -23,6 +32,16 @@ class FakeStorage {
   getItem(k) { return this.map.get(k) ?? null; }
   setItem(k, v) { this.map.set(k, v); }
   removeItem(k) { this.map.delete(k); }
+}
+
+// Fake setTimeout: Node 20.4+ takes { apis }, Node 18 (Debian 12's) a list.
+function enableFakeTimeouts() {
+  try {
+    mock.timers.enable({ apis: ['setTimeout'] });
+  } catch (e) {
+    if (e.code !== 'ERR_INVALID_ARG_TYPE') throw e;
+    mock.timers.enable(['setTimeout']);
+  }
 }
 
 const serverHello = (capabilities) => ({ versionMin: 1, versionMax: 1, capabilities, codecs: [0, 3, 4], software: 'test' });
@@ -99,7 +118,7 @@ test('auth: asks for a token, sends Auth, keeps it only when asked; AuthFailed a
 });
 
 test('a lost connection reconnects with growing backoff; Reconnect skips the wait', () => {
-  mock.timers.enable({ apis: ['setTimeout'] });
+  enableFakeTimeouts();
   try {
     const { c, ws, states } = connect();
     ws.receive(Type.Hello, serverHello(0), 1);
@@ -121,7 +140,7 @@ test('a lost connection reconnects with growing backoff; Reconnect skips the wai
 });
 
 test('an idle-timeout Bye waits for the Reconnect button', () => {
-  mock.timers.enable({ apis: ['setTimeout'] });
+  enableFakeTimeouts();
   try {
     const { c, ws } = connect();
     ws.receive(Type.Hello, serverHello(0), 1);
