@@ -15,6 +15,7 @@
 #include "server/InteractiveBudget.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
+#include "server/RenderMetrics.h"
 #include "server/ViewRequest.h"
 
 #include <algorithm>
@@ -37,197 +38,6 @@ double msSince(Clock::time_point t) {
 }
 
 } // namespace
-
-// ---- RenderSlot: the network side ----------------------------------------------------------
-
-RenderSlot::RenderSlot(RenderService& service, Deliver deliver, std::uint32_t queueFrames,
-                       std::uint64_t queueBytes)
-    : mService(service), mDeliver(std::move(deliver)), mQueueFrames(queueFrames),
-      mQueueBytes(queueBytes) {}
-
-void RenderSlot::setVolume(std::shared_ptr<Volume> volume) {
-    {
-        std::lock_guard lock(mMutex);
-        markChanged();
-        mState.volume = std::move(volume);
-        mState.camera.reset(); // a camera for the old volume means nothing for the new one
-        mDirty = true;
-        mResetDelta = true;
-    }
-    changed();
-}
-
-void RenderSlot::moveTo(std::shared_ptr<Volume> volume,
-                        std::shared_ptr<const render::TransferFunction> tf,
-                        const protocol::SetTransferFunction& message) {
-    {
-        std::lock_guard lock(mMutex);
-        markChanged();
-        mState.volume = std::move(volume); // the camera stays: the volume has the same shape
-        mState.tf = std::move(tf);
-        mState.tfMessage = message;
-        mDirty = true;
-        mResetDelta = true; // the next delta frame is a keyframe
-    }
-    changed();
-}
-
-void RenderSlot::setCamera(const protocol::SetCamera& camera) {
-    {
-        std::lock_guard lock(mMutex);
-        markChanged();
-        mState.camera = camera; // latest wins: an undrawn camera is simply replaced
-        mLastCamera = Clock::now();
-        mCameraMoved = true;
-        mDirty = true;
-    }
-    changed();
-}
-
-void RenderSlot::setTransferFunction(std::shared_ptr<const render::TransferFunction> tf,
-                                     const protocol::SetTransferFunction& message) {
-    {
-        std::lock_guard lock(mMutex);
-        markChanged();
-        mState.tf = std::move(tf);
-        mState.tfMessage = message;
-        mDirty = true;
-    }
-    changed();
-}
-
-void RenderSlot::setOptions(const protocol::RenderOptions& options) {
-    {
-        std::lock_guard lock(mMutex);
-        markChanged();
-        mState.options = options;
-        mDirty = true;
-        mResetDelta = true;
-    }
-    changed();
-}
-
-void RenderSlot::setFrameBudget(const protocol::SetFrameBudget& budget) {
-    std::lock_guard lock(mMutex);
-    mState.budget = budget;
-}
-
-void RenderSlot::continueRefinement(std::uint32_t pass) {
-    {
-        std::lock_guard lock(mMutex);
-        if (mClosed || mDirty || mOnce || !mContinuous) return;
-        mRefinePass = pass;
-    }
-    changed();
-}
-
-void RenderSlot::request(protocol::FrameMode mode, std::uint32_t requestId) {
-    {
-        std::lock_guard lock(mMutex);
-        markChanged();
-        if (mode == protocol::FrameMode::Once) {
-            mOnce = true;
-            mOnceRequest = requestId;
-        } else {
-            mContinuous = mode == protocol::FrameMode::ContinuousOn;
-            mDirty = mContinuous;
-            if (!mContinuous) mNeedsRefine = false;
-        }
-    }
-    changed();
-}
-
-void RenderSlot::frameDone(std::uint64_t bytes) {
-    {
-        std::lock_guard lock(mMutex);
-        if (mInFlight > 0) --mInFlight;
-        mBytesInFlight -= std::min(bytes, mBytesInFlight);
-        mLastDone = Clock::now();
-    }
-    changed();
-}
-
-void RenderSlot::close() {
-    {
-        std::lock_guard lock(mMutex);
-        mClosed = true;
-        mDeliver = nullptr;
-    }
-    changed();
-}
-
-void RenderSlot::changed() {
-    mService.notify();
-}
-
-void RenderSlot::markChanged() {
-    if (!mDirty && !mOnce) mChangedAt = Clock::now(); // the oldest undrawn change
-    mRefinePass = 0;                                  // what it refined has changed
-}
-
-// ---- RenderSlot: the render side -----------------------------------------------------------
-
-std::optional<Clock::time_point> RenderSlot::readyAt(std::uint32_t restMs) const {
-    std::lock_guard lock(mMutex);
-    if (mClosed || !mState.volume || !mState.camera || !mState.tf) return std::nullopt;
-    // frameDone() wakes us; one frame larger than the byte limit still goes, alone
-    if (mInFlight >= mQueueFrames || mBytesInFlight >= mQueueBytes) return std::nullopt;
-    if (mOnce || (mContinuous && (mDirty || mRefinePass > 0))) return Clock::time_point::min();
-    // At rest: rest_ms after the camera last moved and after its last frame went out. Were it
-    // after the move alone, an interactive frame that took longer than rest_ms would be
-    // followed at once by a refined one, started before the client (which moves once it has
-    // the frame) can move again: a slice drawn for nothing, which makes its next interactive
-    // frame late too.
-    if (mContinuous && mNeedsRefine)
-        return std::max(mLastCamera, mLastDone) + std::chrono::milliseconds(restMs);
-    return std::nullopt;
-}
-
-RenderSlot::Job RenderSlot::take(Clock::time_point now, std::uint32_t restMs) {
-    std::lock_guard lock(mMutex);
-    Job job;
-    job.state = mState;
-    const auto quality = mState.options.quality;
-    // A camera not drawn yet is a moving camera's, however long it waited for the render
-    // thread (a slow frame of this or another session): its frame is interactive, and the
-    // refined one follows rest_ms after it. Otherwise a frame that runs longer than rest_ms
-    // would make every next camera's frame a refined one.
-    const bool resting = !mCameraMoved && now - mLastCamera >= std::chrono::milliseconds(restMs);
-    mCameraMoved = false;
-    job.refined = quality == protocol::Quality::Refined ||
-                  (quality == protocol::Quality::Adaptive && (resting || !mContinuous));
-    job.requested = mOnce;
-    job.requestId = mOnce ? mOnceRequest : 0;
-    job.queuedAt = mChangedAt;
-    if (mRefinePass > 0 && !mDirty && !mOnce) { // nothing changed since the pass before
-        job.refined = true;
-        job.pass = mRefinePass;
-        job.queuedAt = now;
-    }
-    mRefinePass = 0;
-    mNeedsRefine = !job.refined && quality == protocol::Quality::Adaptive;
-    mDirty = mOnce = false;
-    ++mInFlight;
-    if (mResetDelta) mEncoder.resetDelta();
-    mResetDelta = false;
-    return job;
-}
-
-bool RenderSlot::superseded() const {
-    std::lock_guard lock(mMutex);
-    return mClosed || mDirty || mOnce;
-}
-
-bool RenderSlot::closed() const {
-    std::lock_guard lock(mMutex);
-    return mClosed;
-}
-
-void RenderSlot::delivering(std::uint64_t bytes) {
-    std::lock_guard lock(mMutex);
-    mBytesInFlight += bytes;
-    mLastDone = Clock::now();
-}
 
 // ---- RenderService -------------------------------------------------------------------------
 
@@ -406,45 +216,7 @@ std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume&
 
 } // namespace
 
-struct RenderService::Counters {
-    std::map<std::string, double> frames; ///< per renderer
-    double refined = 0, errors = 0, renderMs = 0, encodeMs = 0, bytes = 0, samples = 0;
-    double refused = 0, cancelled = 0, slices = 0, checks = 0;
-    Histogram latencyMs{Histogram::series125(1, 10000)};
-    Histogram renderMsHist{Histogram::series125(1, 10000)};
-    Histogram uploadMs{Histogram::series125(0.1, 10000)};
-    Histogram encodeMsHist{Histogram::series125(0.01, 1000)};
-    Histogram workingSet{Histogram::geometric(64 * 1024, 64.0 * (1ull << 30), 4)};
-    Histogram frameBytes{Histogram::geometric(256, 64.0 * (1 << 20), 4)};
-    /// Per volume: the live pool's counters (as of its last frame) and those of pools
-    /// replaced or freed before it, so the exported counters never go down.
-    std::map<std::string, render::BrickPoolStats> poolLive, poolRetired;
-    std::map<std::string, double> poolBudget;
-    /// Per volume: bricks uploaded while a frame waited for them, and by prefetch while idle.
-    std::map<std::string, double> frameUploads, prefetchUploads, prefetchBytes;
-    std::map<std::string, double> deferred, requested; ///< ray-guided residency, per volume
-    double prefetchMs = 0;
-    double gpuContext = 0; ///< 1 once the render thread has made its GL context
-    // Under MPI: slices drawn across the ranks, their compositing and each rank's share.
-    double clusterSlices = 0, clusterBytes = 0, clusterFailures = 0;
-    Histogram clusterCompositeMs{Histogram::series125(0.1, 10000)};
-    Histogram clusterImbalance{{1.05, 1.1, 1.25, 1.5, 2, 3, 5, 10}};
-    std::vector<double> rankRenderMs, rankSamples; ///< per rank, summed over slices
-    double lastImbalance = 1;
-};
-
 namespace {
-
-render::BrickPoolStats& operator+=(render::BrickPoolStats& a, const render::BrickPoolStats& b) {
-    a.hits += b.hits;
-    a.uploads += b.uploads;
-    a.bytesUploaded += b.bytesUploaded;
-    a.evictions += b.evictions;
-    a.refetches += b.refetches;
-    a.bytesRefetched += b.bytesRefetched;
-    a.uploadMs += b.uploadMs;
-    return a;
-}
 
 /// The protocol's renderer numbers, by their names in the registry.
 const char* rendererName(protocol::Renderer r) {
@@ -475,7 +247,7 @@ RenderService::RenderService(const RenderServiceConfig& config, Catalog& catalog
       mClassifications(std::make_unique<render::ClassificationCache>(
           render::ClassificationCacheConfig{config.classificationBudgetBytes})),
       mFrames(std::make_unique<FrameCache>(FrameCacheConfig{config.frameCacheBytes})),
-      mCounters(std::make_unique<Counters>()), mThread([this] { run(); }) {}
+      mCounters(std::make_unique<RenderCounters>()), mThread([this] { run(); }) {}
 
 RenderService::~RenderService() {
     {
@@ -543,158 +315,14 @@ void RenderService::collect(MetricSet& m) {
             const auto at = slot->readyAt(mConfig.restMs);
             waiting += at && *at <= now;
         }
-    const Counters& c = *mCounters;
-    for (const char* r : {"gpu", "cpu", "splat", "splat-gpu", "reference"}) {
-        const auto it = c.frames.find(r);
-        m.counter("frames_total", "Frames drawn and encoded, by renderer",
-                  it == c.frames.end() ? 0.0 : it->second, {{"renderer", r}});
-    }
-    m.counter("frames_refined_total", "Full-quality frames after the camera came to rest",
-              c.refined);
-    m.counter("render_errors_total", "Frames that failed (sent as RenderFailed)", c.errors);
-    m.counter("frames_refused_total",
-              "Frames over the cost cap (frames.max_frame_gsamples), answered OutOfRange",
-              c.refused);
-    m.counter("frames_cancelled_total",
-              "Frames dropped before they were complete: their session had gone or asked for "
-              "something newer",
-              c.cancelled);
-    m.counter("frame_slices_total", "Slices drawn of frames too long to draw in one turn",
-              c.slices);
-    m.counter("refinement_checks_total",
-              "First refinement passes at rest checked against a sparse frame at twice their step",
-              c.checks);
-    m.counter("render_ms_total", "Milliseconds spent drawing frames", c.renderMs);
-    m.counter("encode_ms_total", "Milliseconds spent encoding frames", c.encodeMs);
-    m.counter("frame_bytes_total", "Encoded frame message bytes", c.bytes);
-    m.counter("samples_total", "Volume samples (voxels for the splatter) taken", c.samples);
-    if (mConfig.cluster) {
-        m.gauge("cluster_ranks", "MPI ranks drawing the raycasters' frames (issue 19)",
-                double(mConfig.cluster->ranks()));
-        m.counter("cluster_slices_total", "Frames or slices drawn across the ranks",
-                  c.clusterSlices);
-        m.counter("cluster_failures_total",
-                  "Cluster frames failed because a rank did not answer (the cluster is then out "
-                  "of service)",
-                  c.clusterFailures);
-        m.counter("cluster_composited_bytes_total",
-                  "Bytes the ranks sent each other compositing (pieces and bands)", c.clusterBytes);
-        m.histogram("cluster_composite_ms", "Sort-last compositing per slice, at rank 0",
-                    c.clusterCompositeMs);
-        m.histogram("cluster_imbalance", "Per slice: the slowest rank's render ms over the mean",
-                    c.clusterImbalance);
-        m.gauge("cluster_imbalance_last", "The last slice's slowest rank's render ms over the mean",
-                c.lastImbalance);
-        for (std::size_t r = 0; r < c.rankRenderMs.size(); ++r) {
-            m.counter("cluster_rank_render_ms_total", "Milliseconds each rank spent on its parts",
-                      c.rankRenderMs[r], {{"rank", std::to_string(r)}});
-            m.counter("cluster_rank_samples_total", "Samples each rank took of its parts",
-                      c.rankSamples[r], {{"rank", std::to_string(r)}});
-        }
-    }
-    m.histogram(
-        "frame_latency_ms",
-        "From the oldest change a frame answers to the frame encoded (queue + render + encode)",
-        c.latencyMs);
-    m.histogram("frame_render_ms", "Drawing one frame (bricks, octrees, rays or splats)",
-                c.renderMsHist);
-    m.histogram("frame_upload_ms",
-                "Host -> GPU uploads (CPU renderers: brick preparation) of one frame", c.uploadMs);
-    m.histogram("frame_encode_ms", "Encoding one frame", c.encodeMsHist);
-    m.histogram(
-        "frame_working_set_bytes",
-        "Bytes of the bricks one frame held on the GPU (drawn, less constant and deferred ones)",
-        c.workingSet);
-    m.histogram("frame_encoded_bytes", "Encoded bytes of one frame message", c.frameBytes);
-    m.counter("prefetch_ms_total", "Milliseconds the render thread spent prefetching",
-              c.prefetchMs);
-    const FrameCacheStats fc = mFrames->stats();
-    m.counter("frame_cache_hits_total",
-              "Frames answered from the frame cache: drawn before for an identical request",
-              double(fc.hits));
-    m.counter("frame_cache_misses_total", "Frames looked up in the frame cache and drawn",
-              double(fc.misses));
-    m.counter("frame_cache_evictions_total", "Frames the frame cache dropped for its budget (LRU)",
-              double(fc.evictions));
-    m.counter("frame_cache_dropped_total",
-              "Frames the frame cache dropped because their volume was reopened, removed or "
-              "taken out of service",
-              double(fc.dropped));
-    m.counter("frame_cache_too_large_total",
-              "Frames not kept: over a quarter of the frame cache's budget", double(fc.tooLarge));
-    m.gauge("frame_cache_bytes", "Bytes of frames the frame cache holds", double(fc.bytes));
-    m.gauge("frame_cache_entries", "Frames the frame cache holds", double(fc.entries));
-    m.gauge("frame_cache_budget_bytes", "The frame cache's budget (frames.cache_mb; 0: off)",
-            double(fc.budgetBytes));
-    const render::ClassificationStats cs = mClassifications->stats();
-    m.counter("classification_builds_total",
-              "Transfer functions committed for a store and level: octrees built or brought up "
-              "to date, once per key however many sessions ask",
-              double(cs.builds));
-    m.counter("classification_shared_total",
-              "Of those, classifications that took the octrees and distance maps of one with the "
-              "same visible values (an edit of colours or non-zero opacities): nothing rebuilt",
-              double(cs.shared));
-    m.counter("classification_hits_total", "Frames that found their classification built",
-              double(cs.hits));
-    m.counter("classification_evictions_total",
-              "Classifications dropped by the budget (LRU, none in use)", double(cs.evictions));
-    m.counter("classification_bricks_rebuilt_total", "Per-brick octrees rebuilt over all builds",
-              double(cs.bricksRebuilt));
-    m.counter("classification_build_ms_total", "Milliseconds spent building classifications",
-              cs.buildMs);
-    m.gauge("classification_bytes", "Host bytes of classifications held (octrees and tables)",
-            double(cs.residentBytes));
-    m.gauge("classifications", "Classifications held", double(cs.entries));
-    m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn", double(waiting));
-    m.gauge("gpu_context",
-            "The render thread's OpenGL context: 0 not made (no GPU frame asked for yet), 1 "
-            "made, -1 unavailable (GPU frames are refused)",
-            mGpuUnavailable ? -1.0 : c.gpuContext);
-    if (mAutoChoice)
-        m.gauge("auto_renderer",
-                "1 for the renderer the sessions asking for auto draw with, and why (decided at "
-                "the first such frame, from the OpenGL context: GL_RENDERER, GL_VENDOR)",
-                1.0, {{"renderer", mAutoChoice->name}, {"reason", mAutoChoice->reason}});
-    std::map<std::string, render::BrickPoolStats> pools = c.poolRetired;
-    for (const auto& [name, live] : c.poolLive)
-        pools[name] += live;
-    for (const auto& [name, p] : pools) {
-        const std::vector<std::pair<std::string, std::string>> l{{"volume", name}};
-        m.counter("gpu_pool_hits_total", "Bricks a frame found resident on the GPU", double(p.hits),
-                  l);
-        m.counter("gpu_pool_uploads_total", "Bricks uploaded host -> GPU", double(p.uploads), l);
-        m.counter("gpu_pool_bytes_uploaded_total", "Bytes uploaded host -> GPU",
-                  double(p.bytesUploaded), l);
-        m.counter("gpu_pool_evictions_total", "Bricks evicted from the GPU pool (LRU)",
-                  double(p.evictions), l);
-        m.counter("gpu_pool_refetches_total", "Uploads of bricks the pool held before and evicted",
-                  double(p.refetches), l);
-        m.counter("gpu_pool_bytes_refetched_total", "Bytes uploaded again after their eviction",
-                  double(p.bytesRefetched), l);
-        m.counter("gpu_pool_upload_ms_total", "Milliseconds spent uploading bricks", p.uploadMs, l);
-        auto of = [](const std::map<std::string, double>& m, const std::string& k) {
-            const auto it = m.find(k);
-            return it == m.end() ? 0.0 : it->second;
-        };
-        m.counter("gpu_frame_uploads_total", "Bricks uploaded while a frame waited for them",
-                  of(c.frameUploads, name), l);
-        m.counter("gpu_prefetch_uploads_total",
-                  "Bricks uploaded ahead of need, for a predicted next view, while idle",
-                  of(c.prefetchUploads, name), l);
-        m.counter("gpu_prefetch_bytes_total", "Bytes uploaded by prefetch",
-                  of(c.prefetchBytes, name), l);
-        m.counter("gpu_deferred_bricks_total",
-                  "Planned bricks a frame left unloaded: its last frame found them behind "
-                  "saturated rays (ray-guided residency)",
-                  of(c.deferred, name), l);
-        m.counter("gpu_requested_bricks_total",
-                  "Deferred bricks loaded after all, when rays reached them", of(c.requested, name),
-                  l);
-        const auto b = c.poolBudget.find(name);
-        m.gauge("gpu_pool_budget_bytes", "The volume's share of the GPU budget",
-                b == c.poolBudget.end() ? 0.0 : b->second, l);
-    }
+    RenderMetricsContext context;
+    context.slotsWaiting = waiting;
+    context.cluster = mConfig.cluster;
+    context.frameCache = mFrames->stats();
+    context.classifications = mClassifications->stats();
+    context.gpuUnavailable = mGpuUnavailable.has_value();
+    context.autoChoice = mAutoChoice;
+    mCounters->exportTo(m, context);
 }
 
 /// Bricks one prefetch step uploads at most (see runPrefetch).
@@ -744,43 +372,17 @@ void RenderService::runPrefetch() {
 void RenderService::record(const FrameRecord& f, double bytes, const std::string& volume,
                            const render::BrickPool* pool) {
     std::lock_guard lock(mMutex);
-    Counters& c = *mCounters;
-    c.frames[f.renderer] += 1;
-    c.renderMs += f.renderMs;
-    c.encodeMs += f.encodeMs;
-    c.bytes += bytes;
-    c.latencyMs.observe(f.latencyMs);
-    c.renderMsHist.observe(f.renderMs);
-    c.uploadMs.observe(f.uploadMs);
-    c.encodeMsHist.observe(f.encodeMs);
-    c.workingSet.observe(f.workingSetBytes);
-    c.frameBytes.observe(bytes);
-    if (pool) {
-        c.frameUploads[volume] += f.bricksUploaded;
-        c.deferred[volume] += f.bricksDeferred;
-        c.requested[volume] += f.bricksRequested;
-        c.poolLive[volume] = pool->stats();
-        c.poolBudget[volume] = double(pool->capacity()) * double(pool->slotBytes());
-    }
+    mCounters->recordFrame(f, bytes, volume, pool);
 }
 
 void RenderService::recordCached(const protocol::FrameHeader& h, double bytes, double latencyMs) {
     std::lock_guard lock(mMutex);
-    Counters& c = *mCounters;
-    c.encodeMs += h.encodeMs;
-    c.bytes += bytes;
-    c.latencyMs.observe(latencyMs);
-    c.encodeMsHist.observe(h.encodeMs);
-    c.frameBytes.observe(bytes);
+    mCounters->recordCached(h, bytes, latencyMs);
 }
 
 void RenderService::retirePool(const std::string& volume) {
     std::lock_guard lock(mMutex);
-    Counters& c = *mCounters;
-    if (auto it = c.poolLive.find(volume); it != c.poolLive.end()) {
-        c.poolRetired[volume] += it->second;
-        c.poolLive.erase(it);
-    }
+    mCounters->retirePool(volume);
 }
 
 void RenderService::checkStore(const std::shared_ptr<Volume>& volume, const std::exception& e) {
@@ -1263,7 +865,7 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     stats.samples = ranks.samples();
     stats.totalMs = msSince(start);
     std::lock_guard lock(mMutex);
-    Counters& c = *mCounters;
+    RenderCounters& c = *mCounters;
     c.clusterSlices += 1;
     c.clusterBytes += double(ranks.bytesComposited());
     c.clusterCompositeMs.observe(ranks.compositeMs);

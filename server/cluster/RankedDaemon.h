@@ -1,10 +1,11 @@
 #pragma once
-// brickcastd over MPI ranks (issue 19, render/SCALEOUT.md "The daemon over ranks"). Rank 0 runs
-// the daemon (sessions, protocol, viewer, encoding) and hands each frame of the CPU or GPU
-// raycaster, slice by slice, to an MpiFrameCluster: it broadcasts an order (the slice; the
-// camera, transfer function and options as protocol messages), every rank draws its part of
-// the volume, and the parts are composited by direct send (SortLast.h). Ranks other than 0 run
-// serveOrders(): no sockets, a catalog of their own from the same config, one render loop.
+// brickcastd over MPI ranks (render/SCALEOUT.md "The daemon over ranks"). Rank 0 runs the
+// daemon (sessions, protocol, viewer, encoding) and hands each frame of the CPU or GPU
+// raycaster, slice by slice, to an MpiFrameCluster: it broadcasts an order (ClusterOrder.h: the
+// camera and options as rank 0 resolved them, the slice, the transfer function), every rank draws
+// its part of the volume, and the parts are composited by direct send (SortLast.h). Ranks other
+// than 0 run serveOrders(): no sockets, a catalog of their own from the same config, one render
+// loop.
 //
 // Liveness: rank 0 sends a heartbeat order at least every kHeartbeat while idle; a worker that
 // hears nothing from rank 0 for its silence limit ends. Rank 0 waits for every message of a
