@@ -146,16 +146,21 @@ struct JobGuard {
 };
 #endif
 
+/// The transfer function preset `name`.
+protocol::SetTransferFunction preset(const std::string& name) {
+    protocol::SetTransferFunction t;
+    t.kind = protocol::TfKind::Preset;
+    t.preset = name;
+    return t;
+}
+
 /// Frames of one orbit of `volume`, as a client of `config` sees them (raw codec: exact).
 std::vector<client::ReceivedFrame> orbit(const client::ClientConfig& config,
                                          const std::string& volume, const std::string& tf,
                                          protocol::Renderer renderer, bool ert, int frames) {
     client::Client c(config);
     const auto v = c.openVolume(volume);
-    protocol::SetTransferFunction t;
-    t.kind = protocol::TfKind::Preset;
-    t.preset = tf;
-    c.setTransferFunction(t);
+    c.setTransferFunction(preset(tf));
     protocol::RenderOptions o = smallCpuFrames(72);
     o.renderer = renderer;
     o.codec = protocol::Codec::Raw;
@@ -178,10 +183,7 @@ std::vector<client::ReceivedFrame> passesAtRest(const client::ClientConfig& conf
                                                 std::size_t passes) {
     client::Client c(config);
     const auto v = c.openVolume(volume);
-    protocol::SetTransferFunction t;
-    t.kind = protocol::TfKind::Preset;
-    t.preset = tf;
-    c.setTransferFunction(t);
+    c.setTransferFunction(preset(tf));
     protocol::RenderOptions o = smallCpuFrames(72);
     o.codec = protocol::Codec::Raw;
     o.quality = protocol::Quality::Adaptive;
