@@ -95,6 +95,12 @@ std::array<std::uint32_t, 3> BrickPool::textureSize() const {
     return {mSlotGrid[0] * mEdge, mSlotGrid[1] * mEdge, mSlotGrid[2] * mEdge};
 }
 
+std::uint64_t BrickPool::bytesFor(std::uint64_t bricks, brickstore::VoxelType type,
+                                  std::uint32_t edge, std::uint64_t budgetBytes) {
+    const std::uint64_t slot = std::uint64_t(edge) * edge * edge * brickstore::voxelBytes(type);
+    return std::min(budgetBytes, std::max<std::uint64_t>(bricks, 1) * slot);
+}
+
 std::uint64_t BrickPool::slotBytes() const {
     return std::uint64_t(mEdge) * mEdge * mEdge * brickstore::voxelBytes(mType);
 }

@@ -57,6 +57,11 @@ class BrickPool {
     /// The slot grid a pool of at most `n` slots uses when a 3D texture holds at most
     /// `perAxis` slots a side: the most slots that fit, as near a cube as that allows.
     static std::array<std::uint32_t, 3> slotGridFor(std::uint64_t n, std::uint64_t perAxis);
+    /// The bytes a pool needs to hold `bricks` slots of `edge`^3 voxels of `type`, at most
+    /// `budgetBytes`: a pool larger than every brick a store has buys nothing and costs its
+    /// memory (and on a software GPU the time to clear it).
+    static std::uint64_t bytesFor(std::uint64_t bricks, brickstore::VoxelType type,
+                                  std::uint32_t edge, std::uint64_t budgetBytes);
     std::array<std::uint32_t, 3> slotGrid() const { return mSlotGrid; }
     std::array<std::uint32_t, 3> textureSize() const;
     std::uint64_t slotBytes() const;

@@ -128,6 +128,7 @@ class GpuRaycaster final : public Renderer, public GpuResidency {
     std::shared_ptr<BrickPool> mSharedPool;
     const brickstore::BrickStore* mPoolStore = nullptr;
     std::string mPoolStorePath;
+    std::uint64_t mPoolBytes = 0; ///< the budget mPool was made with, when it is our own
 };
 
 } // namespace bc::render

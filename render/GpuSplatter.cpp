@@ -46,9 +46,9 @@ struct Batch {
     std::uint32_t box[4] = {0, 0, 0, 0}; ///< pixels the batch touches (columns, rows; inclusive)
 };
 
-/// The frame as primitives: the CPU splatter's decisions (render/HybridSplatter.cpp's Drawer),
-/// recorded in order instead of drawn. Slabs are cut as in the whole image; only primitives
-/// that meet `region` (the pixels drawn) are kept.
+/// The frame as primitives: the CPU splatter's decisions (ChunkDrawer,
+/// render/detail/HybridSplatDrawer.h), recorded in order instead of drawn. Slabs are cut as in the
+/// whole image; only primitives that meet `region` (the pixels drawn) are kept.
 class PrimitiveList {
   public:
     PrimitiveList(const Frame& f, const SplatFootprint& fp, std::uint32_t w, std::uint32_t h,

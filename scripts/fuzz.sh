@@ -129,13 +129,27 @@ frame_codec)
     ;;
 daemon_config)
     harness=DaemonConfigFuzz
-    # The presets of configs/tf, embedded as bc_render embeds them (cmake/EmbedTfPresets.cmake).
+    # The presets of configs/tf and the default config, embedded as bc_render and bc_server embed
+    # them (bc_embed_text, cmake/EmbedText.cmake).
+    embed() { # OUTPUT HEADER NAMESPACE TYPE ARRAY COUNT FILES [NAMES]
+        cmake -DOUTPUT="$1" -DHEADER="$2" -DNAMESPACE="$3" -DTYPE="$4" -DARRAY="$5" -DCOUNT="$6" \
+            "-DFILES=$7" "-DNAMES=${8:-}" -P cmake/EmbedText.cmake
+    }
     presets=(configs/tf/*.json)
-    if [[ ! -e $out/TfPresets.cpp || -n $(find configs/tf -newer "$out/TfPresets.cpp") ]]; then
-        cmake -DOUTPUT="$out/TfPresets.cpp" "-DINPUTS=$(IFS=';'; echo "${presets[*]/#/$src/}")" \
-            -P cmake/EmbedTfPresets.cmake
+    if [[ ! -e $out/TfPresets.cpp ||
+        -n $(find configs/tf cmake/EmbedText.cmake -newer "$out/TfPresets.cpp") ]]; then
+        names=("${presets[@]##*/}")
+        embed "$out/TfPresets.cpp" render/detail/TfPresets.h bc::render::detail TfPresetText \
+            kTfPresets kTfPresetCount "$(IFS=';'; echo "${presets[*]/#/$src/}")" \
+            "$(IFS=';'; echo "${names[*]%.json}")"
     fi
-    sources=(server/DaemonConfig.cpp render/TransferFunction.cpp "$out/TfPresets.cpp"
+    if [[ ! -e $out/DaemonConfigDefault.cpp ||
+        -n $(find configs/brickcastd.toml cmake/EmbedText.cmake -newer "$out/DaemonConfigDefault.cpp") ]]; then
+        embed "$out/DaemonConfigDefault.cpp" server/detail/DaemonConfigDefault.h bc::server::detail \
+            DefaultConfigText kDefaultConfigFiles kDefaultConfigFileCount "$src/configs/brickcastd.toml"
+    fi
+    sources=(server/DaemonConfig*.cpp "$out/DaemonConfigDefault.cpp"
+        render/TransferFunction.cpp "$out/TfPresets.cpp"
         brickstore/HostMemory.cpp "${reader_common[@]}" brickstore/Sources.cpp
         brickstore/readers/*.cpp brickstore/readers/detail/*.cpp)
     folders=(server render render/detail brickstore brickstore/readers protocol)
@@ -190,18 +204,34 @@ done
 if stale; then
     echo "building $fuzzer with $cxx"
     objects=()
+    failed=$objdir/.failed.$$
+    rm -f "$failed"
+    compile() { # SOURCE OBJECT; a failure leaves $failed
+        if "${launcher[@]}" "$cxx" "${flags[@]}" -c "$1" -o "$2.$$.tmp"; then
+            mv -f "$2.$$.tmp" "$2"
+        else
+            touch "$failed"
+        fi
+    }
     for s in "${sources[@]}" "$harness_src"; do
         o=$objdir/$(echo "${s#"$build"/}" | tr / _).o
         # One object per source, shared by the targets that use it (the flags are the same but
         # for include folders); written under another name and renamed, so that two targets
-        # built at once never link half an object. -fsanitize=fuzzer at link time brings
-        # libFuzzer's main.
+        # built at once never link half an object. Compiled on every core: the build starts
+        # the fuzz targets last, and one of them alone would leave the other cores idle.
+        # -fsanitize=fuzzer at link time brings libFuzzer's main.
         if [[ ! -e $o || $s -nt $o || (-n $newest_header && $newest_header -nt $o) ]]; then
-            "${launcher[@]}" "$cxx" "${flags[@]}" -c "$s" -o "$o.$$.tmp"
-            mv -f "$o.$$.tmp" "$o"
+            while (($(jobs -rp | wc -l) >= $(nproc))); do wait -n || true; done
+            compile "$s" "$o" &
         fi
         objects+=("$o")
     done
+    wait
+    if [[ -e $failed ]]; then
+        rm -f "$failed"
+        echo "fuzz.sh: compiling $target's sources failed" >&2
+        exit 1
+    fi
     "$cxx" "${flags[@]}" "${objects[@]}" "${libs[@]}" -o "$fuzzer.$$.tmp"
     mv -f "$fuzzer.$$.tmp" "$fuzzer"
 fi

@@ -1,11 +1,51 @@
 #include "server/FrameCache.h"
 
+#include "protocol/FrameCodec.h"
+#include "protocol/Messages.h"
+#include "render/Camera.h"
 #include "render/TransferFunction.h"
 #include "server/Catalog.h"
 
+#include <bit>
 #include <string_view>
 
 namespace bc::server {
+
+namespace {
+
+/// Appends the bits of `v`, little-endian.
+void appendBits(std::vector<std::uint8_t>& out, double v) {
+    const auto bits = std::bit_cast<std::uint64_t>(v);
+    for (int i = 0; i < 8; ++i)
+        out.push_back(std::uint8_t(bits >> (8 * i)));
+}
+
+} // namespace
+
+FrameKey frameKeyOf(std::uint64_t storeInstance, const std::string& renderer, bool refined,
+                    bool shading, const render::Camera& camera,
+                    const protocol::RenderOptions& options,
+                    std::shared_ptr<const render::TransferFunction> tf) {
+    FrameKey key;
+    key.storeInstance = storeInstance;
+    key.renderer = renderer;
+    key.refined = refined;
+    key.shading = shading;
+    for (const glm::dvec3* v : {&camera.eye, &camera.target, &camera.up})
+        for (int i = 0; i < 3; ++i)
+            appendBits(key.request, (*v)[i]);
+    appendBits(key.request, camera.fovYDeg);
+    key.request.push_back(std::uint8_t(camera.orthographic));
+    appendBits(key.request, camera.orthoHeight);
+    protocol::SetRenderOptions message{options};
+    // What they decide is in the key already: who draws it (key.renderer) and whether it is
+    // refined (an adaptive session's frame at rest is a refined session's frame).
+    message.options.renderer = protocol::Renderer::Auto;
+    message.options.quality = protocol::Quality::Adaptive;
+    protocol::encode(message, 0, key.request);
+    key.tf = std::move(tf);
+    return key;
+}
 
 bool FrameKey::matches(const FrameKey& other) const {
     if (storeInstance != other.storeInstance || renderer != other.renderer ||
@@ -24,6 +64,27 @@ std::uint64_t FrameKey::hash() const {
     mix(std::uint64_t(refined) | std::uint64_t(shading) << 1);
     mix(tf ? tf->contentHash() : 0);
     return h;
+}
+
+protocol::Frame frameFrom(const CachedFrame& kept, protocol::FrameEncoder& encoder) {
+    protocol::Frame frame;
+    auto& h = frame.header;
+    if (kept.pixels()) { // a delta against this session's own previous frame
+        auto encoded =
+            encoder.encode(kept.bytes, kept.width, kept.height, kept.codec, kept.quality);
+        h.keyframe = encoded.keyframe;
+        h.encodeMs = float(encoded.encodeMs);
+        frame.image = std::move(encoded.bytes);
+    } else {
+        encoder.resetDelta(); // as encoding a frame of another codec does
+        frame.image = kept.bytes;
+    }
+    h.width = kept.width;
+    h.height = kept.height;
+    h.codec = kept.codec;
+    h.level = kept.level;
+    h.cached = true;
+    return frame;
 }
 
 struct FrameCache::Entry {

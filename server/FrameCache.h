@@ -7,12 +7,13 @@
 // camera is another key; a store reopened (CatalogUpdate) is another store instance, and the
 // entries of a volume gone or out of service are dropped.
 //
-// What "identical" means is exact: the key holds the camera and options as encoded on the wire
-// (every field, bit for bit, but the renderer and quality, which it holds as what they decide:
-// the renderer that draws the frame, auto resolved, and whether the frame is refined), the
-// shading resolved for it, and the placed transfer function (compared by
-// TransferFunction::sameFunction, not by a hash alone). A frame that depends on more (drawn at a
-// coarser level than asked for because level 0 exceeded the GPU pool's share) is not kept.
+// What "identical" means is exact: the key holds the renderer's camera (every field, bit for
+// bit) and the options as encoded on the wire (every field, bit for bit, but the renderer and
+// quality, which it holds as what they decide: the renderer that draws the frame, auto resolved,
+// and whether the frame is refined), the shading resolved for it, and the placed transfer
+// function (compared by TransferFunction::sameFunction, not by a hash alone). A frame that
+// depends on more (drawn at a coarser level than asked for because level 0 exceeded the GPU
+// pool's share) is not kept.
 #include "protocol/Wire.h"
 
 #include <cstdint>
@@ -23,9 +24,16 @@
 #include <unordered_map>
 #include <vector>
 
+namespace bc::protocol {
+struct Frame;
+class FrameEncoder;
+struct RenderOptions;
+} // namespace bc::protocol
+
 namespace bc::render {
+struct Camera;
 class TransferFunction;
-}
+} // namespace bc::render
 
 namespace bc::server {
 
@@ -42,13 +50,22 @@ struct FrameKey {
     std::string renderer;            ///< the registry name that draws it (auto resolved)
     bool refined = true;
     bool shading = false; ///< as resolved from the preset, the options and the client
-    /// The SetCamera (cameraId 0) and SetRenderOptions messages as encoded on the wire.
+    /// The camera's fields' bits, then the SetRenderOptions message as encoded on the wire.
     std::vector<std::uint8_t> request;
     std::shared_ptr<const render::TransferFunction> tf; ///< the placed function
     /// Equal keys, the functions compared by TransferFunction::sameFunction.
     bool matches(const FrameKey& other) const;
     std::uint64_t hash() const;
 };
+
+/// The key of a frame drawn from store `storeInstance` (BrickStore::instance()) by `renderer`
+/// (auto resolved), refined or not, with `shading` as resolved for it, from `camera` and the
+/// session's `options` (their renderer and quality aside: `renderer` and `refined` say what they
+/// decide) under the placed function `tf`.
+FrameKey frameKeyOf(std::uint64_t storeInstance, const std::string& renderer, bool refined,
+                    bool shading, const render::Camera& camera,
+                    const protocol::RenderOptions& options,
+                    std::shared_ptr<const render::TransferFunction> tf);
 
 /// A frame as kept. Delta frames depend on each connection's previous frame, so for ZstdDelta
 /// the pixels are kept and each session encodes them against its own base; every other codec
@@ -62,6 +79,12 @@ struct CachedFrame {
     std::vector<std::uint8_t> bytes;
     bool pixels() const { return codec == protocol::Codec::ZstdDelta; }
 };
+
+/// `kept` answering a session whose encoder is `encoder`: its image (a delta frame encoded anew
+/// against the session's previous frame; other codecs' bytes as kept, after which the next delta
+/// frame is a keyframe, as after a frame encoded in another codec) and the header's size, codec,
+/// level, keyframe and encodeMs, marked cached.
+protocol::Frame frameFrom(const CachedFrame& kept, protocol::FrameEncoder& encoder);
 
 /// Counters since the cache was made, and what it holds now.
 struct FrameCacheStats {

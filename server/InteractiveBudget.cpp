@@ -1,10 +1,40 @@
 #include "server/InteractiveBudget.h"
 
+#include "protocol/Messages.h"
+#include "server/Catalog.h"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
 namespace bc::server {
+
+double levelBytes(const Volume& volume, std::uint32_t level) {
+    const auto last = std::uint32_t(volume.store->layout().levels().size() - 1);
+    return double(volume.store->storedBricks(std::min(level, last))) *
+           double(volume.store->brickBytes());
+}
+
+bool levelFits(const Volume& volume, std::uint32_t level) {
+    return levelBytes(volume, level) <= double(volume.cache->stats().budgetBytes);
+}
+
+LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions& o) {
+    const brickstore::StoreLayout& layout = volume.store->layout();
+    const auto levels = std::uint32_t(layout.levels().size());
+    if (o.level != protocol::kLevelAutomatic) {
+        const std::uint32_t l = std::min<std::uint32_t>(o.level, levels - 1);
+        return {l, l, {}, {}};
+    }
+    const double share = double(volume.cache->stats().budgetBytes);
+    LevelRange range{0, levels - 1, {}, {}};
+    for (std::uint32_t l = 0; l < levels; ++l) {
+        range.fits.push_back(levelFits(volume, l));
+        range.warm.push_back(double(volume.cache->residentBytes(l)) >=
+                             LevelRange::kWarmShare * std::min(levelBytes(volume, l), share));
+    }
+    return range;
+}
 
 InteractiveBudget::InteractiveBudget(double targetMs) : mTargetMs(targetMs) {
     if (!(targetMs > 0)) throw std::invalid_argument("interactive frame budget: target ms <= 0");

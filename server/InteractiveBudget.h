@@ -36,7 +36,13 @@
 #include <tuple>
 #include <vector>
 
+namespace bc::protocol {
+struct RenderOptions;
+}
+
 namespace bc::server {
+
+struct Volume;
 
 /// The pyramid levels an interactive frame may be drawn at, finest `first` to coarsest `last`.
 struct LevelRange {
@@ -53,6 +59,18 @@ struct LevelRange {
     /// share where the level is larger): a flight's view holds about half of a level's bricks.
     static constexpr double kWarmShare = 0.25;
 };
+
+/// The bytes of `level` of `volume` (the last level past it) a host cache can hold: its stored
+/// bricks, decompressed, aprons included (a brick of one value is never loaded).
+double levelBytes(const Volume& volume, std::uint32_t level);
+
+/// Whether those bytes fit the volume's share of the host cache.
+bool levelFits(const Volume& volume, std::uint32_t level);
+
+/// The levels an interactive frame of `volume` asked for with `options` may be drawn at: the
+/// one asked for, or under automatic level every level, each marked by whether its stored
+/// bricks fit the volume's share of the host cache whole (levelBytes) and whether it is warm.
+LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions& options);
 
 /// What an interactive frame is drawn at.
 struct InteractiveChoice {

@@ -1,7 +1,6 @@
 #include "server/RenderService.h"
 
 #include "brickstore/Error.h"
-#include "render/BrickPlan.h"
 #include "render/BrickPool.h"
 #include "render/Classification.h"
 #include "render/EglContext.h"
@@ -15,15 +14,13 @@
 #include "server/InteractiveBudget.h"
 #include "server/Log.h"
 #include "server/Metrics.h"
+#include "server/Prefetch.h"
 #include "server/RenderMetrics.h"
+#include "server/RendererCache.h"
 #include "server/ViewRequest.h"
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <map>
-
-#include <glm/geometric.hpp>
 
 namespace bc::server {
 
@@ -37,205 +34,15 @@ double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-} // namespace
-
-// ---- RenderService -------------------------------------------------------------------------
-
-namespace {
-
-using RendererMap = std::map<std::string, std::unique_ptr<render::Renderer>, std::less<>>;
-
-/// What the sessions of one volume share (render thread only): the bricks resident on the GPU
-/// and the renderers that hold nothing of one viewer (RendererKind::sharedPerVolume).
-struct VolumeRenderers {
-    /// Held until pruned: the map is keyed by its address, which must not be reused meanwhile.
-    std::shared_ptr<Volume> volume;
-    std::shared_ptr<render::BrickPool> pool;
-    std::uint64_t poolBudgetBytes = 0;
-    RendererMap shared;
+/// A frame of a volume out of service: answered RenderFailed at once, not logged again.
+struct VolumeOutOfService : std::runtime_error {
+    using std::runtime_error::runtime_error;
 };
 
-} // namespace
-
-/// A frame being drawn (render thread only): what its first turn resolved, the image so far and
-/// where the next slice starts. A frame that fits one slice lives for one turn.
-struct FrameDrawing {
-    RenderSlot::Job job;
-    const render::RendererKind* kind = nullptr;
-    render::RenderOptions options; ///< the whole frame's (region: whole)
-    render::View view;
-    std::uint64_t costPerPixel = 0; ///< estimated samples of one ray (the longest)
-    std::uint64_t cost = 0;         ///< of the whole frame
-    bool sliced = false;
-    /// The frame drawn, 8-bit RGBA (a sliced frame's slices are converted as they come: at
-    /// 4096^2 that is 64 MiB where float pixels would take 256).
-    std::vector<std::uint8_t> rgba8;
-    std::uint64_t nextPixel = 0; ///< row-major cursor
-    // Slices are sized by each pixel's samples: its ray's length inside the level's box over the
-    // step (plus one for the ray), so rows that miss the volume are not taken for dense ones.
-    render::Box box;
-    double stepMm = 1;
-    std::vector<double> rowCost; ///< per row, computed as the cursor reaches it (< 0: not yet)
-    double sliceTargetMs = 0;    ///< the next slice's length
-    std::uint32_t slices = 0;
-    double slicesMs = 0; ///< drawing them
-    render::FrameStats stats;
-    const render::BrickPool* pool = nullptr;
-    Clock::time_point start;
-    std::string rendererChoice;       ///< why d.kind draws it (RendererChoice::reason)
-    std::optional<FrameKey> cacheKey; ///< set when the frame cache is on and had no frame
-    /// An interactive frame is drawn at the requested size over this (rounded up).
-    std::uint32_t divisor = 1;
-    /// Sessions drawing interactive frames now, this one included: they share the budget.
-    std::uint32_t sharers = 1;
-    bool budgeted = false; ///< an interactive frame whose level and scale a time budget chose
-    /// A refined frame's estimated PSNR against the converged image (render/
-    /// RefinementEstimate.h); negative: none.
-    double estimatedPsnrDb = -1;
-    /// The first refinement pass at rest under an error bound, where the renderer draws a
-    /// stride: the stride of the sparse frame at twice the pass's step that it is checked
-    /// against (render::checkStride; 1: no such check), that frame (8-bit RGBA, the lattice's
-    /// size) and the image row its next band starts at (a sliced frame draws it in bands of
-    /// rows, first).
-    std::uint32_t checkStride = 1;
-    std::vector<std::uint8_t> check;
-    std::uint32_t checkRow = 0;
-    double checkMs = 0;      ///< drawing it
-    double drawMs = 0;       ///< drawing its slices, not waiting for other sessions' turns
-    std::uint32_t draws = 0; ///< render calls so far (slices and bands of the check)
-
-    bool checkDue() const { return checkStride > 1 && checkRow < options.height; }
-
-    /// A refined frame drawn because an adaptive session's camera came to rest.
-    bool refinement() const {
-        return !job.requested && job.refined &&
-               job.state.options.quality == protocol::Quality::Adaptive;
-    }
-};
-
-namespace {
-
-/// A session's own renderers, by name: each keeps what is the session's (its previous frame's
-/// occlusion frustums and ray feedback); bricks come from the volume's shared pool and
-/// classifications from the service's cache.
-struct SessionRenderers {
-    std::weak_ptr<RenderSlot> slot;
-    std::unique_ptr<FrameDrawing> drawing; ///< the frame in progress, if any
-    RendererMap own;
-    /// The GPU renderer's last two views and what to prefetch for the next (see runPrefetch).
-    std::optional<render::Camera> lastCamera, previousCamera;
-    struct Prefetch {
-        render::Renderer* renderer = nullptr; ///< one of `own`, with gpuResidency()
-        std::shared_ptr<Volume> volume;
-        std::shared_ptr<const render::TransferFunction> tf;
-        render::Camera camera;
-        render::RenderOptions options;
-        std::uint64_t lastFrameBricks = 0;
-    };
-    std::optional<Prefetch> prefetch;
-    /// When its last interactive frame started (budget sharing, InteractiveBudget::choose).
-    std::optional<Clock::time_point> lastInteractive;
-    /// The last refinement pass drawn under an error bound (8-bit RGBA), which the next pass is
-    /// estimated against; empty once any other frame is drawn.
-    std::vector<std::uint8_t> lastPass;
-    std::uint32_t lastPassIndex = 0;
-};
-
-} // namespace
-
-struct RenderService::Renderers {
-    std::unique_ptr<render::EglContext> context;
-    /// What `auto` draws with on this server: decided at its first frame, once (autoChoice).
-    std::optional<render::RendererChoice> autoChoice;
-    std::map<const Volume*, VolumeRenderers> volumes;
-    std::map<const RenderSlot*, SessionRenderers> sessions;
-
-    /// Renderers of closed sessions and pools of volumes nobody views go (GL objects, on
-    /// this thread). `retired` is told the name of each volume whose pool goes. Returns the
-    /// frames in progress that went with their sessions.
-    std::uint32_t prune(const std::function<void(const std::string&)>& retired) {
-        std::uint32_t dropped = 0;
-        std::erase_if(sessions, [&](const auto& e) {
-            if (!e.second.slot.expired()) return false;
-            dropped += e.second.drawing != nullptr;
-            return true;
-        });
-        std::erase_if(volumes, [&](const auto& e) {
-            if (e.second.volume->sessions.load() != 0) return false;
-            for (const auto& [key, s] : sessions) // a frame in progress keeps its renderers
-                if (s.drawing && s.drawing->job.state.volume.get() == e.first) return false;
-            if (e.second.pool) retired(e.first->name);
-            return true;
-        });
-        return dropped;
-    }
-    SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot) {
-        auto& s = sessions[slot.get()];
-        if (s.slot.lock() != slot) { // a reused address
-            s = SessionRenderers{};
-            s.slot = slot;
-        }
-        return s;
-    }
-};
-
-namespace {
-
-/// Bricks a frame held resident: those it drew, less constant ones (no texture) and those
-/// ray-guided residency left unloaded.
-std::uint64_t residentBricks(const render::FrameStats& s) {
-    // A sliced frame's counts of bricks are its largest slice's, its deferrals the sum of its
-    // slices': the difference is a lower bound (and never below zero).
-    const std::uint64_t drawn = s.bricksVisited - s.bricksConstant;
-    const std::uint64_t unloaded =
-        s.bricksDeferred > s.bricksRequested ? s.bricksDeferred - s.bricksRequested : 0;
-    return drawn > unloaded ? drawn - unloaded : 0;
-}
-
-/// Bytes of one stored brick (apron included), as the pool and the host cache hold it.
-std::uint64_t slotBytesOf(const brickstore::BrickStore& store) {
-    const std::uint64_t e = store.layout().storedEdge();
-    return e * e * e * brickstore::voxelBytes(store.info().volume.type);
-}
-
-/// The volume's pool at its fair share of the budget; a new pool only when the share moved by
-/// more than an eighth, so sessions coming and going do not make every brick upload again.
-std::shared_ptr<render::BrickPool>& sharedPool(VolumeRenderers& v, const Volume& volume,
-                                               std::uint64_t shareBytes) {
-    const bool far = shareBytes < v.poolBudgetBytes - v.poolBudgetBytes / 8 ||
-                     shareBytes > v.poolBudgetBytes + v.poolBudgetBytes / 8;
-    if (!v.pool || far) {
-        v.pool.reset(); // the old texture goes before the new one is allocated
-        v.pool = std::make_shared<render::BrickPool>(volume.store->info().volume.type,
-                                                     volume.store->layout().storedEdge(),
-                                                     render::BrickPoolConfig{shareBytes});
-        v.poolBudgetBytes = shareBytes;
-    }
-    return v.pool;
-}
-
-} // namespace
-
-namespace {
-
-/// The protocol's renderer numbers, by their names in the registry.
-const char* rendererName(protocol::Renderer r) {
-    switch (r) {
-    case protocol::Renderer::GpuRaycaster:
-        return "gpu";
-    case protocol::Renderer::CpuRaycaster:
-        return "cpu";
-    case protocol::Renderer::Reference:
-        return "reference";
-    case protocol::Renderer::Splatter:
-        return "splat";
-    case protocol::Renderer::GpuSplatter:
-        return "splat-gpu";
-    case protocol::Renderer::Auto:
-        return "auto";
-    }
-    return "unknown";
-}
+/// The shortest slice of a refined frame beside moving sessions (sliceMsBeside): shorter, the
+/// fixed cost of a slice (planning the frame's bricks: about 2 ms for the 2.36 GiB mosaic on
+/// the dev VM) would be a large part of it.
+constexpr double kMinSliceBesideMs = 10.0;
 
 } // namespace
 
@@ -287,8 +94,7 @@ void RenderService::makeContext(const char* forWhat) {
     }
     mLog.info("render: " + mRenderers->context->renderer() + " (" +
               mRenderers->context->platform() + "), made for " + forWhat);
-    std::lock_guard lock(mMutex);
-    mCounters->gpuContext = 1;
+    withCounters([](RenderCounters& c) { c.gpuContext = 1; });
 }
 
 const render::RendererChoice& RenderService::autoChoice() {
@@ -325,64 +131,28 @@ void RenderService::collect(MetricSet& m) {
     mCounters->exportTo(m, context);
 }
 
-/// Bricks one prefetch step uploads at most (see runPrefetch).
-constexpr std::uint32_t kPrefetchStepBricks = 32;
-
 void RenderService::runPrefetch() {
     const auto start = Clock::now();
-    for (auto& [key, mine] : mRenderers->sessions) {
-        if (!mine.prefetch) continue;
-        auto job = std::move(*mine.prefetch);
-        mine.prefetch.reset();
-        render::GpuResidency* gpu = job.renderer ? job.renderer->gpuResidency() : nullptr;
-        if (!gpu || mine.slot.expired() || !gpu->pool()) continue;
-        const render::BrickPool& pool = *gpu->pool();
-        const std::uint64_t keep = std::min<std::uint64_t>(job.lastFrameBricks, pool.capacity());
-        const auto room = std::uint32_t(pool.capacity() - keep);
-        if (room == 0) continue;
-        // A bounded step, so that a session whose frame falls due waits for at most this many
-        // uploads; the rest of the job waits for the next idle turn.
-        const std::uint32_t step = std::min(room, kPrefetchStepBricks);
-        try {
-            const std::uint64_t bytesBefore = pool.stats().bytesUploaded;
-            const render::Scene scene{*job.volume->store, *job.volume->cache, *job.tf,
-                                      *mClassifications};
-            // A predicted camera came from no decoder: validated here (a bad guess throws).
-            const std::uint32_t n = gpu->prefetch(
-                scene, render::View::of(job.camera, job.options.width, job.options.height),
-                job.options, step);
-            if (n == step && step < room) { // more may be missing: continue next turn
-                job.lastFrameBricks += n;   // what this step brought in stays too
-                mine.prefetch = job;
-            }
-            std::lock_guard lock(mMutex);
-            mCounters->prefetchUploads[job.volume->name] += n;
-            mCounters->prefetchBytes[job.volume->name] +=
-                double(pool.stats().bytesUploaded - bytesBefore);
-            mCounters->poolLive[job.volume->name] = pool.stats();
-        } catch (const std::exception& e) { // a guess that failed costs nothing but the log line
-            mLog.error("prefetch: " + job.volume->name + ": " + e.what());
-            checkStore(job.volume, e);
-        }
-    }
+    PrefetchReports reports;
+    reports.uploaded = [this](const std::string& volume, std::uint32_t bricks, std::uint64_t bytes,
+                              const render::BrickPoolStats& pool) {
+        std::lock_guard lock(mMutex);
+        mCounters->prefetchUploads[volume] += bricks;
+        mCounters->prefetchBytes[volume] += double(bytes);
+        mCounters->poolLive[volume] = pool;
+    };
+    reports.failed = [this](const std::shared_ptr<Volume>& volume, const std::exception& e) {
+        mLog.error("prefetch: " + volume->name + ": " + e.what());
+        checkStore(volume, e);
+    };
+    bc::server::runPrefetch(*mRenderers, *mClassifications, reports);
     std::lock_guard lock(mMutex);
     mCounters->prefetchMs += msSince(start);
 }
 
-void RenderService::record(const FrameRecord& f, double bytes, const std::string& volume,
-                           const render::BrickPool* pool) {
+void RenderService::withCounters(const std::function<void(RenderCounters& counters)>& f) {
     std::lock_guard lock(mMutex);
-    mCounters->recordFrame(f, bytes, volume, pool);
-}
-
-void RenderService::recordCached(const protocol::FrameHeader& h, double bytes, double latencyMs) {
-    std::lock_guard lock(mMutex);
-    mCounters->recordCached(h, bytes, latencyMs);
-}
-
-void RenderService::retirePool(const std::string& volume) {
-    std::lock_guard lock(mMutex);
-    mCounters->retirePool(volume);
+    f(*mCounters);
 }
 
 void RenderService::checkStore(const std::shared_ptr<Volume>& volume, const std::exception& e) {
@@ -399,13 +169,15 @@ void RenderService::notify() {
 }
 
 void RenderService::run() {
-    mRenderers = std::make_unique<Renderers>();
+    mRenderers = std::make_unique<RendererCache>(
+        mCatalog, mConfig.gpuBudgetBytes, [this](const std::string& volume) {
+            withCounters([&](RenderCounters& c) { c.retirePool(volume); });
+        });
     std::unique_lock lock(mMutex);
     while (!mStop) {
         // Sessions gone go first (their frames in progress with them), before any wait.
         lock.unlock();
-        const std::uint32_t dropped =
-            mRenderers->prune([this](const std::string& volume) { retirePool(volume); });
+        const std::uint32_t dropped = mRenderers->prune();
         lock.lock();
         mCounters->cancelled += dropped;
         if (mConfig.cluster) { // the workers hear from rank 0 at least every kHeartbeat
@@ -415,7 +187,7 @@ void RenderService::run() {
         }
         bool prefetchDue = false;
         for (const auto& [key, s] : mRenderers->sessions)
-            prefetchDue |= s.prefetch.has_value();
+            prefetchDue |= s.prefetch.job.has_value();
         auto slot = nextReady(lock, !prefetchDue);
         if (!slot) {
             if (prefetchDue) {
@@ -436,9 +208,7 @@ void RenderService::run() {
 }
 
 bool RenderService::drawing(const RenderSlot* slot) const {
-    const auto it = mRenderers->sessions.find(slot);
-    return it != mRenderers->sessions.end() && it->second.drawing &&
-           it->second.slot.lock().get() == slot;
+    return mRenderers->drawing(slot);
 }
 
 std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex>& lock,
@@ -470,137 +240,13 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
     return nullptr;
 }
 
-namespace {
-
-/// A frame over its cost cap: answered OutOfRange, not RenderFailed.
-struct FrameRefused : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
-
-/// A frame of a volume out of service: answered RenderFailed at once, not logged again.
-struct VolumeOutOfService : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
-
-/// Cost units (samples) per millisecond assumed of a renderer before it has drawn anything:
-/// low (2 M samples/s, the reference renderer's order on one slow core), so that a first
-/// frame that turns out heavy is sliced rather than drawn whole, and its first slice is short
-/// on any machine (at 20 M samples/s assumed, a first slice under ThreadSanitizer took 18 s).
-/// The measured speed replaces it from the first slice on.
-constexpr double kFirstCostPerMs = 2000.0;
-
-/// The speed `rates` holds for renderer `name` (cost units per millisecond), or
-/// kFirstCostPerMs before it has drawn anything.
-double speedOf(const std::map<std::string, double, std::less<>>& rates, std::string_view name) {
-    const auto rate = rates.find(name);
-    return rate == rates.end() ? kFirstCostPerMs : rate->second;
-}
-
-/// The shortest slice of a refined frame beside moving sessions (sliceMsBeside): shorter, the
-/// fixed cost of a slice (planning the frame's bricks: about 2 ms for the 2.36 GiB mosaic on
-/// the dev VM) would be a large part of it.
-constexpr double kMinSliceBesideMs = 10.0;
-
-/// Estimated cost of pixel (x, y): its ray's samples inside the box, plus one for the ray.
-double pixelCost(const FrameDrawing& d, std::uint32_t x, std::uint32_t y) {
-    const render::Ray ray = d.view.basis.ray(x, y, d.options.width, d.options.height);
-    const auto [t0, t1] = render::intersectBox(ray, d.box);
-    return 1.0 + std::max(0.0, (t1 - std::max(t0, 0.0)) / d.stepMm);
-}
-
-double rowCost(FrameDrawing& d, std::uint32_t y) {
-    if (d.rowCost[y] < 0) {
-        double sum = 0;
-        for (std::uint32_t x = 0; x < d.options.width; ++x)
-            sum += pixelCost(d, x, y);
-        d.rowCost[y] = sum;
-    }
-    return d.rowCost[y];
-}
-
-/// The next slice of about `budget` cost units (at least one pixel): whole rows from the cursor
-/// when it is at a row's start and its row fits, else a run of the cursor's row. Returns the
-/// slice and (in `cost`) its estimated cost.
-render::PixelRect nextSlice(FrameDrawing& d, double budget, double& cost) {
-    const std::uint32_t w = d.options.width, h = d.options.height;
-    const auto x = std::uint32_t(d.nextPixel % w), y = std::uint32_t(d.nextPixel / w);
-    cost = 0;
-    if (x == 0 && rowCost(d, y) <= budget) {
-        std::uint32_t rows = 0;
-        while (y + rows < h && cost + rowCost(d, y + rows) <= budget)
-            cost += rowCost(d, y + rows++);
-        return {0, y, w, rows};
-    }
-    std::uint32_t n = 0;
-    while (x + n < w && (n == 0 || cost + pixelCost(d, x + n, y) <= budget))
-        cost += pixelCost(d, x + n++, y);
-    return {x, y, n, 1};
-}
-
-void paste(std::vector<std::uint8_t>& frame, std::uint32_t frameWidth, const render::Image& part,
-           const render::PixelRect& at) {
-    const auto bytes = render::toRgba8(part);
-    const std::size_t row = std::size_t(part.width) * 4;
-    for (std::uint32_t y = 0; y < part.height; ++y)
-        std::copy_n(&bytes[y * row], row, &frame[(std::size_t(at.y + y) * frameWidth + at.x) * 4]);
-}
-
-/// The frame's statistics with those of its next slice (the first is the frame's so far).
-void accumulate(render::FrameStats& total, const render::FrameStats& slice, bool first) {
-    if (first)
-        total = slice;
-    else
-        render::addSlice(total, slice);
-}
-
-/// The bytes of `level` of `volume` (the last level past it) a host cache can hold: its
-/// stored bricks, decompressed, aprons included (a brick of one value is never loaded).
-double levelBytes(const Volume& volume, std::uint32_t level) {
-    const auto last = std::uint32_t(volume.store->layout().levels().size() - 1);
-    return double(volume.store->storedBricks(std::min(level, last))) *
-           double(volume.store->brickBytes());
-}
-
-/// Whether those bytes fit the volume's share of the host cache.
-bool levelFits(const Volume& volume, std::uint32_t level) {
-    return levelBytes(volume, level) <= double(volume.cache->stats().budgetBytes);
-}
-
-/// The levels an interactive frame of `volume` may be drawn at: the one asked for, or under
-/// automatic level every level, each marked by whether its stored bricks fit the volume's
-/// share of the host cache whole (levelBytes) and whether it is warm.
-LevelRange interactiveLevels(const Volume& volume, const protocol::RenderOptions& o) {
-    const brickstore::StoreLayout& layout = volume.store->layout();
-    const auto levels = std::uint32_t(layout.levels().size());
-    if (o.level != protocol::kLevelAutomatic) {
-        const std::uint32_t l = std::min<std::uint32_t>(o.level, levels - 1);
-        return {l, l, {}, {}};
-    }
-    const double share = double(volume.cache->stats().budgetBytes);
-    LevelRange range{0, levels - 1, {}, {}};
-    for (std::uint32_t l = 0; l < levels; ++l) {
-        range.fits.push_back(levelFits(volume, l));
-        range.warm.push_back(double(volume.cache->residentBytes(l)) >=
-                             LevelRange::kWarmShare * std::min(levelBytes(volume, l), share));
-    }
-    return range;
-}
-
-std::string giga(std::uint64_t samples) {
-    char text[32];
-    std::snprintf(text, sizeof text, "%.3g", double(samples) / double(1ull << 30));
-    return text;
-}
-
-} // namespace
-
 void RenderService::prepare(FrameDrawing& d) {
     const auto& s = d.job.state;
     const auto& o = s.options;
     d.start = Clock::now();
     if (const auto why = s.volume->failure())
         throw VolumeOutOfService("volume '" + s.volume->name + "' is out of service: " + *why);
-    std::string_view name = rendererName(o.renderer);
+    std::string_view name = protocol::rendererName(o.renderer);
     d.rendererChoice = "asked for " + std::string(name);
     if (o.renderer == protocol::Renderer::Auto) {
         const render::RendererChoice& choice = autoChoice();
@@ -642,76 +288,8 @@ void RenderService::prepare(FrameDrawing& d) {
         d.options.stepVoxels = float(render::refinementStep(d.options.stepVoxels, d.job.pass));
     d.options.shading = shadingFor(o, s.tfMessage, *s.tf);
     // The decoder validated the camera (the same rules as Camera::validate).
-    d.view = render::View::ofDecoded(toCamera(*s.camera), d.options.width, d.options.height);
-
-    // Cost: an upper bound of the samples (every ray as long as the level's diagonal), or the
-    // voxels a splatter projects.
-    const brickstore::BrickStore& store = *s.volume->store;
-    const auto levels = std::uint32_t(store.layout().levels().size());
-    const auto level = std::min<std::uint32_t>(std::uint32_t(d.options.level), levels - 1);
-    const render::LevelGeometry g = render::LevelGeometry::of(store, level);
-    const std::uint64_t pixels = std::uint64_t(d.options.width) * d.options.height;
-    const double diagonal = glm::length(g.box.size());
-    d.costPerPixel = std::uint64_t(std::ceil(diagonal / (d.options.stepVoxels * g.minSpacing())));
-    const double voxels = double(g.dims[0]) * double(g.dims[1]) * double(g.dims[2]);
-    const double cost =
-        d.kind->objectOrder ? voxels + double(pixels) : double(pixels) * double(d.costPerPixel);
-    const bool sliceable = d.kind->regions;
-    const std::uint64_t cap = sliceable ? mConfig.maxFrameSamples : mConfig.maxUnslicedSamples;
-    if (cost > double(cap))
-        throw FrameRefused(
-            "frame cost " + giga(std::uint64_t(std::min(cost, 1e19))) + " Gi samples (" +
-            std::to_string(d.options.width) + "x" + std::to_string(d.options.height) + " pixels, " +
-            std::to_string(d.costPerPixel) + " samples per ray, " + std::string(name) +
-            ") is over the server's cap of " + giga(cap) + " Gi samples (" +
-            (sliceable ? "frames.max_frame_gsamples" : "frames.max_unsliced_gsamples") + ")");
-    d.cost = std::uint64_t(cost);
-
-    const double perMs = speedOf(mCostPerMs, name);
-    d.sliced = sliceable && cost / perMs > 1.5 * mConfig.sliceMs;
-    if (d.sliced) {
-        d.rgba8.assign(std::size_t(d.options.width) * d.options.height * 4, 0);
-        d.box = g.box;
-        d.stepMm = d.options.stepVoxels * g.minSpacing();
-        d.rowCost.assign(d.options.height, -1.0);
-        d.sliceTargetMs = mConfig.sliceMs;
-    }
-}
-
-render::Renderer& RenderService::rendererFor(const std::shared_ptr<RenderSlot>& slot,
-                                             FrameDrawing& d) {
-    const auto& s = d.job.state;
-    auto& v = mRenderers->volumes[s.volume.get()];
-    v.volume = s.volume;
-    auto& mine = mRenderers->of(slot);
-    RendererMap& owner = d.kind->sharedPerVolume ? v.shared : mine.own;
-    auto it = owner.find(d.kind->name);
-    if (it == owner.end()) it = owner.emplace(d.kind->name, d.kind->create()).first;
-    render::Renderer& renderer = *it->second;
-    if (render::GpuResidency* gpu = renderer.gpuResidency()) {
-        // the volume's bricks on the GPU are shared by its sessions
-        const render::BrickPool* before = v.pool.get();
-        auto& shared =
-            sharedPool(v, *s.volume, mCatalog.shareOf(*s.volume, mConfig.gpuBudgetBytes));
-        if (before && shared.get() != before) retirePool(s.volume->name);
-        gpu->setSharedPool(shared);
-        d.pool = shared.get();
-    }
-    return renderer;
-}
-
-std::uint32_t RenderService::interactiveSessions(Clock::duration within,
-                                                 const RenderSlot* except) const {
-    const auto now = Clock::now();
-    std::uint32_t n = 0;
-    // A frame still being drawn counts however long ago it started: a cold start's first
-    // frames load the view's bricks for seconds, and the sessions drawing them share the
-    // machine all the while.
-    for (const auto& [key, other] : mRenderers->sessions)
-        n += key != except && !other.slot.expired() &&
-             ((other.lastInteractive && now - *other.lastInteractive < within) ||
-              (other.drawing && !other.drawing->job.refined));
-    return n;
+    d.view = render::View::ofDecoded(*s.camera, d.options.width, d.options.height);
+    planSlices(d, *s.volume->store, mConfig, mFrameSpeeds);
 }
 
 double RenderService::sliceMsBeside(const std::shared_ptr<RenderSlot>& slot,
@@ -720,110 +298,29 @@ double RenderService::sliceMsBeside(const std::shared_ptr<RenderSlot>& slot,
     if (!d.job.refined || mConfig.interactiveMs == 0) return sliceMs;
     // Other sessions moving now: an interactive frame started within the rest interval and a
     // slice.
-    const std::uint32_t moving = interactiveSessions(
-        std::chrono::milliseconds(mConfig.restMs + mConfig.sliceMs), slot.get());
+    const std::uint32_t moving = mRenderers->interactiveSessions(
+        Clock::now(), std::chrono::milliseconds(mConfig.restMs + mConfig.sliceMs), slot.get());
     if (moving == 0) return sliceMs;
     return std::clamp(double(mConfig.interactiveMs) / double(moving + 1), kMinSliceBesideMs,
                       sliceMs);
 }
 
-double RenderService::drawCheck(render::Renderer& renderer, FrameDrawing& d, double budget) {
-    const auto start = Clock::now();
-    const render::PixelLattice lattice{d.checkStride};
-    const std::uint32_t w = d.options.width, h = d.options.height;
-    if (d.check.empty()) d.check.assign(std::size_t(lattice.first(w)) * lattice.first(h) * 4, 0);
-    render::RenderOptions options = d.options;
-    options.stride = d.checkStride;
-    options.stepVoxels = 2.0 * d.options.stepVoxels; // the session's step: a power of two apart
-    options.hostKeptBefore = d.stats.hostKeptBytes;  // its bricks count as the frame's
-    // Whole lattice rows from d.checkRow, about `budget` cost units, at least one: a lattice
-    // row takes a stride-th of its image row's rays, at twice the step.
-    std::uint32_t rows = h - d.checkRow;
-    if (budget > 0) {
-        double cost = 0;
-        std::uint32_t j = lattice.first(d.checkRow);
-        do
-            cost += rowCost(d, lattice.pixel(j)) / (2.0 * d.checkStride);
-        while (++j < lattice.first(h) && cost < budget);
-        rows = (j < lattice.first(h) ? lattice.pixel(j) : h) - d.checkRow;
-    }
-    options.region = {0, d.checkRow, w, rows};
-    const std::optional<render::PixelRect> at = lattice.of(options.region);
-    render::FrameStats stats;
-    const render::Image band = drawRegion(renderer, d, options, stats);
-    paste(d.check, lattice.first(w), band, *at);
-    accumulate(d.stats, stats, d.draws++ == 0);
-    d.checkRow += rows;
-    d.checkMs += msSince(start);
-    if (!d.checkDue()) {
-        std::lock_guard lock(mMutex);
-        mCounters->checks += 1;
-    }
-    return std::min(stats.uploadMs, msSince(start));
-}
-
 bool RenderService::drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d) {
-    render::Renderer& renderer = rendererFor(slot, d);
-    if (d.checkDue() && !d.sliced) {
-        drawCheck(renderer, d, 0); // whole, and the pass in the same turn
-    } else if (d.checkDue()) {     // a band of it is this turn's slice
-        if (d.draws == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
-        const double loadMs =
-            drawCheck(renderer, d, d.sliceTargetMs * speedOf(mSliceCostPerMs, d.kind->name));
-        d.sliceTargetMs = std::max(sliceMsBeside(slot, d), 2.0 * loadMs);
-        d.drawMs = d.checkMs;
-        return false;
-    }
-    const auto start = Clock::now();
-    // Speeds measured, per renderer: whole frames against their upper-bound cost (whether to
-    // slice), slices against their pixels' estimated samples (how large a slice is). The
-    // estimate is an upper bound whose truth varies across an image (skipping, early ray
-    // termination, rays that miss): a slower speed is taken at once, so that a slice that ran
-    // long is not followed by another, and a faster one is approached by halves.
-    auto calibrate = [&](std::map<std::string, double, std::less<>>& rates, double cost,
-                         double ms) {
-        const double perMs = cost / std::max(ms, 0.01);
-        auto [it, fresh] = rates.try_emplace(d.kind->name, perMs);
-        if (!fresh) it->second = perMs < it->second ? perMs : 0.5 * (it->second + perMs);
+    const RendererCache::Drawer drawer = mRenderers->rendererFor(slot, *d.kind, d.job.state.volume);
+    render::Renderer& renderer = drawer.renderer;
+    if (drawer.pool) d.pool = drawer.pool;
+    SliceHooks hooks;
+    hooks.draw = [&](const render::RenderOptions& options, render::FrameStats& stats) {
+        return drawRegion(renderer, d, options, stats);
     };
-    if (!d.sliced) {
-        render::FrameStats stats;
-        d.rgba8 = render::toRgba8(drawRegion(renderer, d, d.options, stats));
-        accumulate(d.stats, stats, d.draws++ == 0);
-        const double ms = msSince(start);
-        d.drawMs = d.checkMs + ms;
-        calibrate(mCostPerMs, double(d.cost), ms);
-        planPrefetch(slot, d, renderer);
-        return true;
-    }
-    const double perMs = speedOf(mSliceCostPerMs, d.kind->name);
-    double cost = 0;
-    render::RenderOptions options = d.options;
-    if (d.draws == 0) d.sliceTargetMs = sliceMsBeside(slot, d);
-    options.region = nextSlice(d, d.sliceTargetMs * perMs, cost);
-    options.hostKeptBefore = d.stats.hostKeptBytes; // the slices keep one frame's bricks
-    render::FrameStats stats;
-    const render::Image part = drawRegion(renderer, d, options, stats);
-    paste(d.rgba8, d.options.width, part, options.region);
-    accumulate(d.stats, stats, d.draws++ == 0);
-    // The speed of the rays alone: loading bricks is a cost per slice, not per pixel (when the
-    // frame's bricks exceed the host budget, a brick whose footprint spans several slices is
-    // loaded by each). Slices are made long enough that it stays at most half of each.
-    const double ms = msSince(start), loadMs = std::min(stats.uploadMs, ms);
-    calibrate(mSliceCostPerMs, cost, ms - loadMs);
-    d.sliceTargetMs = std::max(sliceMsBeside(slot, d), 2.0 * loadMs);
-    ++d.slices;
-    d.slicesMs += msSince(start);
-    d.drawMs = d.checkMs + d.slicesMs;
-    d.nextPixel += options.region.pixels();
-    {
-        std::lock_guard lock(mMutex);
-        mCounters->slices += 1;
-    }
-    if (d.nextPixel < std::uint64_t(d.options.width) * d.options.height) return false;
-    // The whole frame's speed too, so that a frame like it is sliced only when it must be.
-    calibrate(mCostPerMs, double(d.cost), d.slicesMs);
-    planPrefetch(slot, d, renderer);
+    hooks.sliceMs = [&] { return sliceMsBeside(slot, d); };
+    hooks.now = [] { return Clock::now(); };
+    hooks.sliceDrawn = [this] { withCounters([](RenderCounters& c) { c.slices += 1; }); };
+    hooks.checkDrawn = [this] { withCounters([](RenderCounters& c) { c.checks += 1; }); };
+    hooks.frameSpeeds = &mFrameSpeeds;
+    hooks.sliceSpeeds = &mSliceSpeeds;
+    if (!drawNext(d, hooks)) return false; // more slices: the other sessions' turn
+    planPrefetch(mRenderers->of(slot).prefetch, d, renderer, mConfig.prefetch);
     return true;
 }
 
@@ -857,8 +354,7 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
             },
             stats, ranks);
     } catch (const ClusterFailed&) {
-        std::lock_guard lock(mMutex);
-        mCounters->clusterFailures += 1;
+        withCounters([](RenderCounters& c) { c.clusterFailures += 1; });
         throw;
     }
     // The frame's work is every rank's; its time is rank 0's wall time.
@@ -880,24 +376,6 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     return image;
 }
 
-void RenderService::planPrefetch(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d,
-                                 render::Renderer& renderer) {
-    render::GpuResidency* gpu = renderer.gpuResidency();
-    if (!gpu) return;
-    const auto& s = d.job.state;
-    auto& mine = mRenderers->of(slot);
-    mine.previousCamera = mine.lastCamera;
-    mine.lastCamera = d.view.camera;
-    mine.prefetch.reset();
-    // A sliced frame's brick count is its largest slice's (a lower bound): prefetch may then
-    // evict a few of the frame's bricks, which costs uploads later, never a wrong frame.
-    if (mConfig.prefetch && mine.previousCamera && gpu->pool())
-        mine.prefetch = SessionRenderers::Prefetch{
-            &renderer, s.volume,
-            s.tf,      render::predictNext(*mine.previousCamera, d.view.camera),
-            d.options, residentBricks(d.stats)};
-}
-
 void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
                          std::optional<RenderSlot::Job> job) {
     RenderSlot& slot = *slotPtr;
@@ -909,8 +387,8 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
             // Sessions that started an interactive frame within the last second, or are drawing
             // one, share the frame-time budget.
             mine.lastInteractive = Clock::now();
-            mine.drawing->sharers =
-                std::max<std::uint32_t>(interactiveSessions(std::chrono::seconds(1)), 1);
+            mine.drawing->sharers = std::max<std::uint32_t>(
+                mRenderers->interactiveSessions(Clock::now(), std::chrono::seconds(1)), 1);
         }
     } else if (slot.closed() || (mine.drawing->refinement() && slot.superseded())) {
         // Nobody waits for it, or it refines a view the camera has left (interactive frames
@@ -919,8 +397,7 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
         // requested frame is owed its answer.
         mine.drawing.reset();
         slot.frameDone(0);
-        std::lock_guard lock(mMutex);
-        mCounters->cancelled += 1;
+        withCounters([](RenderCounters& c) { c.cancelled += 1; });
         return;
     }
     FrameDrawing& d = *mine.drawing;
@@ -935,34 +412,26 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
             cached = fromCache(slot, d);
         }
         if (!cached && !drawSlice(slotPtr, d)) return; // more slices: the other sessions' turn
-        // At rest under an error bound: each pass after the first is estimated against the
-        // one before, and another follows at half the step until the estimate meets the bound.
+        // At rest under an error bound: the pass's estimate decides whether another follows.
         const double boundDb = d.job.state.budget.restPsnrDb;
-        if (!cached && d.refinement() && boundDb > 0) {
-            if (!d.check.empty())
-                d.estimatedPsnrDb = render::estimatedPsnrDb(
-                    render::latticeOf(d.rgba8, d.options.width, d.options.height, d.checkStride),
-                    d.check);
-            else if (d.job.pass > 0 && mine.lastPassIndex + 1 == d.job.pass &&
-                     mine.lastPass.size() == d.rgba8.size())
-                d.estimatedPsnrDb = render::estimatedPsnrDb(d.rgba8, mine.lastPass);
-            mine.lastPass = d.rgba8;
-            mine.lastPassIndex = d.job.pass;
-            if (render::refineFurther(d.estimatedPsnrDb, boundDb, d.options.stepVoxels))
-                nextPass = d.job.pass + 1;
-        } else {
+        if (!cached && d.refinement() && boundDb > 0)
+            nextPass = afterPass(mine, d, boundDb);
+        else
             mine.lastPass.clear();
-        }
         FrameRecord rec;
         const protocol::Frame frame = cached ? std::move(*cached) : finish(slot, d, rec);
         protocol::encode(frame, requestId, bytes);
-        if (cached)
-            recordCached(frame.header, double(bytes.size()), msSince(d.job.queuedAt));
-        else
-            record(rec, double(bytes.size()), volume, d.pool);
-        std::lock_guard lock(mMutex);
-        mCounters->refined += frame.header.refined;
-        mCounters->samples += double(frame.header.samples);
+        const double latencyMs = cached ? msSince(d.job.queuedAt) : 0;
+        withCounters([&](RenderCounters& c) {
+            if (cached)
+                c.recordCached(frame.header, double(bytes.size()), latencyMs);
+            else
+                c.recordFrame(rec, double(bytes.size()), volume, d.pool);
+        });
+        withCounters([&](RenderCounters& c) {
+            c.refined += frame.header.refined;
+            c.samples += double(frame.header.samples);
+        });
     } catch (const std::exception& e) {
         const bool refused = dynamic_cast<const FrameRefused*>(&e) != nullptr;
         protocol::Error error{refused ? protocol::ErrorCode::OutOfRange
@@ -975,8 +444,7 @@ void RenderService::turn(const std::shared_ptr<RenderSlot>& slotPtr,
             mLog.error("render: " + volume + ": " + e.what());
             checkStore(d.job.state.volume, e);
         }
-        std::lock_guard lock(mMutex);
-        (refused ? mCounters->refused : mCounters->errors) += 1;
+        withCounters([&](RenderCounters& c) { (refused ? c.refused : c.errors) += 1; });
     }
     mine.drawing.reset();
     slot.delivering(bytes.size());
@@ -1017,7 +485,7 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     auto encoded = slot.mEncoder.encode(rgba8, width, height, codec, quality);
     auto& h = frame.header;
     h.frameId = slot.mNextFrameId++;
-    h.cameraId = s.camera->cameraId;
+    h.cameraId = s.cameraId;
     h.width = width;
     h.height = height;
     h.codec = codec;
@@ -1056,31 +524,6 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     return frame;
 }
 
-namespace {
-
-/// What determines the frame `d` (prepared): FrameCache.h.
-FrameKey keyOf(const FrameDrawing& d) {
-    const auto& s = d.job.state;
-    FrameKey key;
-    key.storeInstance = s.volume->store->instance();
-    key.renderer = d.kind->name;
-    key.refined = d.job.refined;
-    key.shading = d.options.shading;
-    protocol::SetCamera camera = *s.camera;
-    camera.cameraId = 0; // the client's name for the view, not the view
-    protocol::encode(camera, 0, key.request);
-    protocol::SetRenderOptions options{s.options};
-    // What they decide is in the key already: who draws it (key.renderer) and whether it is
-    // refined (an adaptive session's frame at rest is a refined session's frame).
-    options.options.renderer = protocol::Renderer::Auto;
-    options.options.quality = protocol::Quality::Adaptive;
-    protocol::encode(options, 0, key.request);
-    key.tf = s.tf;
-    return key;
-}
-
-} // namespace
-
 std::optional<protocol::Frame> RenderService::fromCache(RenderSlot& slot, FrameDrawing& d) {
     // Under a time budget an interactive frame's size follows the machine's speed as well as
     // its request: neither served from the cache nor kept in it.
@@ -1088,32 +531,19 @@ std::optional<protocol::Frame> RenderService::fromCache(RenderSlot& slot, FrameD
     // pixels, and passes after the first have a step of their own.
     if (!mFrames->enabled() || d.budgeted || (d.job.refined && d.job.state.budget.restPsnrDb > 0))
         return std::nullopt;
-    FrameKey key = keyOf(d);
+    const auto& s = d.job.state;
+    FrameKey key = frameKeyOf(s.volume->store->instance(), d.kind->name, d.job.refined,
+                              d.options.shading, d.view.camera, s.options, s.tf);
     const std::shared_ptr<const CachedFrame> kept = mFrames->find(key);
     if (!kept) {
         d.cacheKey = std::move(key);
         return std::nullopt;
     }
-    protocol::Frame frame;
+    protocol::Frame frame = frameFrom(*kept, slot.mEncoder);
     auto& h = frame.header;
-    if (kept->pixels()) { // a delta against this session's own previous frame
-        auto encoded = slot.mEncoder.encode(kept->bytes, kept->width, kept->height, kept->codec,
-                                            kept->quality);
-        h.keyframe = encoded.keyframe;
-        h.encodeMs = float(encoded.encodeMs);
-        frame.image = std::move(encoded.bytes);
-    } else {
-        slot.mEncoder.resetDelta(); // as encoding a frame of another codec does
-        frame.image = kept->bytes;
-    }
     h.frameId = slot.mNextFrameId++;
-    h.cameraId = d.job.state.camera->cameraId;
-    h.width = kept->width;
-    h.height = kept->height;
-    h.codec = kept->codec;
-    h.level = kept->level;
+    h.cameraId = d.job.state.cameraId;
     h.refined = d.job.refined;
-    h.cached = true;
     h.queueMs = float(std::chrono::duration<double, std::milli>(d.start - d.job.queuedAt).count());
     h.renderMs = float(msSince(d.start));
     return frame;

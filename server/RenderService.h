@@ -23,6 +23,7 @@
 #include "render/RendererChoice.h"
 #include "render/TransferFunction.h"
 #include "server/RenderSlot.h"
+#include "server/SlicePlanner.h"
 
 #include <chrono>
 #include <condition_variable>
@@ -46,6 +47,7 @@ namespace bc::server {
 
 class FrameCache;
 class FrameCluster;
+class RendererCache;
 struct ClusterFrameStats;
 struct Volume;
 class Catalog;
@@ -112,7 +114,6 @@ class RenderService {
 
   private:
     friend class RenderSlot;
-    struct Renderers;
     void run();
     /// Makes the GL context on the first call (render thread), logging that it was made
     /// `forWhat`; later calls return at once.
@@ -130,48 +131,30 @@ class RenderService {
     /// One turn of `slot`: starts `job` when given, else goes on with the frame in progress;
     /// draws one slice (or the whole frame) and delivers the frame once it is complete.
     void turn(const std::shared_ptr<RenderSlot>& slot, std::optional<RenderSlot::Job> job);
-    /// Resolves the frame's options and view, checks its cost and decides on slices.
+    /// Resolves the frame's options and view, checks its cost and decides on slices
+    /// (planSlices).
     void prepare(FrameDrawing& d);
-    /// Draws the next slice; true when the frame is complete. A first refinement pass checked
-    /// against a sparse frame (FrameDrawing::checkStride) draws that frame first: in the same
-    /// turn when the pass is drawn whole, in bands of rows, a turn each, when it is sliced.
+    /// Draws the next slice with the session's renderer (drawNext); true when the frame is
+    /// complete, and its session's next view is then planned for prefetch.
     bool drawSlice(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
-    /// Draws the sparse frame a first refinement pass is checked against (render/
-    /// RefinementEstimate.h), the pass's lattice of pixels at twice its step: its next band of
-    /// about `budget` cost units (slices' units), or, at 0, all of it that is left. Returns the
-    /// milliseconds spent loading bricks.
-    double drawCheck(render::Renderer& renderer, FrameDrawing& d, double budget);
     /// How long a slice of `d` should be: `frames.slice_ms`, but a refined frame's, while other
     /// sessions move, their share of `frames.interactive_ms` (each of the n moving and this one
     /// gets interactive_ms / (n + 1), at least 10 ms): a moving session's frame then waits for
     /// short slices of the frames at rest, not for whole 50 ms ones.
     double sliceMsBeside(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d) const;
-    /// Sessions (other than `except`) that started an interactive frame within `within` of
-    /// now or are drawing one: those sharing the frame-time budget, or moving beside a refined
-    /// frame.
-    std::uint32_t interactiveSessions(Clock::duration within,
-                                      const RenderSlot* except = nullptr) const;
     /// Draws `options.region` of the frame: with `renderer` here, or across the cluster's
     /// ranks when there is one and the frame is a raycaster's (a sparse frame, options.stride,
     /// is drawn here).
     render::Image drawRegion(render::Renderer& renderer, const FrameDrawing& d,
                              const render::RenderOptions& options, render::FrameStats& stats);
-    /// After a GPU frame `d` completed: its session's next view, predicted from its last two,
-    /// is prefetched while the render thread is idle (frames.prefetch).
-    void planPrefetch(const std::shared_ptr<RenderSlot>& slot, const FrameDrawing& d,
-                      render::Renderer& renderer);
-    render::Renderer& rendererFor(const std::shared_ptr<RenderSlot>& slot, FrameDrawing& d);
     protocol::Frame finish(RenderSlot& slot, FrameDrawing& d, FrameRecord& record);
     /// The frame `d` (prepared) from the frame cache, encoded for `slot`, or nullopt when the
     /// cache has no frame for its key (then d.cacheKey is set for finish() to keep it).
     std::optional<protocol::Frame> fromCache(RenderSlot& slot, FrameDrawing& d);
     /// Whether `slot` has a frame in progress (render thread).
     bool drawing(const RenderSlot* slot) const;
-    void record(const FrameRecord& f, double bytes, const std::string& volume,
-                const render::BrickPool* pool);
-    /// A frame answered from the frame cache: its bytes, latency and encoding.
-    void recordCached(const protocol::FrameHeader& h, double bytes, double latencyMs);
-    void retirePool(const std::string& volume); ///< its pool is replaced or freed
+    /// Calls `f` with the counters, under mMutex (the render thread's counting).
+    void withCounters(const std::function<void(RenderCounters& counters)>& f);
     /// After `e` failed a frame or prefetch of `volume`: a store error while its file has
     /// changed on disk takes the volume out of service (Catalog::markFailed) and tells
     /// mVolumeFailed.
@@ -188,12 +171,12 @@ class RenderService {
     bool mStop = false;
     std::optional<std::string> mGpuUnavailable;        ///< set once by makeContext()
     std::optional<render::RendererChoice> mAutoChoice; ///< set once by autoChoice(), for metrics
-    std::unique_ptr<Renderers> mRenderers;             // render thread only
+    std::unique_ptr<RendererCache> mRenderers;         // render thread only
     /// Measured speed of each renderer in cost units (upper bounds of samples) per millisecond,
     /// from the whole frames it drew: whether a frame is sliced (render thread only).
-    std::map<std::string, double, std::less<>> mCostPerMs;
+    RendererSpeeds mFrameSpeeds;
     /// The same against each slice's pixels' estimated samples (sizes slices).
-    std::map<std::string, double, std::less<>> mSliceCostPerMs;
+    RendererSpeeds mSliceSpeeds;
     /// The image scale of interactive frames (render thread only); null: half size.
     std::unique_ptr<InteractiveBudget> mBudget;
     /// Shared by every session and renderer (thread-safe).

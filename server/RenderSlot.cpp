@@ -1,6 +1,7 @@
 #include "server/RenderSlot.h"
 
 #include "server/RenderService.h"
+#include "server/ViewRequest.h"
 
 namespace bc::server {
 
@@ -42,7 +43,8 @@ void RenderSlot::setCamera(const protocol::SetCamera& camera) {
     {
         std::lock_guard lock(mMutex);
         markChanged();
-        mState.camera = camera; // latest wins: an undrawn camera is simply replaced
+        mState.camera = toCamera(camera); // latest wins: an undrawn camera is simply replaced
+        mState.cameraId = camera.cameraId;
         mLastCamera = Clock::now();
         mCameraMoved = true;
         mDirty = true;

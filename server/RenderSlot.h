@@ -6,6 +6,7 @@
 // write queue has room, or when its camera has rested long enough for the refined frame.
 #include "protocol/FrameCodec.h"
 #include "protocol/Messages.h"
+#include "render/Camera.h"
 #include "render/TransferFunction.h"
 
 #include <chrono>
@@ -60,7 +61,10 @@ class RenderSlot {
     friend struct FrameDrawing;
     struct State {
         std::shared_ptr<Volume> volume;
-        std::optional<protocol::SetCamera> camera;
+        /// The renderer's camera, converted once when its SetCamera arrived (the decoder
+        /// checked it: protocol/MessageRules.cpp).
+        std::optional<render::Camera> camera;
+        std::uint32_t cameraId = 0; ///< the client's, echoed by the frame that draws it
         std::shared_ptr<const render::TransferFunction> tf;
         protocol::SetTransferFunction tfMessage;
         protocol::RenderOptions options;

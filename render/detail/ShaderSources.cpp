@@ -29,7 +29,7 @@ gl::ShaderStage shaderStage(std::string_view name, const std::vector<ShaderDefin
                           " is embedded");
     std::string source = file->text;
     if (!defines.empty()) {
-        // EmbedShaders.cmake checked that a stage file starts with its #version line.
+        // EmbedText.cmake checked that a stage file starts with its #version line.
         std::string block;
         for (const ShaderDefine& d : defines)
             block += "#define " + d.name + " " + d.value + "\n";

@@ -1,7 +1,7 @@
 #pragma once
-// The GLSL of render/shaders/, embedded at build time by cmake/EmbedShaders.cmake (the generated
-// EmbeddedShaders.cpp lives in the build tree). How the files are named, included and given
-// constants from the C++: render/shaders/README.md.
+// The GLSL of render/shaders/, embedded at build time by bc_embed_text (cmake/EmbedText.cmake; the
+// generated EmbeddedShaders.cpp lives in the build tree). How the files are named, included and
+// given constants from the C++: render/shaders/README.md.
 #include "render/detail/Gl.h"
 
 #include <cstddef>

@@ -1,6 +1,6 @@
 #pragma once
-// The transfer-function presets of configs/tf, embedded at build time by
-// cmake/EmbedTfPresets.cmake (the generated TfPresets.cpp lives in the build tree).
+// The transfer-function presets of configs/tf, embedded at build time by bc_embed_text
+// (cmake/EmbedText.cmake; the generated TfPresets.cpp lives in the build tree).
 #include <cstddef>
 
 namespace bc::render::detail {

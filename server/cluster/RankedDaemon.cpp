@@ -8,6 +8,7 @@
 #include "render/View.h"
 #include "server/Catalog.h"
 #include "server/Log.h"
+#include "server/RendererCache.h"
 #include "server/ViewRequest.h"
 
 #include <algorithm>
@@ -405,17 +406,10 @@ int serveOrders(MPI_Comm comm, Catalog& catalog, const DaemonConfig& config, Log
             if (render::GpuResidency* gpu = raycaster.gpuResidency()) {
                 // The volume's share of the rank's GPU budget (by the volumes drawn here, as
                 // rank 0 shares by sessions); a new pool only when the share moved by more
-                // than an eighth.
+                // than an eighth (fitPool, as rank 0's).
                 auto& [pool, budget] = pools[&volume];
                 const std::uint64_t share = catalog.shareOf(volume, config.gpuBudgetBytes);
-                if (!pool || share < budget - budget / 8 || share > budget + budget / 8) {
-                    pool.reset(); // the old texture goes before the new one is allocated
-                    pool = std::make_shared<render::BrickPool>(volume.store->info().volume.type,
-                                                               volume.store->layout().storedEdge(),
-                                                               render::BrickPoolConfig{share});
-                    budget = share;
-                }
-                gpu->setSharedPool(pool);
+                gpu->setSharedPool(fitPool(pool, budget, volume, share));
             }
             options.parts = std::uint32_t(ranks);
             options.part = std::uint32_t(me);

@@ -1,10 +1,16 @@
 // The frame cache: a second session asking for a view already drawn gets the frame
 // drawn before, without a render and with the same bytes; a delta-coded frame is each session's
 // own delta; a change of transfer function, options or store is drawn anew; the cache is held
-// under its byte budget; frames.cache_mb = 0 turns it off.
+// under its byte budget; frames.cache_mb = 0 turns it off. And the key (frameKeyOf): two views
+// that differ in any field are two keys, identical views one.
 #include "ServerTestSupport.h"
 
+#include "render/Camera.h"
+#include "render/TransferFunction.h"
+#include "server/FrameCache.h"
+
 #include <fstream>
+#include <functional>
 
 namespace bc::server::test {
 namespace {
@@ -214,6 +220,91 @@ TEST_F(FrameCacheTest, ABudgetOfZeroTurnsItOff) {
     EXPECT_EQ(metric("frame_cache_hits_total"), 0);
     EXPECT_EQ(metric("frame_cache_misses_total"), 0);
     EXPECT_EQ(metric("frame_cache_budget_bytes"), 0);
+}
+
+/// What a key is made of, each field as frameKeyOf takes it.
+struct KeyFields {
+    std::uint64_t storeInstance = 1;
+    std::string renderer = "cpu";
+    bool refined = true, shading = true;
+    render::Camera camera;
+    protocol::RenderOptions options = smallCpuFrames(48);
+    std::shared_ptr<const render::TransferFunction> tf;
+    FrameKey key() const {
+        return frameKeyOf(storeInstance, renderer, refined, shading, camera, options, tf);
+    }
+};
+
+std::shared_ptr<const render::TransferFunction> functionPeakingAt(double value) {
+    render::VolumeValueStats stats;
+    stats.valueMin = 0;
+    stats.valueMax = 255;
+    const std::string json = R"({"name":"t","points":[{"value":)" + std::to_string(value) +
+                             R"(,"rgba":[0.9,0.7,0.4,0]},{"value":255,"rgba":[0.9,0.7,0.4,0.6]}]})";
+    return std::make_shared<const render::TransferFunction>(
+        render::TransferFunction::parse(json, "<test>", stats));
+}
+
+TEST(FrameKeyTest, IdenticalViewsAreOneKey) {
+    KeyFields a;
+    a.camera.eye = {1, 2, 3};
+    a.tf = functionPeakingAt(100);
+    KeyFields b = a;
+    b.tf = functionPeakingAt(100); // another object, the same function
+    EXPECT_TRUE(a.key().matches(b.key()));
+    EXPECT_EQ(a.key().hash(), b.key().hash());
+    // What the renderer and quality asked for decide the key's renderer and refined: not kept.
+    b.options.renderer = protocol::Renderer::Auto;
+    b.options.quality = protocol::Quality::Interactive;
+    EXPECT_TRUE(a.key().matches(b.key()));
+    EXPECT_EQ(a.key().hash(), b.key().hash());
+}
+
+TEST(FrameKeyTest, ViewsDifferingInAnyFieldAreTwoKeys) {
+    KeyFields base;
+    base.camera.eye = {100, 50, 25};
+    base.camera.target = {1, 2, 3};
+    base.options.refinedCodec = protocol::Codec::Png;
+    base.tf = functionPeakingAt(100);
+    const std::vector<std::pair<std::string, std::function<void(KeyFields&)>>> changes = {
+        {"store", [](KeyFields& v) { v.storeInstance = 2; }},
+        {"renderer", [](KeyFields& v) { v.renderer = "gpu"; }},
+        {"refined", [](KeyFields& v) { v.refined = false; }},
+        {"shading", [](KeyFields& v) { v.shading = false; }},
+        {"eye.x", [](KeyFields& v) { v.camera.eye.x += 1e-9; }},
+        {"eye.y", [](KeyFields& v) { v.camera.eye.y += 1; }},
+        {"eye.z", [](KeyFields& v) { v.camera.eye.z += 1; }},
+        {"target.x", [](KeyFields& v) { v.camera.target.x += 1; }},
+        {"target.y", [](KeyFields& v) { v.camera.target.y += 1; }},
+        {"target.z", [](KeyFields& v) { v.camera.target.z += 1; }},
+        {"up.x", [](KeyFields& v) { v.camera.up.x = 0.5; }},
+        {"up.y", [](KeyFields& v) { v.camera.up.y = 0.5; }},
+        {"up.z", [](KeyFields& v) { v.camera.up.z = 0.5; }},
+        {"up.x -0 for 0", [](KeyFields& v) { v.camera.up.x = -0.0; }}, // bit for bit
+        {"fovYDeg", [](KeyFields& v) { v.camera.fovYDeg = 31; }},
+        {"orthographic", [](KeyFields& v) { v.camera.orthographic = true; }},
+        {"orthoHeight", [](KeyFields& v) { v.camera.orthoHeight = 2; }},
+        {"width", [](KeyFields& v) { v.options.width += 1; }},
+        {"height", [](KeyFields& v) { v.options.height += 1; }},
+        {"stepVoxels", [](KeyFields& v) { v.options.stepVoxels = 0.5f; }},
+        {"techniques", [](KeyFields& v) { v.options.techniques &= ~protocol::kTechJitter; }},
+        {"ertThreshold", [](KeyFields& v) { v.options.ertThreshold = 0.95f; }},
+        {"codec", [](KeyFields& v) { v.options.codec = protocol::Codec::Raw; }},
+        {"codecQuality", [](KeyFields& v) { v.options.codecQuality = 5; }},
+        {"level", [](KeyFields& v) { v.options.level = 1; }},
+        {"refinedCodec", [](KeyFields& v) { v.options.refinedCodec.reset(); }},
+        {"flags", [](KeyFields& v) { v.options.flags = protocol::kFlagUnscaledInteractive; }},
+        {"another function", [](KeyFields& v) { v.tf = functionPeakingAt(120); }},
+        {"no function", [](KeyFields& v) { v.tf = nullptr; }},
+    };
+    const FrameKey key = base.key();
+    for (const auto& [field, change] : changes) {
+        KeyFields other = base;
+        change(other);
+        EXPECT_FALSE(key.matches(other.key())) << field;
+        EXPECT_FALSE(other.key().matches(key)) << field;
+        EXPECT_TRUE(other.key().matches(other.key())) << field;
+    }
 }
 
 } // namespace

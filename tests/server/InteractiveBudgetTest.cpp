@@ -4,6 +4,7 @@
 // raycasters' frames have), so that what it decides is checked exactly, not timed.
 #include "server/InteractiveBudget.h"
 #include "ServerTestSupport.h"
+#include "server/Catalog.h"
 #include "server/ViewRequest.h"
 
 #include <gtest/gtest.h>
@@ -488,6 +489,73 @@ TEST(FrameBudget, WithoutABoundOneRefinedFrameAndACameraThatMovesStopsTheRefinem
         f = c.nextFrame();
         EXPECT_EQ(f.header.cameraId, 3u);
     }
+}
+
+/// A 32^3 phantom in bricks of 8 (levels of 32, 16 and 8 voxels) with a host cache of
+/// `cacheBytes`, as the catalog would serve it.
+struct LevelsVolume {
+    test::TempDir dir;
+    Volume v;
+    explicit LevelsVolume(std::uint64_t cacheBytes) {
+        auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {32, 32, 32}, 1);
+        brickstore::IngestConfig config;
+        config.geometry = {8, 2, 4};
+        brickstore::ingest(*source, dir.file("p.bcs"), config);
+        v.name = "p";
+        v.store = brickstore::BrickStore::open(dir.file("p.bcs"));
+        v.cache = std::make_unique<brickstore::BrickCache>(
+            *v.store, brickstore::BrickCacheConfig{cacheBytes});
+    }
+};
+
+TEST(LevelFitting, ALevelsBytesAreItsStoredBricksDecompressed) {
+    LevelsVolume p(64ull << 20);
+    const auto levels = std::uint32_t(p.v.store->layout().levels().size());
+    ASSERT_EQ(levels, 3u);
+    for (std::uint32_t l = 0; l < levels; ++l) {
+        EXPECT_GT(p.v.store->storedBricks(l), 0u) << "level " << l;
+        EXPECT_EQ(levelBytes(p.v, l),
+                  double(p.v.store->storedBricks(l)) * double(p.v.store->brickBytes()));
+    }
+    EXPECT_EQ(levelBytes(p.v, 7), levelBytes(p.v, 2)) << "past the last level: the last";
+    EXPECT_GT(levelBytes(p.v, 0), levelBytes(p.v, 1));
+}
+
+TEST(LevelFitting, ALevelFitsWhenItsBytesAreWithinTheCacheShare) {
+    LevelsVolume probe(64ull << 20);
+    const double level1 = levelBytes(probe.v, 1);
+    LevelsVolume p{std::uint64_t(level1)}; // exactly level 1's bytes
+    EXPECT_FALSE(levelFits(p.v, 0));
+    EXPECT_TRUE(levelFits(p.v, 1)) << "the bound is inclusive";
+    EXPECT_TRUE(levelFits(p.v, 2));
+    LevelsVolume tight{std::uint64_t(level1) - 1};
+    EXPECT_FALSE(levelFits(tight.v, 1));
+}
+
+TEST(LevelFitting, InteractiveLevelsAreTheOneAskedForOrEveryLevelMarked) {
+    LevelsVolume probe(64ull << 20);
+    LevelsVolume p{std::uint64_t(levelBytes(probe.v, 1))};
+    protocol::RenderOptions o;
+    o.level = 1;
+    LevelRange r = interactiveLevels(p.v, o);
+    EXPECT_EQ(r.first, 1u);
+    EXPECT_EQ(r.last, 1u);
+    EXPECT_TRUE(r.fits.empty() && r.warm.empty());
+    o.level = 9; // past the last level: the last
+    r = interactiveLevels(p.v, o);
+    EXPECT_EQ(r.first, 2u);
+    EXPECT_EQ(r.last, 2u);
+    o.level = protocol::kLevelAutomatic;
+    r = interactiveLevels(p.v, o);
+    EXPECT_EQ(r.first, 0u);
+    EXPECT_EQ(r.last, 2u);
+    EXPECT_EQ(r.fits, (std::vector<bool>{false, true, true}));
+    EXPECT_EQ(r.warm, (std::vector<bool>{false, false, false})) << "nothing is resident yet";
+    // The coarsest level's one brick loaded: that level is warm, the others not.
+    ASSERT_EQ(p.v.store->layout().levels()[2].bricks, (std::array<std::uint32_t, 3>{1, 1, 1}));
+    p.v.cache->pin(brickstore::BrickKey{2, {0, 0, 0}});
+    r = interactiveLevels(p.v, o);
+    EXPECT_EQ(r.warm, (std::vector<bool>{false, false, true}));
 }
 
 } // namespace

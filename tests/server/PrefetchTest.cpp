@@ -1,11 +1,15 @@
 // Prefetch: while the render thread is idle, the bricks of each GPU session's
 // predicted next view that the pool lacks are uploaded ahead of need. A close-up orbit that
 // brings new bricks into view every frame, with think time between frames: with prefetch on,
-// frames wait for far fewer uploads, and every frame is the one drawn without it.
+// frames wait for far fewer uploads, and every frame is the one drawn without it. And what is
+// planned without a GPU (server/Prefetch.h): the view predicted, the bricks to leave in the pool
+// and the bounded steps.
 #include "ServerTestSupport.h"
 
 #include "../render/RenderTestSupport.h"
 #include "brickstore/Readers.h"
+#include "render/View.h"
+#include "server/Prefetch.h"
 
 namespace bc::server::test {
 namespace {
@@ -90,6 +94,70 @@ TEST(Prefetch, UploadsTheNextViewsBricksAheadAndChangesNoFrame) {
                 std::max(worst, std::abs(int(on.frames[i].rgba[k]) - int(off.frames[i].rgba[k])));
         EXPECT_LE(worst, 2) << "frame " << i; // the skipping invariant's bound (pool slots differ)
     }
+}
+
+void expectSameCamera(const render::Camera& a, const render::Camera& b) {
+    EXPECT_EQ(a.eye, b.eye);
+    EXPECT_EQ(a.target, b.target);
+    EXPECT_EQ(a.up, b.up);
+    EXPECT_EQ(a.fovYDeg, b.fovYDeg);
+    EXPECT_EQ(a.orthographic, b.orthographic);
+    EXPECT_EQ(a.orthoHeight, b.orthoHeight);
+}
+
+TEST(PrefetchPlanTest, TheNextViewIsPredictedFromTheLastTwo) {
+    render::Box box;
+    box.max = glm::dvec3(100.0);
+    const render::Camera c1 = render::Camera::orbit(box, 30, 20),
+                         c2 = render::Camera::orbit(box, 36, 20),
+                         c3 = render::Camera::orbit(box, 42, 20),
+                         c4 = render::Camera::orbit(box, 48, 20);
+    SessionPrefetch p;
+    EXPECT_FALSE(p.afterFrame(c1, true).has_value()) << "one view: no motion to go on";
+    const auto next = p.afterFrame(c2, true);
+    ASSERT_TRUE(next.has_value());
+    expectSameCamera(*next, render::predictNext(c1, c2));
+    // Not planned (prefetch off, or no pool yet): the job planned before is dropped, and the
+    // views are still followed.
+    p.job = PrefetchJob{};
+    EXPECT_FALSE(p.afterFrame(c3, false).has_value());
+    EXPECT_FALSE(p.job.has_value());
+    const auto after = p.afterFrame(c4, true);
+    ASSERT_TRUE(after.has_value());
+    expectSameCamera(*after, render::predictNext(c3, c4));
+}
+
+TEST(PrefetchPlanTest, AStepLeavesTheLastFramesBricksAndUploadsAtMost32) {
+    PrefetchStep s = prefetchStep(60, 100);
+    EXPECT_EQ(s.room, 40u);
+    EXPECT_EQ(s.bricks, kPrefetchStepBricks);
+    EXPECT_TRUE(s.continues(32)) << "all it could upload: more may be missing";
+    EXPECT_FALSE(s.continues(31)) << "the view's missing bricks ran out";
+    s = prefetchStep(90, 100);
+    EXPECT_EQ(s.room, 10u);
+    EXPECT_EQ(s.bricks, 10u);
+    EXPECT_FALSE(s.continues(10)) << "the pool's room is used up";
+    EXPECT_EQ(prefetchStep(100, 100).room, 0u);
+    EXPECT_EQ(prefetchStep(500, 100).room, 0u) << "a frame larger than the pool";
+    EXPECT_EQ(prefetchStep(0, 0).room, 0u);
+    s = prefetchStep(0, 1000);
+    EXPECT_EQ(s.room, 1000u);
+    EXPECT_EQ(s.bricks, 32u);
+}
+
+TEST(PrefetchPlanTest, AFramesResidentBricksAreThoseItDrewLessThoseLeftUnloaded) {
+    render::FrameStats s;
+    s.bricksVisited = 10;
+    s.bricksConstant = 2;
+    EXPECT_EQ(residentBricks(s), 8u);
+    s.bricksDeferred = 3;
+    s.bricksRequested = 1;
+    EXPECT_EQ(residentBricks(s), 6u);
+    s.bricksRequested = 5; // more requested than deferred (slices' sums): none unloaded
+    EXPECT_EQ(residentBricks(s), 8u);
+    s.bricksDeferred = 20;
+    s.bricksRequested = 0;
+    EXPECT_EQ(residentBricks(s), 0u) << "never below zero";
 }
 
 } // namespace

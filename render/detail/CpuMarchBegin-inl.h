@@ -1,0 +1,184 @@
+// Ray set-up of the CPU raycaster's SIMD march (render/detail/CpuMarchSimd.cpp): the walks of
+// a vector of fresh rays through the brick grid, set up at once (RayWalk::begin() per lane).
+//
+// Per-target code in Highway's -inl.h form: include it only from render/detail/CpuMarchSimd.cpp,
+// which foreach_target re-includes once per target (hence the toggle guard below, not
+// #pragma once), and which alone defines its non-inline functions. That file is compiled with
+// -ffp-contract=off (render/CMakeLists.txt) and this header's code inherits it only by being
+// included there: a lane's float operations must stay the scalar code's, unfused.
+#include "render/detail/CpuMarchSimd.h"
+
+#include <cstddef>
+#include <cstdint>
+
+// Per-target include guard: flipped with HWY_TARGET_TOGGLE for each target.
+#if defined(BRICKCAST_RENDER_DETAIL_CPUMARCHBEGIN_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef BRICKCAST_RENDER_DETAIL_CPUMARCHBEGIN_INL_H_
+#undef BRICKCAST_RENDER_DETAIL_CPUMARCHBEGIN_INL_H_
+#else
+#define BRICKCAST_RENDER_DETAIL_CPUMARCHBEGIN_INL_H_
+#endif
+
+#include "render/detail/CpuMarchGathers-inl.h"
+
+#include <hwy/highway.h>
+
+HWY_BEFORE_NAMESPACE();
+namespace bc::render::detail {
+namespace HWY_NAMESPACE {
+
+/// The rays' origins o and directions d per lane for image-plane positions (SX, SY), as
+/// RayWalk::begin() sets them up (glm::normalize is v * (1 / sqrt(dot(v, v)))).
+HWY_INLINE void rayBasis(const Frame& f, VF SX, VF SY, VF* o, VF* d) {
+    const DF df;
+    auto along = [&](float base, float right, float up) { // base + sx right + sy up
+        return hn::Add(hn::Add(hn::Set(df, base), hn::Mul(SX, hn::Set(df, right))),
+                       hn::Mul(SY, hn::Set(df, up)));
+    };
+    for (int a = 0; a < 3; ++a) {
+        o[a] = f.ortho ? along(f.eye[a], f.right[a], f.up[a]) : hn::Set(df, f.eye[a]);
+        d[a] = f.ortho ? hn::Set(df, f.forward[a]) : along(f.forward[a], f.right[a], f.up[a]);
+    }
+    if (f.ortho) return;
+    const VF inv = hn::Div(
+        hn::Set(df, 1.0f),
+        hn::Sqrt(hn::Add(hn::Add(hn::Mul(d[0], d[0]), hn::Mul(d[1], d[1])), hn::Mul(d[2], d[2]))));
+    for (int a = 0; a < 3; ++a)
+        d[a] = hn::Mul(d[a], inv);
+}
+
+/// The rays in voxels (origins ov, directions dv, inv = 1 / dv) and where they enter (t0) and
+/// leave (t1) the volume's box (std::min and std::max by their own comparisons); returns the
+/// lanes that miss it, and those past `count`.
+HWY_INLINE hn::Mask<DF> clipToVolume(const Frame& f, const VF* o, const VF* d, std::size_t count,
+                                     VF* ov, VF* dv, VF* inv, VF& t0, VF& t1) {
+    const DF df;
+    const VF zero = hn::Zero(df);
+    auto minOf = [](VF a, VF b) { return hn::IfThenElse(hn::Lt(b, a), b, a); }; // std::min
+    auto maxOf = [](VF a, VF b) { return hn::IfThenElse(hn::Lt(a, b), b, a); }; // std::max
+    t0 = zero;
+    t1 = hn::Set(df, 3.0e38f);
+    auto miss = hn::Not(hn::FirstN(df, count));
+    for (int a = 0; a < 3; ++a) {
+        ov[a] = hn::Mul(o[a], hn::Set(df, f.invSpacing[a]));
+        dv[a] = hn::Mul(d[a], hn::Set(df, f.invSpacing[a]));
+        inv[a] = hn::Div(hn::Set(df, 1.0f), dv[a]);
+        const auto still = hn::Eq(dv[a], zero);
+        miss = hn::Or(miss, hn::And(still, hn::Or(hn::Lt(ov[a], zero),
+                                                  hn::Gt(ov[a], hn::Set(df, f.dims[a])))));
+        const VF ta = hn::Mul(hn::Neg(ov[a]), inv[a]),
+                 tb = hn::Mul(hn::Sub(hn::Set(df, f.dims[a]), ov[a]), inv[a]);
+        t0 = hn::IfThenElse(still, t0, maxOf(t0, minOf(ta, tb)));
+        t1 = hn::IfThenElse(still, t1, minOf(t1, maxOf(ta, tb)));
+    }
+    return miss;
+}
+
+/// beginFresh()'s walks per lane, stored from its vectors for each ray's RayWalk.
+struct FreshLanes {
+    static constexpr std::size_t kMax = hn::MaxLanes(DF());
+    HWY_ALIGN float d[3][kMax], ov[3][kMax], dv[3][kMax], invDv[3][kMax], tDelta[3][kMax];
+    HWY_ALIGN float tMax[kMax]; ///< one axis at a time
+    HWY_ALIGN std::int32_t cell[3][kMax];
+    HWY_ALIGN float t0[kMax];
+    HWY_ALIGN std::int32_t total[kMax];
+    std::uint8_t missBits[(kMax + 7) / 8 + 8] = {};
+};
+
+/// The rays' cells of the brick grid at t0 and their DDA steps (tDelta, and tMax straight into
+/// walks[0, count)), stored per axis into `out` with the rays' d, ov, dv and inv.
+HWY_INLINE void storeAxes(const Frame& f, const VF* d, const VF* ov, const VF* dv, const VF* inv,
+                          VF t0, std::size_t count, FreshLanes& out, RayWalk* walks) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df);
+    const float brick = float(f.brick);
+    for (int a = 0; a < 3; ++a) {
+        const VF pin = hn::Add(ov[a], hn::Mul(dv[a], t0));
+        const VI cell = hn::Min(
+            hn::Max(hn::ConvertTo(di, hn::Floor(hn::Div(pin, hn::Set(df, brick)))), hn::Zero(di)),
+            hn::Set(di, f.grid[a] - 1));
+        const auto still = hn::Eq(dv[a], zero), up = hn::Gt(dv[a], zero);
+        const VF plane = hn::ConvertTo(
+            df, hn::Mul(hn::Add(cell, hn::IfThenElseZero(hn::RebindMask(di, up), hn::Set(di, 1))),
+                        hn::Set(di, f.brick)));
+        const VF far = hn::Set(df, 3.0e38f);
+        hn::Store(cell, di, out.cell[a]);
+        hn::Store(d[a], df, out.d[a]);
+        hn::Store(ov[a], df, out.ov[a]);
+        hn::Store(dv[a], df, out.dv[a]);
+        hn::Store(inv[a], df, out.invDv[a]);
+        hn::Store(hn::IfThenElse(still, far, hn::Mul(hn::Set(df, brick), hn::Abs(inv[a]))), df,
+                  out.tDelta[a]);
+        // tMax, kept where the cell is known: out.tMax holds one axis at a time.
+        hn::Store(hn::IfThenElse(still, far, hn::Mul(hn::Sub(plane, ov[a]), inv[a])), df, out.tMax);
+        for (std::size_t i = 0; i < count; ++i)
+            walks[i].tMax[a] = out.tMax[i];
+    }
+}
+
+/// Each ray's walk and ok[i] from the lanes, as begin() leaves them; the rays marked Done.
+HWY_INLINE void unpackWalks(const PacketRay* rays, std::size_t count, float invStep,
+                            const FreshLanes& out, RayWalk* walks, bool* ok) {
+    for (std::size_t i = 0; i < count; ++i) {
+        RayWalk& w = walks[i];
+        ok[i] = ((out.missBits[i >> 3] >> (i & 7)) & 1) == 0;
+        if (rays[i].state) rays[i].state->phase = RayPhase::Done;
+        if (!ok[i]) continue;
+        for (int a = 0; a < 3; ++a) {
+            w.d[a] = out.d[a][i];
+            w.ov[a] = out.ov[a][i];
+            w.dv[a] = out.dv[a][i];
+            w.invDv[a] = out.invDv[a][i];
+            w.tDelta[a] = out.tDelta[a][i];
+            w.cell[a] = out.cell[a][i];
+            w.stepDir[a] = w.dv[a] > 0.0f ? 1 : w.dv[a] < 0.0f ? -1 : 0;
+        }
+        w.t0 = out.t0[i];
+        w.invStep = invStep;
+        w.total = out.total[i];
+        w.k = w.kEnd = w.index = 0;
+        w.entered = false;
+    }
+}
+
+/// RayWalk::begin() for rays [0, count) of `rays` at once, all Fresh: ok[i] says whether ray
+/// i has anything to draw, walks[i] is its walk. The scalar code's float operations in its
+/// order (glm::normalize is v * (1 / sqrt(dot(v, v))); std::min and std::max by their own
+/// comparisons), so each walk is bit for bit the one begin() sets up. Marks the rays Done,
+/// as begin() does (a ray that stops to wait says so in RayWalk::next()).
+void beginFresh(const Frame& f, const PacketRay* rays, std::size_t count, RayWalk* walks,
+                bool* ok) {
+    const DF df;
+    const DI di;
+    constexpr std::size_t kMax = hn::MaxLanes(DF());
+    HWY_ALIGN float sx[kMax] = {}, sy[kMax] = {}, shift[kMax] = {};
+    for (std::size_t i = 0; i < count; ++i) {
+        sx[i] = rays[i].sx;
+        sy[i] = rays[i].sy;
+        shift[i] = rays[i].shift;
+    }
+    VF o[3], d[3];
+    rayBasis(f, hn::Load(df, sx), hn::Load(df, sy), o, d);
+    VF ov[3], dv[3], inv[3], t0, t1;
+    auto miss = clipToVolume(f, o, d, count, ov, dv, inv, t0, t1);
+    const float invStep = 1.0f / f.stepMm;
+    t0 = hn::Add(t0, hn::Mul(hn::Load(df, shift), hn::Set(df, f.stepMm)));
+    const VF totalF =
+        hn::Ceil(hn::Sub(hn::Mul(hn::Sub(t1, t0), hn::Set(df, invStep)), hn::Set(df, 0.5f)));
+    // Where the count does not fit an int the ray is refused (begin() would misbehave).
+    miss = hn::Or(miss, hn::Not(hn::Lt(totalF, hn::Set(df, 2.0e9f))));
+    miss = hn::Or(miss, hn::Not(hn::Gt(totalF, hn::Zero(df))));
+    FreshLanes out;
+    storeAxes(f, d, ov, dv, inv, t0, count, out, walks);
+    hn::Store(t0, df, out.t0);
+    hn::Store(hn::ConvertTo(di, hn::IfThenElseZero(hn::Not(miss), totalF)), di, out.total);
+    hn::StoreMaskBits(df, miss, out.missBits);
+    unpackWalks(rays, count, invStep, out, walks, ok);
+}
+
+} // namespace HWY_NAMESPACE
+} // namespace bc::render::detail
+HWY_AFTER_NAMESPACE();
+
+#endif // BRICKCAST_RENDER_DETAIL_CPUMARCHBEGIN_INL_H_
