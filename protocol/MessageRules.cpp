@@ -76,29 +76,39 @@ void check(Rules& r, const VolumeOpened& m) {
     check(r, m.info);
 }
 
+using Vec3 = std::array<double, 3>;
+
+// GLM's dot, cross and normalize, operation for operation: the renderer's camera check
+// (render/Camera.cpp, Camera::validate) is this one in its own module, and the test
+// CameraRules.* holds the two to the same verdicts.
+double dot(const Vec3& a, const Vec3& b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+Vec3 cross(const Vec3& x, const Vec3& y) {
+    return {x[1] * y[2] - y[1] * x[2], x[2] * y[0] - y[2] * x[0], x[0] * y[1] - y[0] * x[1]};
+}
+
+/// The unit vector along `v` (finite, not zero), scaled first by the power of two that brings
+/// its largest component into [1, 2) (exact), so that no squared length overflows.
+Vec3 direction(Vec3 v) {
+    const int e = std::ilogb(std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])}));
+    for (double& c : v)
+        c = std::ldexp(c, -e);
+    const double inverse = 1.0 / std::sqrt(dot(v, v));
+    for (double& c : v)
+        c *= inverse;
+    return v;
+}
+
 void checkView(Rules& r, const SetCamera& m) {
-    std::array<double, 3> view{};
-    double scale = 0;
-    for (int i = 0; i < 3; ++i) {
-        view[i] = m.target[i] - m.eye[i];
-        scale = std::max(scale, std::abs(view[i]));
-    }
-    if (scale == 0) return r.fail(ErrorCode::OutOfRange, "eye", vec3(m.eye) + " equals target");
-    if (!std::isfinite(scale))
+    const Vec3 view{m.target[0] - m.eye[0], m.target[1] - m.eye[1], m.target[2] - m.eye[2]};
+    if (view == Vec3{0, 0, 0})
+        return r.fail(ErrorCode::OutOfRange, "eye", vec3(m.eye) + " equals target");
+    if (!std::isfinite(view[0]) || !std::isfinite(view[1]) || !std::isfinite(view[2]))
         return r.fail(ErrorCode::OutOfRange, "target", "target - eye is not finite");
-    // The renderer's test (render/Camera.cpp): |cross(normalize(view), up)| < 1e-9.
-    double length = 0;
-    for (auto& v : view) {
-        v /= scale;
-        length += v * v;
-    }
-    length = std::sqrt(length);
-    for (auto& v : view)
-        v /= length;
-    const double cx = view[1] * m.up[2] - view[2] * m.up[1];
-    const double cy = view[2] * m.up[0] - view[0] * m.up[2];
-    const double cz = view[0] * m.up[1] - view[1] * m.up[0];
-    if (!(std::sqrt(cx * cx + cy * cy + cz * cz) >= 1e-9))
+    const Vec3 side = cross(direction(view), m.up);
+    if (!(std::sqrt(dot(side, side)) >= 1e-9))
         r.fail(ErrorCode::OutOfRange, "up",
                vec3(m.up) + " is zero or parallel to the view direction");
 }

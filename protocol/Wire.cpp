@@ -1,5 +1,7 @@
 #include "protocol/Wire.h"
 
+#include <utility>
+
 namespace bc::protocol {
 
 const char* typeName(std::uint8_t type) {
@@ -84,6 +86,28 @@ const char* errorName(std::uint16_t code) {
         return "NotFound";
     }
     return "unknown";
+}
+
+namespace {
+
+constexpr std::pair<Renderer, std::string_view> kRendererNames[] = {
+    {Renderer::GpuRaycaster, "gpu"},      {Renderer::CpuRaycaster, "cpu"},
+    {Renderer::Reference, "reference"},   {Renderer::Splatter, "splat"},
+    {Renderer::GpuSplatter, "splat-gpu"}, {Renderer::Auto, "auto"},
+};
+
+} // namespace
+
+std::string_view rendererName(Renderer renderer) {
+    for (const auto& [r, name] : kRendererNames)
+        if (r == renderer) return name;
+    return "unknown";
+}
+
+std::optional<Renderer> rendererNamed(std::string_view name) {
+    for (const auto& [r, n] : kRendererNames)
+        if (n == name) return r;
+    return std::nullopt;
 }
 
 } // namespace bc::protocol

@@ -5,6 +5,8 @@
 // values are the ones PROTOCOL.md gives.
 #include <cstddef>
 #include <cstdint>
+#include <optional>
+#include <string_view>
 
 namespace bc::protocol {
 
@@ -129,5 +131,11 @@ enum class ByeReason : std::uint16_t { Normal = 0, ShuttingDown = 1, IdleTimeout
 const char* typeName(std::uint8_t type);
 /// Name of an error code ("OutOfRange"), "unknown" for other values.
 const char* errorName(std::uint16_t code);
+/// A renderer's name, as the programs' --renderer, the metrics and the renderer registry
+/// (render/RendererRegistry.h) spell it: "gpu", "cpu", "reference", "splat", "splat-gpu",
+/// "auto"; "unknown" for other values.
+std::string_view rendererName(Renderer renderer);
+/// The renderer named `name` (rendererName), or nullopt.
+std::optional<Renderer> rendererNamed(std::string_view name);
 
 } // namespace bc::protocol

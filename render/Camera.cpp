@@ -16,6 +16,16 @@ bool finite(const glm::dvec3& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+/// The unit vector along `v` (finite, not zero). `v` is first scaled by the power of two that
+/// brings its largest component into [1, 2), which is exact: directions of vectors whose squared
+/// length would overflow or underflow normalise too, and any other gives the bits of
+/// glm::normalize(v). protocol/MessageRules.cpp judges cameras with the same arithmetic.
+glm::dvec3 direction(const glm::dvec3& v) {
+    const int e = std::ilogb(std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}));
+    return glm::normalize(
+        glm::dvec3(std::ldexp(v.x, -e), std::ldexp(v.y, -e), std::ldexp(v.z, -e)));
+}
+
 } // namespace
 
 double Box::radius() const {
@@ -42,8 +52,9 @@ void Camera::validate() const {
     if (!finite(target)) throw std::invalid_argument("camera target is not finite");
     if (!finite(up)) throw std::invalid_argument("camera up is not finite");
     const glm::dvec3 view = target - eye;
-    if (glm::length(view) <= 0.0) throw std::invalid_argument("camera eye equals target");
-    if (glm::length(glm::cross(glm::normalize(view), up)) < 1e-9)
+    if (view == glm::dvec3(0.0)) throw std::invalid_argument("camera eye equals target");
+    if (!finite(view)) throw std::invalid_argument("camera target - eye is not finite");
+    if (!(glm::length(glm::cross(direction(view), up)) >= 1e-9))
         throw std::invalid_argument("camera up is zero or parallel to the view direction");
     if (!(fovYDeg > 0.0 && fovYDeg < 180.0))
         throw std::invalid_argument("camera fov must lie in (0, 180) degrees");
@@ -60,8 +71,8 @@ ViewBasis ViewBasis::fromValid(const Camera& camera, std::uint32_t width, std::u
     ViewBasis b;
     b.eye = camera.eye;
     b.orthographic = camera.orthographic;
-    b.forward = glm::normalize(camera.target - camera.eye);
-    const glm::dvec3 right = glm::normalize(glm::cross(b.forward, camera.up));
+    b.forward = direction(camera.target - camera.eye);
+    const glm::dvec3 right = direction(glm::cross(b.forward, camera.up));
     const glm::dvec3 up = glm::cross(right, b.forward);
     const double aspect = double(width) / double(height);
     const double halfH = camera.orthographic ? 0.5 * camera.orthoHeight

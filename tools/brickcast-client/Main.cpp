@@ -99,20 +99,10 @@ protocol::RenderOptions renderOptions(const Options& o) {
     r.codec = codecOf(o.codec);
     r.codecQuality = std::uint8_t(o.quality);
     r.quality = protocol::Quality::Refined;
-    if (o.renderer == "auto")
-        r.renderer = protocol::Renderer::Auto;
-    else if (o.renderer == "cpu")
-        r.renderer = protocol::Renderer::CpuRaycaster;
-    else if (o.renderer == "reference")
-        r.renderer = protocol::Renderer::Reference;
-    else if (o.renderer == "splat")
-        r.renderer = protocol::Renderer::Splatter;
-    else if (o.renderer == "splat-gpu")
-        r.renderer = protocol::Renderer::GpuSplatter;
-    else if (o.renderer == "gpu")
-        r.renderer = protocol::Renderer::GpuRaycaster;
-    else
+    const auto renderer = protocol::rendererNamed(o.renderer);
+    if (!renderer)
         throw CLI::ValidationError("--renderer", "auto, gpu, cpu, splat, splat-gpu or reference");
+    r.renderer = *renderer;
     return r;
 }
 

@@ -84,11 +84,8 @@ struct FrameRow {
 };
 
 protocol::Renderer rendererOf(const std::string& name) {
-    if (name == "auto") return protocol::Renderer::Auto;
-    if (name == "gpu") return protocol::Renderer::GpuRaycaster;
-    if (name == "cpu") return protocol::Renderer::CpuRaycaster;
-    if (name == "splat") return protocol::Renderer::Splatter;
-    if (name == "splat-gpu") return protocol::Renderer::GpuSplatter;
+    const auto renderer = protocol::rendererNamed(name);
+    if (renderer && *renderer != protocol::Renderer::Reference) return *renderer;
     throw std::invalid_argument("--renderer: '" + name +
                                 "' is not auto, gpu, cpu, splat or splat-gpu");
 }

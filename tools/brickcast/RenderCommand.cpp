@@ -16,6 +16,7 @@
 #include "render/ReferenceRenderer.h"
 #include "render/Renderer.h"
 #include "render/RendererChoice.h"
+#include "render/RendererRegistry.h"
 #include "render/TransferFunction.h"
 #include "tools/Parse.h"
 #include "tools/TransferFunctionFile.h"
@@ -276,7 +277,8 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
     using namespace server::cluster;
     if (o.reference || !o.converge.empty())
         throw std::invalid_argument("--mpi draws with the CPU or GPU raycaster, not the reference");
-    if (o.renderer != "auto" && o.renderer != "cpu" && o.renderer != "gpu")
+    const render::RendererKind* kind = render::RendererRegistry::builtin().find(o.renderer);
+    if (o.renderer != "auto" && !(kind && kind->parts))
         throw std::invalid_argument(
             "--mpi draws with the CPU or GPU raycaster (--renderer cpu or gpu), not " + o.renderer);
     if (!(o.mpiTimeoutS > 0.0 && o.mpiTimeoutS <= 86400.0))
@@ -438,8 +440,8 @@ void runRender(const RenderCliOptions& o) {
     render::FrameStats stats;
     render::Image image;
     std::string renderer;
-    if (o.renderer != "auto" && o.renderer != "gpu" && o.renderer != "cpu" &&
-        o.renderer != "splat" && o.renderer != "splat-gpu")
+    const render::RendererRegistry& registry = render::RendererRegistry::builtin();
+    if (o.renderer != "auto" && (o.renderer == "reference" || !registry.find(o.renderer)))
         throw std::invalid_argument("--renderer: '" + o.renderer +
                                     "' is not auto, gpu, cpu, splat or splat-gpu");
     // One renderer draws the view --repeat times: the later frames are warm (host cache, GPU
@@ -466,7 +468,7 @@ void runRender(const RenderCliOptions& o) {
         };
         describe = [] { return std::string("CPU reference (double)"); };
     } else {
-        if ((choice.name == "gpu" || choice.name == "splat-gpu") && !context)
+        if (registry.find(choice.name)->needsGl && !context)
             context = std::make_unique<render::EglContext>();
         cache = std::make_unique<brickstore::BrickCache>(
             *store, brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
