@@ -134,11 +134,13 @@ struct Daemon::Impl {
         if (clustered) {
             log.error("reload: refused under MPI (every rank must serve the same catalog); "
                       "restart the job to change it");
+            ++reloadsFailed;
             return;
         }
         if (config.file.empty()) {
             log.error("reload: no config file to re-read (serving " + config.source +
                       "); catalog unchanged");
+            ++reloadsFailed;
             return;
         }
         if (reloading) {
@@ -173,7 +175,9 @@ struct Daemon::Impl {
         reloading = false;
         if (!r.error.empty()) {
             log.error("reload: " + r.error + "; the old catalog is kept");
+            ++reloadsFailed;
         } else if (!draining) {
+            ++reloadsApplied;
             if (const auto kept = settingsAReloadKeeps(config, r.config); !kept.empty()) {
                 std::string keys;
                 for (const auto& k : kept)
@@ -268,6 +272,12 @@ struct Daemon::Impl {
                   "Connections cut before their handshake to make room for a newer one",
                   double(unauthenticatedCut));
         m.counter("auth_failures_total", "Wrong tokens", double(authThrottle.failures()));
+        m.counter("catalog_reloads_total", "Catalog reloads applied (SIGHUP)",
+                  double(reloadsApplied));
+        m.counter("catalog_reload_failures_total",
+                  "Catalog reloads that kept the old catalog (the config did not load, or a "
+                  "reload is refused: under MPI, or with no config file)",
+                  double(reloadsFailed));
         m.counter("auth_delayed_total",
                   "Auths checked late because their address sent wrong tokens before",
                   double(authThrottle.delayed()));
@@ -389,6 +399,8 @@ struct Daemon::Impl {
     std::unique_ptr<detail::MetricsEndpoint> metrics;
     std::unique_ptr<detail::WebListener> web; ///< the browser viewer's address, when served
     std::uint64_t nextId = 0, accepted = 0, refused = 0, unauthenticatedCut = 0;
+    /// Reloads applied, and those that kept the old catalog.
+    std::uint64_t reloadsApplied = 0, reloadsFailed = 0;
     bool draining = false, reloading = false, reloadAgain = false;
     std::thread reloader; ///< the last reload's worker (opens stores off this thread)
     std::shared_ptr<ReloadChannel> reloadChannel; ///< the last reload's

@@ -165,6 +165,12 @@ void RenderCounters::exportTo(MetricSet& m, const RenderMetricsContext& context)
     m.gauge("classifications", "Classifications held", double(cs.entries));
     m.gauge("render_slots_waiting", "Sessions with a frame due and not yet drawn",
             double(context.slotsWaiting));
+    m.gauge("render_frames_in_progress", "Frames drawn in slices, begun and not finished",
+            double(context.framesInProgress));
+    m.gauge("render_idle",
+            "1 while the render thread has nothing to do: no frame in progress and none owed to "
+            "any session, now or when its camera rests",
+            context.idle ? 1.0 : 0.0);
     m.gauge("gpu_context",
             "The render thread's OpenGL context: 0 not made (no GPU frame asked for yet), 1 "
             "made, -1 unavailable (GPU frames are refused)",

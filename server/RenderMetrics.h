@@ -31,6 +31,10 @@ struct FrameRecord {
 /// found it.
 struct RenderMetricsContext {
     std::size_t slotsWaiting = 0;
+    std::size_t framesInProgress = 0; ///< frames drawn in slices, begun and not finished
+    /// The render thread waits with nothing to do: no frame in progress, none owed to any
+    /// session (now or at rest), no prefetch.
+    bool idle = false;
     const FrameCluster* cluster = nullptr; ///< under MPI
     FrameCacheStats frameCache;
     render::ClassificationStats classifications;

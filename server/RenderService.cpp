@@ -115,14 +115,18 @@ const render::RendererChoice& RenderService::autoChoice() {
 void RenderService::collect(MetricSet& m) {
     std::lock_guard lock(mMutex); // then each slot's: the order nextReady() takes them in
     std::size_t waiting = 0;
+    bool owed = false;
     const auto now = Clock::now();
     for (const auto& w : mSlots)
         if (auto slot = w.lock()) {
             const auto at = slot->readyAt(mConfig.restMs);
             waiting += at && *at <= now;
+            owed |= slot->owesFrame();
         }
     RenderMetricsContext context;
     context.slotsWaiting = waiting;
+    context.framesInProgress = mFramesInProgress;
+    context.idle = mWaiting && !owed && mFramesInProgress == 0;
     context.cluster = mConfig.cluster;
     context.frameCache = mFrames->stats();
     context.classifications = mClassifications->stats();
@@ -180,6 +184,7 @@ void RenderService::run() {
         const std::uint32_t dropped = mRenderers->prune();
         lock.lock();
         mCounters->cancelled += dropped;
+        mFramesInProgress = mRenderers->framesInProgress();
         if (mConfig.cluster) { // the workers hear from rank 0 at least every kHeartbeat
             lock.unlock();
             mConfig.cluster->idle();
@@ -202,6 +207,7 @@ void RenderService::run() {
         lock.unlock();
         turn(slot, std::move(job));
         lock.lock();
+        mFramesInProgress = mRenderers->framesInProgress();
     }
     lock.unlock();
     mRenderers.reset(); // GL objects go before the context, on this thread
@@ -233,10 +239,12 @@ std::shared_ptr<RenderSlot> RenderService::nextReady(std::unique_lock<std::mutex
         const auto beat = now + std::chrono::seconds(1);
         if (!wakeAt || beat < *wakeAt) wakeAt = beat;
     }
+    mWaiting = true;
     if (wakeAt)
         mWake.wait_until(lock, *wakeAt);
     else
         mWake.wait(lock);
+    mWaiting = false;
     return nullptr;
 }
 

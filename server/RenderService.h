@@ -169,6 +169,10 @@ class RenderService {
     std::vector<std::weak_ptr<RenderSlot>> mSlots;
     std::size_t mNextSlot = 0;
     bool mStop = false;
+    /// What the render thread is doing, for collect(): it waits in nextReady() (having found
+    /// nothing due), and the frames it has in progress (written on the render thread).
+    bool mWaiting = false;
+    std::size_t mFramesInProgress = 0;
     std::optional<std::string> mGpuUnavailable;        ///< set once by makeContext()
     std::optional<render::RendererChoice> mAutoChoice; ///< set once by autoChoice(), for metrics
     std::unique_ptr<RendererCache> mRenderers;         // render thread only

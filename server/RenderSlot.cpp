@@ -151,6 +151,12 @@ std::optional<Clock::time_point> RenderSlot::readyAt(std::uint32_t restMs) const
     return std::nullopt;
 }
 
+bool RenderSlot::owesFrame() const {
+    std::lock_guard lock(mMutex);
+    if (mClosed || !mState.volume || !mState.camera || !mState.tf) return false;
+    return mOnce || (mContinuous && (mDirty || mRefinePass > 0 || mNeedsRefine));
+}
+
 RenderSlot::Job RenderSlot::take(Clock::time_point now, std::uint32_t restMs) {
     std::lock_guard lock(mMutex);
     Job job;

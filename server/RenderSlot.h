@@ -83,6 +83,9 @@ class RenderSlot {
     };
     /// When the slot can next be drawn (nullopt: not until something changes).
     std::optional<Clock::time_point> readyAt(std::uint32_t restMs) const;
+    /// Whether the slot owes its session a frame, now or once its camera rests, whatever room
+    /// its write queue has.
+    bool owesFrame() const;
     Job take(Clock::time_point now, std::uint32_t restMs);
     /// Whether what a continuous frame in progress answers has changed (a newer camera,
     /// transfer function, options or volume, or a request), or the session has gone.

@@ -79,6 +79,13 @@ bool RendererCache::drawing(const RenderSlot* slot) const {
     return it != sessions.end() && it->second.drawing && it->second.slot.lock().get() == slot;
 }
 
+std::size_t RendererCache::framesInProgress() const {
+    std::size_t n = 0;
+    for (const auto& [key, s] : sessions)
+        n += s.drawing != nullptr;
+    return n;
+}
+
 std::uint32_t RendererCache::interactiveSessions(Clock::time_point now, Clock::duration within,
                                                  const RenderSlot* except) const {
     std::uint32_t n = 0;

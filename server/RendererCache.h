@@ -98,6 +98,8 @@ class RendererCache {
     SessionRenderers& of(const std::shared_ptr<RenderSlot>& slot);
     /// Whether `slot` has a frame in progress.
     bool drawing(const RenderSlot* slot) const;
+    /// Frames in progress, over every session.
+    std::size_t framesInProgress() const;
     /// Sessions (other than `except`) that started an interactive frame within `within` of `now`
     /// or are drawing one.
     std::uint32_t interactiveSessions(Clock::time_point now, Clock::duration within,

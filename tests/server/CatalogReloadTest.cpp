@@ -111,7 +111,10 @@ TEST(CatalogReload, SighupReloadsTheCatalogAndLeavesSessionsOnUnchangedVolumesAl
         // A config that does not parse: logged, the catalog kept, the daemon still serving.
         std::ofstream(config) << "[[volume]\nname = ";
         ASSERT_EQ(::kill(::getpid(), SIGHUP), 0);
-        std::this_thread::sleep_for(std::chrono::milliseconds(500));
+        EXPECT_EQ(
+            waitForStat(keep, "catalog_reload_failures_total", [](double n) { return n > 0; }),
+            1.0);
+        EXPECT_EQ(serverStat(keep, "catalog_reloads_total"), 1.0);
         EXPECT_EQ(served(cc.port), (std::set<std::string>{"keep", "swap", "added"}));
         EXPECT_TRUE(frameArrives(keep, vk, 9));
 

@@ -134,12 +134,8 @@ class FairScheduling : public ::testing::Test {
     }
     /// frames_cancelled_total once it is 1, or after 5 s.
     static double cancelledWithin5s(client::Client& c) {
-        double cancelled = 0;
-        for (int i = 0; i < 50 && cancelled < 1; ++i) {
-            std::this_thread::sleep_for(std::chrono::milliseconds(100));
-            cancelled = counter(c, "frames_cancelled_total");
-        }
-        return cancelled;
+        return waitForStat(
+            c, "frames_cancelled_total", [](double n) { return n >= 1; }, 5);
     }
     static bc::test::TestStore* sStore;
 };
@@ -188,7 +184,10 @@ TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionG
         heavy.setRenderOptions(heaviestReference());
         heavy.setCamera(orbitCamera(v, 30, 1));
         heavy.requestFrame();
-        std::this_thread::sleep_for(std::chrono::milliseconds(200)); // the heavy frame starts
+        ASSERT_EQ(waitForStat(light, "render_frames_in_progress", [](double n) { return n > 0; }),
+                  1.0)
+            << "the heavy frame did not start";
+        EXPECT_EQ(counter(light, "render_idle"), 0.0) << "idle with a frame in progress";
         const auto [frames, worstGapMs] = lightFrames(light, v);
         std::printf("[fair] %u light frames in 6 s beside a 4096^2 reference frame, worst gap "
                     "%.0f ms, %.0f slices so far\n",
@@ -199,10 +198,9 @@ TEST_F(FairScheduling, AHeavyFrameCostsOthersOneSliceAndIsDroppedWhenItsSessionG
     } // the heavy client disconnects mid-frame
     EXPECT_EQ(cancelledWithin5s(light), 1.0)
         << "the frame of a session that has gone was not dropped";
-    // Nothing is left running: slices stop growing.
-    const double slices = counter(light, "frame_slices_total");
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    EXPECT_EQ(counter(light, "frame_slices_total"), slices);
+    // Nothing is left running: the render thread has no frame in progress and goes idle.
+    EXPECT_TRUE(renderIdle(light, 5))
+        << "frames in progress: " << counter(light, "render_frames_in_progress");
 }
 
 // Beside a session whose camera moves, a refined frame is drawn in slices of the moving
@@ -294,7 +292,9 @@ TEST_F(FairSchedulingGl, AHeavyGpuFrameCostsOthersOneSliceAndIsDroppedWhenItsSes
         heavy.setRenderOptions(o);
         heavy.setCamera(orbitCamera(v, 30, 2));
         heavy.requestFrame();
-        std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the heavy frame starts
+        ASSERT_EQ(waitForStat(light, "render_frames_in_progress", [](double n) { return n > 0; }),
+                  1.0)
+            << "the heavy frame did not start";
         const auto [frames, worstGapMs] = lightFrames(light, v);
         std::printf("[fair] %u light frames in 6 s beside a 2048^2 GPU frame, worst gap %.0f ms, "
                     "%.0f slices so far\n",

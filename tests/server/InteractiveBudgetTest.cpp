@@ -421,7 +421,7 @@ TEST(FrameBudget, AtRestTheDaemonRefinesUntilTheEstimateMeetsTheBound) {
     }
     ASSERT_GE(refined.back().header.estimatedPsnrDb, 45);
     // The pass that met the bound was the last: no refined frame follows it.
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    ASSERT_TRUE(test::renderIdle(s.c));
     EXPECT_EQ(counter(s.c.stats(), "frames_refined_total"), double(refined.size()));
     EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 0.0) << "64^2 is drawn whole";
 }
@@ -437,7 +437,7 @@ TEST(FrameBudget, AtRestALargeFramesFirstPassComesWithItsEstimate) {
     for (std::size_t i = 1; i < refined.size(); ++i)
         EXPECT_GT(refined[i].header.samples, refined[i - 1].header.samples) << "a finer step";
     ASSERT_GE(refined.back().header.estimatedPsnrDb, 45);
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    ASSERT_TRUE(test::renderIdle(s.c));
     EXPECT_EQ(counter(s.c.stats(), "frames_refined_total"), double(refined.size()));
     EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 1.0);
     // Without a bound the frame at rest is one pass at the session's step, unchecked.
@@ -458,7 +458,7 @@ TEST(FrameBudget, AtRestALargeFramesFirstPassComesWithItsEstimate) {
     while (!(f.header.refined && f.header.cameraId == 3))
         f = s.c.nextFrame();
     EXPECT_EQ(f.header.estimatedPsnrDb, 0);
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    ASSERT_TRUE(test::renderIdle(s.c));
     EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 1.0);
 }
 
@@ -471,7 +471,7 @@ TEST(FrameBudget, WithoutABoundOneRefinedFrameAndACameraThatMovesStopsTheRefinem
     o.quality = protocol::Quality::Adaptive;
     c.setRenderOptions(o);
     framesAtRest(c, v, [](const client::ReceivedFrame& f) { return f.header.refined; });
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    ASSERT_TRUE(test::renderIdle(c));
     EXPECT_EQ(counter(c.stats(), "frames_refined_total"), 1.0);
     // Under the highest bound, the camera moves as soon as the first estimate arrives: the
     // passes stop there, and the new view is drawn.

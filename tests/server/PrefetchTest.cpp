@@ -51,7 +51,9 @@ Flight fly(const std::string& storePath, bool prefetch) {
         cl.setCamera(client::orbitCamera(v, 30.0 + 6.0 * f, 15.0, 0.3, f + 1));
         cl.requestFrame();
         run.frames.push_back(cl.nextFrame());
-        std::this_thread::sleep_for(std::chrono::milliseconds(150)); // a viewer's think time
+        // A viewer's think time: the render thread prefetches what the next view may need, and
+        // goes idle once it has.
+        EXPECT_TRUE(renderIdle(cl));
     }
     const auto s = cl.stats();
     run.frameUploads = statOf(s, "gpu_frame_uploads_total{volume=\"p\"}");

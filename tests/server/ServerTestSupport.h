@@ -276,6 +276,31 @@ inline double sessionsDownTo(client::Client& c, double n, int seconds) {
     return now;
 }
 
+/// The server's statistic `name` (labels included), asked through `c`; -1 if absent.
+inline double serverStat(client::Client& c, const std::string& name) {
+    for (const auto& [n, value] : c.stats())
+        if (n == name) return value;
+    return -1;
+}
+
+/// Asks for the statistic `name` until `done(value)` holds or `seconds` have passed; the last
+/// value. The server's state is polled, not slept on for a guessed time.
+template <typename Done>
+double waitForStat(client::Client& c, const std::string& name, Done done, int seconds = 20) {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+    double value = serverStat(c, name);
+    for (; !done(value) && std::chrono::steady_clock::now() < until; value = serverStat(c, name))
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return value;
+}
+
+/// Waits until the render thread has nothing left to draw for any session: no frame in
+/// progress or owed, no prefetch (the "render_idle" gauge). True when it came.
+inline bool renderIdle(client::Client& c, int seconds = 20) {
+    return waitForStat(
+               c, "render_idle", [](double v) { return v == 1; }, seconds) == 1;
+}
+
 /// The value of the sample line `name` (labels included) in a text exposition; -1 if absent.
 inline double sampleOf(const std::string& text, const std::string& name) {
     std::istringstream in(text);

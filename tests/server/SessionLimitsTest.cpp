@@ -25,12 +25,6 @@ std::uint64_t residentBytes() {
     return resident * std::uint64_t(::sysconf(_SC_PAGESIZE));
 }
 
-double statOf(client::Client& c, const std::string& name) {
-    for (const auto& [n, value] : c.stats())
-        if (n == name) return value;
-    return -1;
-}
-
 TEST(AuthThrottle, EachWrongTokenDoublesTheAddresssWaitUpToTwoSeconds) {
     detail::AuthThrottle t;
     const auto t0 = Clock::time_point{} + std::chrono::hours(1);
@@ -146,7 +140,7 @@ TEST_F(SessionLimits, AClientThatNeverReadsItsRepliesHoldsABoundedQueueAndIsCut)
     auto last = Clock::now();
     for (auto until = last + std::chrono::seconds(2); Clock::now() < until;) {
         witnessFrame(id++);
-        queuedMax = std::max(queuedMax, statOf(*mWitness, "write_queue_bytes_max"));
+        queuedMax = std::max(queuedMax, serverStat(*mWitness, "write_queue_bytes_max"));
         worstGapS = std::max(worstGapS, std::chrono::duration<double>(Clock::now() - last).count());
         last = Clock::now();
     }
@@ -181,7 +175,10 @@ TEST_F(SessionLimits, RequestsAskedAgainBeforeTheirReplyWentAreEachAnswered) {
 TEST_F(SessionLimits, ConnectionsThatNeverAuthenticateKeepNoAuthenticatedClientOut) {
     // Forty silent connections (over max_unauthenticated), reopened as the daemon cuts them.
     SilentConnections silent(sDaemon->port, 40);
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    // They fill the places for connections yet to authenticate: the daemon cuts the oldest.
+    EXPECT_GT(waitForStat(*mWitness, "connections_unauthenticated_cut_total",
+                          [](double n) { return n > 0; }),
+              0.0);
     std::vector<std::unique_ptr<client::Client>> clients; // the witness is one already
     for (std::uint32_t i = 1; i < DaemonConfig{}.maxClients; ++i) {
         try {
@@ -192,7 +189,7 @@ TEST_F(SessionLimits, ConnectionsThatNeverAuthenticateKeepNoAuthenticatedClientO
         }
     }
     witnessFrame(3);
-    EXPECT_GT(statOf(*mWitness, "connections_unauthenticated_cut_total"), 0.0);
+    EXPECT_GT(serverStat(*mWitness, "connections_unauthenticated_cut_total"), 0.0);
     silent.stop();
     // Every place is taken by an authenticated client now: one more is refused.
     RawConnection extra(sDaemon->port);
@@ -238,8 +235,8 @@ TEST(SessionLimitsAuth, WrongTokensFromOneAddressComeAtMostTenASecond) {
     // The right token from the same address is served, after its turn.
     client::Client c(daemon.clientConfig(kToken));
     EXPECT_EQ(c.listVolumes().size(), 1u);
-    EXPECT_GE(statOf(c, "auth_failures_total"), double(answered));
-    EXPECT_GT(statOf(c, "auth_delayed_total"), 0.0);
+    EXPECT_GE(serverStat(c, "auth_failures_total"), double(answered));
+    EXPECT_GT(serverStat(c, "auth_delayed_total"), 0.0);
 }
 
 } // namespace

@@ -120,7 +120,9 @@ TEST(DaemonProcess, SigtermDuringTheHeaviestFrameExitsWithinFiveSeconds) {
     c.setRenderOptions(o);
     c.setCamera(orbitCamera(v, 30, 1));
     c.requestFrame();
-    std::this_thread::sleep_for(std::chrono::seconds(2)); // well into the frame
+    // Mid-frame: its first slice has been drawn, and the rest is to come.
+    ASSERT_EQ(waitForStat(c, "render_frames_in_progress", [](double n) { return n > 0; }), 1.0)
+        << "the frame did not start";
     const auto start = std::chrono::steady_clock::now();
     ASSERT_EQ(::kill(daemon.pid, SIGTERM), 0);
     const std::optional<int> status = waitForExit(daemon.pid, 5000);
