@@ -281,4 +281,15 @@ void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats) {
     stats.bricksConstant = plan.constant;
 }
 
+void keepInside(BrickPlan& plan, const LevelGeometry& geometry, const Clip& clip) {
+    std::uint64_t dropped = 0;
+    std::erase_if(plan.drawn, [&](const PlannedBrick& b) {
+        if (!clip.outside(geometry.brickBox(b.key.pos))) return false;
+        ++dropped;
+        (b.draw == BrickDraw::Constant ? plan.constant : plan.sampled) -= 1;
+        return true;
+    });
+    plan.culled += dropped;
+}
+
 } // namespace bc::render

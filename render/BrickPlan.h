@@ -96,6 +96,10 @@ std::vector<std::size_t> planBatches(const BrickPlan& plan, std::uint64_t brickB
                                      const std::vector<std::uint8_t>& missing,
                                      std::uint64_t loadBytes);
 
+/// Drops from `plan` the bricks whose payload box lies wholly outside what `clip` keeps
+/// (Clip::outside), counting them culled: no sample of theirs is taken.
+void keepInside(BrickPlan& plan, const LevelGeometry& geometry, const Clip& clip);
+
 /// The plan's brick counts and `level` into a frame's stats.
 void recordPlan(const BrickPlan& plan, std::uint32_t level, FrameStats& stats);
 

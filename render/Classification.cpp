@@ -29,10 +29,52 @@ std::uint64_t tableBytes(const TransferFunctionTable& t) {
 
 // ---- Classification ---------------------------------------------------------------------
 
-Visibility Visibility::of(const TransferFunction& tf) {
+SkipRule SkipRule::of(const RenderOptions& options) {
+    return {options.mode, options.mode == BlendMode::Isosurface ? options.isoValue : 0.0};
+}
+
+TransferFunctionTable skipTableOf(const TransferFunctionTable& unit, const SkipRule& rule) {
+    if (rule.mode == BlendMode::Composite) return unit;
+    const std::uint32_t n = unit.entries;
+    auto visible = [&](std::uint32_t i) { return unit.rgba[4 * std::size_t(i) + 3] > 0.0f; };
+    // Entries [first, last] keep their samples; the others are skipped.
+    std::uint32_t first = 0, last = n - 1;
+    switch (rule.mode) {
+    case BlendMode::Maximum:
+        while (first < n && !visible(first))
+            ++first;
+        break;
+    case BlendMode::Minimum: {
+        std::uint32_t end = n; // one past the highest visible entry
+        while (end > 0 && !visible(end - 1))
+            --end;
+        if (end == 0)
+            first = n; // none visible: nothing kept
+        else
+            last = end - 1;
+        break;
+    }
+    case BlendMode::Isosurface: {
+        // A value at or above the iso value reads entries from floor(u(iso)) on (the lookup
+        // mixes floor(u) and the next one).
+        const double u =
+            (rule.iso - unit.domainMin) / (unit.domainMax - unit.domainMin) * double(n - 1);
+        first = std::uint32_t(std::clamp(std::floor(u), 0.0, double(n - 1)));
+        break;
+    }
+    case BlendMode::Average:
+    case BlendMode::Composite:
+        break;
+    }
+    std::vector<float> rgba = unit.rgba;
+    for (std::uint32_t i = 0; i < n; ++i)
+        rgba[4 * std::size_t(i) + 3] = i >= first && i <= last && first <= last ? 1.0f : 0.0f;
+    return TransferFunctionTable(unit.domainMin, unit.domainMax, std::move(rgba));
+}
+
+Visibility Visibility::of(const TransferFunctionTable& table) {
     // Which entries are visible does not depend on the step (a' > 0 exactly when a > 0), so
     // the table at step 1 says it for every step.
-    const TransferFunctionTable table = tf.table(1.0, kClassificationTableEntries);
     Visibility v{table.domainMin, table.domainMax, {}};
     v.bits.assign((table.entries + 63) / 64, 0);
     for (std::uint32_t i = 0; i < table.entries; ++i)
@@ -48,10 +90,13 @@ struct Classification::FineMaps {
 
 Classification::Classification(const brickstore::BrickStore& store, std::uint32_t level,
                                const TransferFunction& tf, const OccupancyConfig* octree,
-                               const Classification* donor)
-    : mKey{store.instance(), level, tf.contentHash(), octree != nullptr,
-           octree ? *octree : OccupancyConfig{}},
-      mTf(tf), mVisibility(Visibility::of(tf)), mId(nextClassificationId()), mOccupancyId(mId),
+                               const Classification* donor, const SkipRule& rule)
+    : mKey{store.instance(),  level,
+           tf.contentHash(),  rule,
+           octree != nullptr, octree ? *octree : OccupancyConfig{}},
+      mTf(tf), mSkipTable(std::make_shared<const TransferFunctionTable>(
+                   skipTableOf(tf.table(1.0, kClassificationTableEntries), rule))),
+      mVisibility(Visibility::of(*mSkipTable)), mId(nextClassificationId()), mOccupancyId(mId),
       mFine(std::make_shared<FineMaps>()) {
     if (!octree) return;
     octree->validate();
@@ -65,7 +110,6 @@ Classification::Classification(const brickstore::BrickStore& store, std::uint32_
         mBuild.bricksStored = donor->mBuild.bricksStored;
         return;
     }
-    const TransferFunctionTable table = tf.table(1.0, kClassificationTableEntries);
     std::unique_ptr<OccupancyTrees> trees;
     if (donor && donor->mOccupancy) {
         trees = std::make_unique<OccupancyTrees>(*donor->mOccupancy);
@@ -73,7 +117,7 @@ Classification::Classification(const brickstore::BrickStore& store, std::uint32_
     } else {
         trees = std::make_unique<OccupancyTrees>(store, level);
     }
-    mBuild = trees->update(table, *octree);
+    mBuild = trees->update(*mSkipTable, *octree);
     mOccupancy = std::move(trees);
 }
 
@@ -111,8 +155,7 @@ FineOccupancy* Classification::fine(std::uint32_t cellVoxels) const {
     std::lock_guard lock(mFine->mutex);
     for (const auto& f : mFine->maps)
         if (f->cellVoxels() == cellVoxels) return f.get();
-    const TransferFunctionTable table = mTf.table(1.0, kClassificationTableEntries);
-    mFine->maps.push_back(std::make_unique<FineOccupancy>(*mOccupancy, table, cellVoxels));
+    mFine->maps.push_back(std::make_unique<FineOccupancy>(*mOccupancy, *mSkipTable, cellVoxels));
     return mFine->maps.back().get();
 }
 
@@ -136,11 +179,14 @@ std::uint64_t Classification::bytes() const {
 ClassificationCache::ClassificationCache(const ClassificationCacheConfig& config)
     : mConfig(config) {}
 
-std::shared_ptr<const Classification>
-ClassificationCache::get(const brickstore::BrickStore& store, std::uint32_t level,
-                         const TransferFunction& tf, const OccupancyConfig* octree, bool* built) {
-    const ClassificationKey key{store.instance(), level, tf.contentHash(), octree != nullptr,
-                                octree ? *octree : OccupancyConfig{}};
+std::shared_ptr<const Classification> ClassificationCache::get(const brickstore::BrickStore& store,
+                                                               std::uint32_t level,
+                                                               const TransferFunction& tf,
+                                                               const OccupancyConfig* octree,
+                                                               bool* built, const SkipRule& rule) {
+    const ClassificationKey key{store.instance(),  level,
+                                tf.contentHash(),  rule,
+                                octree != nullptr, octree ? *octree : OccupancyConfig{}};
     std::lock_guard lock(mMutex);
     const Classification *latest = nullptr, *sharer = nullptr;
     std::optional<Visibility> visible; // computed when an entry could share its octrees
@@ -149,7 +195,7 @@ ClassificationCache::get(const brickstore::BrickStore& store, std::uint32_t leve
         const ClassificationKey& k = c.key();
         const bool serves = octree ? k == key
                                    : k.storeInstance == key.storeInstance && k.level == level &&
-                                         k.tfHash == key.tfHash;
+                                         k.tfHash == key.tfHash && k.rule == rule;
         if (serves && c.transferFunction().sameFunction(tf)) {
             mEntries.splice(mEntries.begin(), mEntries, it);
             ++mStats.hits;
@@ -159,14 +205,16 @@ ClassificationCache::get(const brickstore::BrickStore& store, std::uint32_t leve
         if (!c.occupancy() || k.storeInstance != key.storeInstance || k.level != level) continue;
         if (!latest) latest = &c; // the most recent octrees of this store and level
         if (!sharer && octree && k.octree == *octree) { // or octrees to share outright
-            if (!visible) visible = Visibility::of(tf);
+            if (!visible)
+                visible =
+                    Visibility::of(skipTableOf(tf.table(1.0, kClassificationTableEntries), rule));
             if (c.visibility() == *visible) sharer = &c;
         }
     }
     const Classification* donor = sharer ? sharer : latest;
     // Built under the lock: a second request for this key waits and then finds it.
     const auto start = std::chrono::steady_clock::now();
-    auto made = std::make_shared<const Classification>(store, level, tf, octree, donor);
+    auto made = std::make_shared<const Classification>(store, level, tf, octree, donor, rule);
     mStats.builds += 1;
     mStats.shared += made->sharesOccupancy();
     mStats.bricksRebuilt += made->build().bricksRebuilt;

@@ -13,6 +13,7 @@
 // else) shares that one's octrees and distance maps outright: nothing is copied or rebuilt.
 #include "render/FineOccupancy.h"
 #include "render/Occupancy.h"
+#include "render/RenderTypes.h"
 #include "render/TransferFunction.h"
 
 #include <cstdint>
@@ -32,12 +33,31 @@ namespace bc::render {
 /// reference's).
 inline constexpr std::uint32_t kClassificationTableEntries = TransferFunction::kDefaultTableEntries;
 
-/// Which values a transfer function makes visible (opacity above 0), over its table's domain:
-/// all that the octrees and distance maps depend on (besides the store, level and config).
+/// Which samples a frame's mode may leave out (render/MODES.md), as a visibility over the
+/// transfer function's table: what its octrees, distance maps and brick plan are built from.
+/// Composite: the function's own (a transparent sample adds nothing). Maximum: every value at
+/// or above the lowest visible one (samples below it can only make a ray's maximum one that
+/// maps to transparency). Minimum: at or below the highest visible one. Isosurface: at or
+/// above the iso value (a ray below it everywhere meets no surface). Average: every value.
+struct SkipRule {
+    BlendMode mode = BlendMode::Composite;
+    double iso = 0.0; ///< Isosurface only (0 for the others, so equal rules compare equal)
+    static SkipRule of(const RenderOptions& options);
+    bool operator==(const SkipRule&) const = default;
+};
+
+/// The table whose transparency says what `rule` may skip: `unit` (the function's table at
+/// step 1) itself for composite, else its entries' opacities replaced by 1 where the rule
+/// keeps samples and 0 where it skips them (colours kept). Conservative by one entry where
+/// the rule's boundary falls between entries, so that no kept value is ever skipped.
+TransferFunctionTable skipTableOf(const TransferFunctionTable& unit, const SkipRule& rule);
+
+/// Which values a table makes visible (opacity above 0), over its domain: all that the
+/// octrees and distance maps depend on (besides the store, level and config).
 struct Visibility {
     double domainMin = 0, domainMax = 0;
     std::vector<std::uint64_t> bits; ///< entry i of kClassificationTableEntries at bit i
-    static Visibility of(const TransferFunction& tf);
+    static Visibility of(const TransferFunctionTable& table);
     bool operator==(const Visibility&) const = default;
 };
 
@@ -46,6 +66,7 @@ struct ClassificationKey {
     std::uint64_t storeInstance = 0; ///< BrickStore::instance()
     std::uint32_t level = 0;
     std::uint64_t tfHash = 0; ///< TransferFunction::contentHash(); sameFunction() decides
+    SkipRule rule;            ///< the mode's (octrees and the skip table follow it)
     bool octrees = true;      ///< false: tables only (a frame that does not leap inside bricks)
     OccupancyConfig octree;   ///< when octrees
     bool operator==(const ClassificationKey&) const = default;
@@ -54,14 +75,14 @@ struct ClassificationKey {
 /// Immutable once built; every member function is thread-safe.
 class Classification {
   public:
-    /// Builds the octrees of `level` for `tf` under `octree` (none when `octree` is null or
-    /// the store has no apron: without one, leaf ranges do not cover what border samples
-    /// read), starting from `donor`'s when given (same store and level); shares `donor`'s
-    /// octrees and distance maps when it has the same config and Visibility.
+    /// Builds the octrees of `level` for `tf` and `rule` under `octree` (none when `octree`
+    /// is null or the store has no apron: without one, leaf ranges do not cover what border
+    /// samples read), starting from `donor`'s when given (same store and level); shares
+    /// `donor`'s octrees and distance maps when it has the same config and Visibility.
     /// @throw std::invalid_argument on a bad config; what OccupancyTrees throws.
     Classification(const brickstore::BrickStore& store, std::uint32_t level,
                    const TransferFunction& tf, const OccupancyConfig* octree,
-                   const Classification* donor);
+                   const Classification* donor, const SkipRule& rule = {});
 
     const ClassificationKey& key() const { return mKey; }
     const TransferFunction& transferFunction() const { return mTf; }
@@ -77,6 +98,9 @@ class Classification {
     /// Whether the octrees and distance maps are another classification's (same Visibility).
     bool sharesOccupancy() const { return mOccupancyId != mId; }
     const Visibility& visibility() const { return mVisibility; }
+    /// skipTableOf(the function at step 1, the key's rule): the table a brick plan decides
+    /// transparency by, and the octrees were built from.
+    const std::shared_ptr<const TransferFunctionTable>& skipTable() const { return mSkipTable; }
     /// The octrees, or nullptr when the store has no apron.
     const OccupancyTrees* occupancy() const { return mOccupancy.get(); }
     /// What building the octrees took (zero when there are none).
@@ -100,6 +124,7 @@ class Classification {
     struct FineMaps;
     ClassificationKey mKey;
     TransferFunction mTf;
+    std::shared_ptr<const TransferFunctionTable> mSkipTable;
     Visibility mVisibility;
     std::uint64_t mId = 0, mOccupancyId = 0, mBasedOn = 0;
     std::shared_ptr<const OccupancyTrees> mOccupancy;
@@ -134,14 +159,15 @@ class ClassificationCache {
   public:
     explicit ClassificationCache(const ClassificationCacheConfig& config = {});
 
-    /// The classification of `tf` for `level` of `store` with octrees under `octree` (null:
-    /// tables only, and any held classification of that function serves): the one held for an
-    /// equal key and function, else one built now (from the latest of that store and level).
-    /// `built` (optional) is set to whether this call built it.
+    /// The classification of `tf` and `rule` for `level` of `store` with octrees under
+    /// `octree` (null: tables only, and any held classification of that function and rule
+    /// serves): the one held for an equal key and function, else one built now (from the
+    /// latest of that store and level). `built` (optional) is set to whether this call built it.
     /// @throw std::invalid_argument on a bad octree config; StoreCorrupt from the store.
     std::shared_ptr<const Classification> get(const brickstore::BrickStore& store,
                                               std::uint32_t level, const TransferFunction& tf,
-                                              const OccupancyConfig* octree, bool* built = nullptr);
+                                              const OccupancyConfig* octree, bool* built = nullptr,
+                                              const SkipRule& rule = {});
     ClassificationStats stats() const;
     void setBudgetBytes(std::uint64_t budgetBytes);
 

@@ -83,8 +83,13 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.tfOffset = float(-table.domainMin * last / span);
     f.ertT = o.earlyTermination ? float(1.0 - o.ertThreshold) : -1.0f;
     f.shading = o.shading;
-    f.simd = o.simd;
-    f.packets = o.simd && o.packets && !o.preintegrate;
+    f.mode = o.mode;
+    f.clip = ClipF::of(o.clip);
+    f.iso = float(o.isoValue);
+    f.valueMin = float(table.domainMin);
+    f.valueMax = float(table.domainMax);
+    f.simd = o.simd && o.mode == BlendMode::Composite;
+    f.packets = f.simd && o.packets && !o.preintegrate;
     f.jitter = o.jitter;
     f.segment = o.stepVoxels;
     f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);
@@ -118,10 +123,11 @@ BrickPlan planOf(const brickstore::BrickStore& store, const LevelGeometry& g, st
         options.preintegrate
             ? std::max(1u, std::uint32_t(std::ceil(options.stepVoxels / g.brickVoxels)))
             : 0u;
-    BrickPlan plan = planBricks(store, g, *classified.table, view, options.region, options.skip,
+    BrickPlan plan = planBricks(store, g, *classified.skipTable, view, options.region, options.skip,
                                 classified.occupancy, keepNear);
     if (options.parts > 1) // only this part's bricks: the others' samples are theirs
         keepOwned(plan, partitions.get(store, level, options.parts).region(options.part));
+    if (options.clip.any()) keepInside(plan, g, options.clip); // neither loaded nor drawn
     recordPlan(plan, level, stats);
     return plan;
 }
@@ -251,6 +257,18 @@ class FramePasses {
         return keptBytes;
     }
     const RayCount& count() const { return mCount; }
+    /// The projections: each marched ray's value into its colour (resolveProjection), once
+    /// every batch is drawn.
+    void resolveProjections() {
+        if (mF.mode == BlendMode::Composite || mF.mode == BlendMode::Isosurface ||
+            !mMarched.visible)
+            return;
+        const PixelRect& m = mMarched.rect;
+        for (std::uint32_t y = m.y; y < m.y + m.height; ++y)
+            for (std::uint32_t x = m.x; x < m.x + m.width; ++x)
+                detail::resolveProjection(
+                    mF, mRays[std::size_t(y - mRegion.y) * mRegion.width + (x - mRegion.x)].acc);
+    }
     /// The region's image; clamped to [0, 1] unless `clamp` is false (imageOf).
     Image image(bool clamp) const {
         Footprint local = mMarched; // in the region's coordinates
@@ -307,11 +325,17 @@ std::string CpuRaycaster::simdTarget() {
 }
 CpuRaycaster::~CpuRaycaster() = default;
 
-Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
+Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& asked,
                            FrameStats& stats) {
     const auto frameStart = Clock::now();
-    options.validate();
-    checkView(view, options, true, true, true);
+    asked.validate();
+    checkView(view, asked, true, true, true);
+    if (asked.mode != BlendMode::Composite && asked.parts > 1)
+        throw std::invalid_argument(std::string("parts: mode ") + toString(asked.mode) +
+                                    " is drawn whole, not in parts (composite only)");
+    // An average takes every sample inside the volume: nothing is skipped.
+    RenderOptions options = asked;
+    if (options.mode == BlendMode::Average) options.skip = SkipMode::None;
     stats = FrameStats{};
     const brickstore::BrickStore& store = scene.store;
     const auto levels = std::uint32_t(store.layout().levels().size());
@@ -333,6 +357,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     FramePasses passes(scene, view, options, g, plan, f, bricks, fine);
     stats.hostKeptBytes =
         passes.draw(batches, options.hostKeptBefore, stats) - options.hostKeptBefore;
+    passes.resolveProjections();
     stats.samples = passes.count().samples;
     stats.octreeLeaps = passes.count().leaps;
     stats.occlusionReason = "not on the CPU raycaster";

@@ -127,6 +127,7 @@ GpuRaycaster::Prepared GpuRaycaster::prepare(const Scene& scene, const View& vie
     options.validate();
     checkView(view, options, true, true);
     refusePreintegration(options, "GPU raycaster");
+    refuseModesAndClips(options, "GPU raycaster");
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());

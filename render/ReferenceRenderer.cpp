@@ -106,7 +106,39 @@ struct RayProgress {
     std::int64_t k = 0;
     bool done = false;
     PreintegratedTable::End front; ///< pre-integration: sample k - 1's (k > 0)
+    /// The projections: the largest, smallest or summed value of the samples so far, and how
+    /// many there were (0: none yet).
+    double value = 0.0;
+    std::uint64_t count = 0;
 };
+
+/// Where along the ray the value first reaches `iso` between parameters lo (below it) and
+/// hi (at or above it): IsoModel's bisections of the field `at(t)`.
+template <class At> double refineIso(double lo, double hi, double iso, const At& at) {
+    for (int i = 0; i < IsoModel::kBisections; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        (at(mid) >= iso ? hi : lo) = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/// Takes sample `value` into a projecting ray (BlendMode Maximum, Minimum, Average).
+void project(BlendMode mode, double value, RayProgress& s) {
+    if (mode == BlendMode::Average)
+        s.value += value;
+    else if (s.count == 0 || (mode == BlendMode::Maximum ? value > s.value : value < s.value))
+        s.value = value;
+    ++s.count;
+}
+
+/// A projecting ray's colour: its value mapped through `table` (the function as authored),
+/// premultiplied; transparent without samples.
+void resolveProjection(BlendMode mode, const TransferFunctionTable& table, RayProgress& s) {
+    if (s.count == 0) return;
+    const double v = mode == BlendMode::Average ? s.value / double(s.count) : s.value;
+    const auto f = table.lookup(v);
+    s.acc = {double(f[0]) * f[3], double(f[1]) * f[3], double(f[2]) * f[3], double(f[3])};
+}
 
 /// Marches one ray from progress.k on; `volumeAt(p)` is the volume that samples point p, or
 /// nullptr when it is not drawn in this pass (the ray stops there and goes on in a later one).
@@ -129,16 +161,50 @@ void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_
     const double step = c.options.stepVoxels * g.minSpacing();
     if (c.options.jitter) t0 += (double(rayJitter(x, y)) - 0.5) * step;
     const double count = std::ceil((t1 - t0) / step - 0.5);
-    const auto total = count > 0 ? std::int64_t(count) : 0;
+    auto total = count > 0 ? std::int64_t(count) : 0;
+    std::int64_t first = 0;
+    if (c.options.clip.any()) { // samples [first, total) of the same lattice are kept
+        const auto [ta, tb] = c.options.clip.interval(ray.origin, ray.direction);
+        const double last = ta <= tb ? std::ceil((tb - t0) / step - 0.5) : 0.0;
+        const double from = std::ceil((ta - t0) / step - 0.5);
+        if (last < double(total)) total = last > 0 ? std::int64_t(last) : 0;
+        if (from > 0.0) first = from < double(total) ? std::int64_t(from) : total;
+        s.k = std::max(s.k, first);
+    }
     std::array<double, 4>& acc = s.acc;
+    const BlendMode mode = c.options.mode;
+    auto tOf = [&](std::int64_t k) { return t0 + (double(k) + 0.5) * step; };
     for (std::int64_t k = s.k; k < total; ++k) {
-        const glm::dvec3 p = ov + dv * (t0 + (double(k) + 0.5) * step);
+        const glm::dvec3 p = ov + dv * tOf(k);
         const auto* volume = volumeAt(p);
         if (volume == nullptr) {
             s.k = k;
             return;
         }
         const double value = volume->sample(p.x, p.y, p.z);
+        if (mode == BlendMode::Isosurface) {
+            if (value < c.options.isoValue) continue;
+            // The first sample at or above the value: the surface lies since the one before
+            // (the first sample kept: the surface is where the volume or the clip cuts it).
+            const double t = k == first
+                                 ? tOf(k)
+                                 : refineIso(tOf(k - 1), tOf(k), c.options.isoValue, [&](double u) {
+                                       const glm::dvec3 q = ov + dv * u;
+                                       return volume->sample(q.x, q.y, q.z);
+                                   });
+            const glm::dvec3 hit = ov + dv * t;
+            const auto f = c.table.lookup(c.options.isoValue);
+            std::array<double, 4> rgba{f[0], f[1], f[2], 1.0};
+            if (c.options.shading) rgba = shade(c, *volume, rgba, hit, ray.direction);
+            acc = rgba;
+            samples += std::uint64_t(k + 1);
+            s.done = true;
+            return;
+        }
+        if (mode != BlendMode::Composite) {
+            project(mode, value, s);
+            continue;
+        }
         std::array<double, 4> rgba;
         if (c.pre) {
             // The segment from sample k - 1 to k (the first sample's: its value alone).
@@ -159,6 +225,8 @@ void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_
     }
     samples += std::uint64_t(total);
     s.done = true;
+    if (mode != BlendMode::Composite && mode != BlendMode::Isosurface)
+        resolveProjection(mode, c.table, s);
 }
 
 /// Runs `pixel(x, y, i, samples, oracle)` for every pixel of `region` (i: its index in the
@@ -300,7 +368,9 @@ Image renderReference(const brickstore::BrickStore& store, const ReferenceVolume
                       const ReferenceConfig& config) {
     options.validate();
     const auto pre = options.preintegrate ? std::make_optional(tf.preintegrated()) : std::nullopt;
-    return renderReference(store, volume, tf.table(options.stepVoxels),
+    // The projections and the isosurface map values through the function as authored.
+    const double tableStep = options.mode == BlendMode::Composite ? options.stepVoxels : 1.0;
+    return renderReference(store, volume, tf.table(tableStep),
                            ViewBasis::from(camera, options.width, options.height), options, stats,
                            config, pre ? &*pre : nullptr);
 }
@@ -365,7 +435,9 @@ Image ReferenceRenderer::render(const Scene& scene, const View& view, const Rend
     const FrameClassification classified =
         classifyFrame(scene, level, tablesOnly, options.stepVoxels, ignored);
     const LevelGeometry g = LevelGeometry::of(scene.store, level);
-    if (g.apronVoxels < 2)
+    // An isosurface's refinement and gradient read around a point up to a step from its
+    // sample, which may be in a brick of another batch: the level is read whole.
+    if (g.apronVoxels < 2 || options.mode == BlendMode::Isosurface)
         return renderWhole(scene, *classified.table, classified.preintegrated.get(), view, options,
                            stats);
     const auto start = std::chrono::steady_clock::now();

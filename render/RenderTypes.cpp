@@ -25,6 +25,32 @@ const char* toString(SkipMode mode) {
     return "?";
 }
 
+BlendMode parseBlendMode(const std::string& text) {
+    if (text == "composite") return BlendMode::Composite;
+    if (text == "mip") return BlendMode::Maximum;
+    if (text == "minip") return BlendMode::Minimum;
+    if (text == "average") return BlendMode::Average;
+    if (text == "iso") return BlendMode::Isosurface;
+    throw std::invalid_argument("mode '" + text +
+                                "' is not one of composite, mip, minip, average, iso");
+}
+
+const char* toString(BlendMode mode) {
+    switch (mode) {
+    case BlendMode::Composite:
+        return "composite";
+    case BlendMode::Maximum:
+        return "mip";
+    case BlendMode::Minimum:
+        return "minip";
+    case BlendMode::Average:
+        return "average";
+    case BlendMode::Isosurface:
+        return "iso";
+    }
+    return "?";
+}
+
 float rayJitter(std::uint32_t x, std::uint32_t y) {
     // 2^32 / plastic number and 2^32 / plastic number^2, rounded; wrap-around is the fract.
     const std::uint32_t h = x * 3242174889u + y * 2447445414u;
@@ -70,6 +96,12 @@ void RenderOptions::validate() const {
     if (cellVoxels != 0 && (cellVoxels > 64 || (cellVoxels & (cellVoxels - 1)) != 0))
         throw std::invalid_argument("cells: " + std::to_string(cellVoxels) +
                                     " voxels; 0 (none) or a power of two up to 64");
+    if (mode == BlendMode::Isosurface && !std::isfinite(isoValue))
+        throw std::invalid_argument("iso: the iso value must be a finite number");
+    if (mode != BlendMode::Composite && preintegrate)
+        throw std::invalid_argument(std::string("preintegrate: mode ") + toString(mode) +
+                                    " takes no segments (composite only)");
+    clip.validate();
     octree.validate();
     occlusion.validate();
 }

@@ -1,6 +1,7 @@
 #pragma once
 // What a frame is asked for and what it reports, shared by the GPU raycaster and the CPU
 // reference so both follow one optical model (see render/OPTICS.md).
+#include "render/Clip.h"
 #include "render/Occupancy.h"
 
 #include <array>
@@ -19,6 +20,20 @@ enum class SkipMode { None, Bricks, All };
 /// "none" | "bricks" | "all" -> SkipMode; std::invalid_argument otherwise.
 SkipMode parseSkipMode(const std::string& text);
 const char* toString(SkipMode mode);
+
+/// What a ray makes of its samples (render/MODES.md). `Composite`: emission and absorption
+/// through the transfer function, front to back. The projections keep one value of the ray's
+/// samples and map it through the transfer function's colour and opacity as authored (per
+/// unit step, not corrected for the step): `Maximum` (MIP) the largest, `Minimum` (MinIP)
+/// the smallest, `Average` their mean. `Isosurface`: the first point along the ray where the
+/// value reaches RenderOptions::isoValue, refined between the two samples around it, drawn
+/// opaque in the transfer function's colour there and shaded by the gradient.
+enum class BlendMode { Composite, Maximum, Minimum, Average, Isosurface };
+
+/// "composite" | "mip" | "minip" | "average" | "iso" -> BlendMode; std::invalid_argument
+/// naming the choices otherwise.
+BlendMode parseBlendMode(const std::string& text);
+const char* toString(BlendMode mode);
 
 /// Occlusion-frustum ray starts (render/OCCLUSION.md).
 struct OcclusionConfig {
@@ -75,6 +90,13 @@ struct RenderOptions {
     bool earlyTermination = true;
     double ertThreshold = 0.99; ///< stop a ray once its opacity reaches this
     SkipMode skip = SkipMode::All;
+    BlendMode mode = BlendMode::Composite;
+    /// BlendMode::Isosurface: the value whose surface is drawn, in the volume's units (the
+    /// transfer function's domain); it must lie within the volume's values.
+    double isoValue = 0.0;
+    /// The crop box and clip planes (render/Clip.h): the CPU raycaster and the reference
+    /// honour them; other renderers refuse a clip.
+    Clip clip;
     bool shading = true;      ///< Blinn-Phong from central-difference gradients
     std::int32_t level = 0;   ///< pyramid level; see `interactive`
     bool interactive = false; ///< may draw a coarser level when level 0 exceeds the GPU budget
@@ -155,6 +177,13 @@ struct RenderOptions {
 /// dither (Roberts 2018, fract(x a1 + y a2) with a1, a2 from the plastic number) in 32-bit
 /// fixed point, so that the shader computes the same float bit for bit.
 float rayJitter(std::uint32_t x, std::uint32_t y);
+
+/// How an isosurface's crossing is refined between the sample below the iso value and the
+/// first at or above it: this many bisections of that step, the hit at the middle of what is
+/// left (within step / 2^(kBisections + 1) of a crossing).
+struct IsoModel {
+    static constexpr int kBisections = 12;
+};
 
 /// Shading constants (headlight Blinn-Phong; the light sits at the eye).
 struct ShadingModel {

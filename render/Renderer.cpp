@@ -1,5 +1,7 @@
 #include "render/Renderer.h"
 
+#include "render/TransferFunction.h"
+
 #include <stdexcept>
 #include <string>
 
@@ -19,12 +21,21 @@ Image Renderer::render(const brickstore::BrickStore& store, brickstore::BrickCac
 FrameClassification classifyFrame(const Scene& scene, std::uint32_t level,
                                   const RenderOptions& options, double stepVoxels,
                                   FrameStats& stats) {
-    const bool octrees = options.skip == SkipMode::All;
+    const bool composite = options.mode == BlendMode::Composite;
+    const bool octrees = options.skip == SkipMode::All && options.mode != BlendMode::Average;
+    if (options.mode == BlendMode::Isosurface &&
+        !(options.isoValue >= scene.tf.domainMin() && options.isoValue <= scene.tf.domainMax()))
+        throw std::invalid_argument("iso: " + std::to_string(options.isoValue) +
+                                    " is outside the volume's values [" +
+                                    std::to_string(scene.tf.domainMin()) + ", " +
+                                    std::to_string(scene.tf.domainMax()) + "]");
     bool built = false;
     FrameClassification f;
-    f.classification = scene.classifications.get(scene.store, level, scene.tf,
-                                                 octrees ? &options.octree : nullptr, &built);
-    f.table = f.classification->table(stepVoxels);
+    f.classification =
+        scene.classifications.get(scene.store, level, scene.tf, octrees ? &options.octree : nullptr,
+                                  &built, SkipRule::of(options));
+    f.table = f.classification->table(composite ? stepVoxels : 1.0);
+    f.skipTable = composite ? f.table : f.classification->skipTable();
     f.occupancy = octrees ? f.classification->occupancy() : nullptr;
     if (options.preintegrate) f.preintegrated = f.classification->preintegrated();
     stats.octreeBricksRebuilt = built ? f.classification->build().bricksRebuilt : 0;
@@ -54,6 +65,18 @@ void Renderer::refusePreintegration(const RenderOptions& options, const char* re
         throw std::invalid_argument(std::string("preintegrate: the ") + renderer +
                                     " does not pre-integrate (the CPU raycaster and the reference "
                                     "do)");
+}
+
+void Renderer::refuseModesAndClips(const RenderOptions& options, const char* renderer) {
+    if (options.clip.any())
+        throw std::invalid_argument(std::string(options.clip.cropped ? "crop" : "clip") + ": the " +
+                                    renderer +
+                                    ": whole volumes only (the CPU raycaster and the reference "
+                                    "crop and clip)");
+    if (options.mode != BlendMode::Composite)
+        throw std::invalid_argument(std::string("mode: the ") + renderer +
+                                    ": composite only, not " + toString(options.mode) +
+                                    " (the CPU raycaster and the reference draw every mode)");
 }
 
 } // namespace bc::render

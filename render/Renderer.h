@@ -33,15 +33,22 @@ struct Scene {
 /// and its octrees when the frame leaps inside bricks.
 struct FrameClassification {
     std::shared_ptr<const Classification> classification;
+    /// What samples classify through: the table at the frame's step for composite, the
+    /// function as authored (step 1) for the other modes, which map one value per ray.
     std::shared_ptr<const TransferFunctionTable> table;
+    /// What the brick plan decides transparency by: `table` for composite, else the mode's
+    /// Classification::skipTable().
+    std::shared_ptr<const TransferFunctionTable> skipTable;
     const OccupancyTrees* occupancy = nullptr; ///< null: no second-stage skipping this frame
     /// With RenderOptions::preintegrate: the classification's pre-integration table.
     std::shared_ptr<const PreintegratedTable> preintegrated;
 };
 
-/// The one place a frame gets its classification: octrees when options.skip is All (and the
-/// store has an apron), the table at `stepVoxels`. Records the octree build in `stats` when
-/// this frame made it (0 bricks rebuilt when another frame or session already had).
+/// The one place a frame gets its classification, for its mode (SkipRule): octrees when
+/// options.skip is All (and the store has an apron; never for BlendMode::Average, which skips
+/// nothing), the table at `stepVoxels`. Records the octree build in `stats` when this frame
+/// made it (0 bricks rebuilt when another frame or session already had).
+/// @throw std::invalid_argument when an isosurface's value lies outside the volume's values.
 FrameClassification classifyFrame(const Scene& scene, std::uint32_t level,
                                   const RenderOptions& options, double stepVoxels,
                                   FrameStats& stats);
@@ -96,6 +103,9 @@ class Renderer {
     /// @throw std::invalid_argument naming `renderer` when the options ask for
     /// pre-integration (RenderOptions::preintegrate), which it does not do.
     static void refusePreintegration(const RenderOptions& options, const char* renderer);
+    /// @throw std::invalid_argument naming the field and `renderer` when the options ask for a
+    /// mode other than composite, or for a crop box or clip planes, which it does not draw.
+    static void refuseModesAndClips(const RenderOptions& options, const char* renderer);
 
   private:
     std::unique_ptr<ClassificationCache> mOwnClassifications;

@@ -118,7 +118,7 @@ HWY_INLINE void storeAxes(const Frame& f, const VF* d, const VF* ov, const VF* d
 }
 
 /// Each ray's walk and ok[i] from the lanes, as begin() leaves them; the rays marked Done.
-HWY_INLINE void unpackWalks(const PacketRay* rays, std::size_t count, float invStep,
+HWY_INLINE void unpackWalks(const Frame& f, const PacketRay* rays, std::size_t count, float invStep,
                             const FreshLanes& out, RayWalk* walks, bool* ok) {
     for (std::size_t i = 0; i < count; ++i) {
         RayWalk& w = walks[i];
@@ -137,8 +137,13 @@ HWY_INLINE void unpackWalks(const PacketRay* rays, std::size_t count, float invS
         w.t0 = out.t0[i];
         w.invStep = invStep;
         w.total = out.total[i];
-        w.k = w.kEnd = w.index = 0;
+        w.k = w.kEnd = w.index = w.first = 0;
         w.entered = false;
+        if (f.clip.any) { // as begin() narrows it, from the same origin and direction
+            const glm::vec3 o = f.ortho ? f.eye + rays[i].sx * f.right + rays[i].sy * f.up : f.eye;
+            ok[i] = w.clipSamples(f, o);
+            w.k = w.first;
+        }
     }
 }
 
@@ -174,7 +179,7 @@ void beginFresh(const Frame& f, const PacketRay* rays, std::size_t count, RayWal
     hn::Store(t0, df, out.t0);
     hn::Store(hn::ConvertTo(di, hn::IfThenElseZero(hn::Not(miss), totalF)), di, out.total);
     hn::StoreMaskBits(df, miss, out.missBits);
-    unpackWalks(rays, count, invStep, out, walks, ok);
+    unpackWalks(f, rays, count, invStep, out, walks, ok);
 }
 
 } // namespace HWY_NAMESPACE

@@ -71,6 +71,13 @@ struct Frame {
     float cell = 1;
     const BrickRef* bricks = nullptr;
     std::uint32_t batch = 0; ///< the batch being drawn
+    /// RenderOptions::mode; the other modes than composite march with the scalar loop
+    /// (marchBrickMode), through `tf` as authored (step 1).
+    BlendMode mode = BlendMode::Composite;
+    ClipF clip;    ///< RenderOptions::clip: samples outside are not taken
+    float iso = 0; ///< RenderOptions::isoValue
+    float valueMin = 0,
+          valueMax = 0; ///< the volume's values: a projection that reaches its end stops
 };
 
 struct Rgba {
@@ -124,7 +131,31 @@ inline Rgba shade(const Frame& f, Rgba c, glm::vec3 diffs, glm::vec3 dir) {
 /// to the next (the SIMD march composites lane by lane along that chain).
 struct Accum {
     float r = 0, g = 0, b = 0, t = 1;
+    /// The projections (BlendMode Maximum, Minimum, Average): the largest, smallest or summed
+    /// value of the samples so far, and how many there were; resolveProjection() turns them
+    /// into the colour above once the ray is done.
+    float v = 0;
+    std::uint32_t n = 0;
 };
+
+/// Takes a sample's value into a projecting ray; false once nothing can change it (the ray
+/// has reached the volume's largest or smallest value, under early termination).
+inline bool project(const Frame& f, Accum& acc, float value) {
+    switch (f.mode) {
+    case BlendMode::Maximum:
+        if (acc.n == 0 || value > acc.v) acc.v = value;
+        ++acc.n;
+        return !(f.ertT >= 0.0f && acc.v >= f.valueMax);
+    case BlendMode::Minimum:
+        if (acc.n == 0 || value < acc.v) acc.v = value;
+        ++acc.n;
+        return !(f.ertT >= 0.0f && acc.v <= f.valueMin);
+    default: // Average
+        acc.v += value;
+        ++acc.n;
+        return true;
+    }
+}
 
 inline void composite(Accum& acc, const Rgba& c) {
     const float w = acc.t * c.a;
@@ -267,14 +298,15 @@ inline int sampleAfterCube(const Frame& f, glm::vec3 local, glm::vec3 dv, float 
     return int(std::ceil((tExit - t0) * (1.0f / f.stepMm) - 0.5f));
 }
 
-/// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque. `map`: the
-/// brick's distance map (f.fine + its BrickRef::fine, as bytes), which then decides in place
-/// of the octree; null to walk the octree.
-template <class T>
-bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, const std::uint8_t* map,
-                glm::vec3 local, glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd,
-                Accum& acc, RayCount& n) {
-    const glm::vec3 rel = local + (float(f.apron) - 0.5f);
+/// The samples [k, kEnd) of one sampled brick that the brick's distance map or octree does
+/// not leap, each given to `take(k, t)` (sample k at ray parameter t), which returns false to
+/// end the ray; false when it did. `map`: the brick's distance map (f.fine + its
+/// BrickRef::fine, as bytes), which then decides in place of the octree; null to walk the
+/// octree.
+template <class Take>
+[[gnu::always_inline]] inline bool
+walkBrick(const Frame& f, const std::uint32_t* words, const std::uint8_t* map, glm::vec3 local,
+          glm::vec3 dv, float t0, int& k, int kEnd, RayCount& n, const Take& take) {
     glm::ivec3 checked(-1);
     for (; k < kEnd; ++k) {
         const float t = t0 + (float(k) + 0.5f) * f.stepMm;
@@ -299,13 +331,99 @@ bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, const st
                 checked = leaf;
             }
         }
-        const Rgba c = colourOf(f, Sample<T>(v, f.edge, rel + dv * t), dir);
         ++n.samples;
-        if (c.a <= 0.0f) continue;
-        composite(acc, c);
-        if (acc.t <= f.ertT) return false;
+        if (!take(k, t)) return false;
     }
     return true;
+}
+
+/// Samples [k, kEnd) of one sampled brick; returns false once the ray is opaque (walkBrick()).
+template <class T>
+bool marchBrick(const Frame& f, const T* v, const std::uint32_t* words, const std::uint8_t* map,
+                glm::vec3 local, glm::vec3 dv, glm::vec3 dir, float t0, int& k, int kEnd,
+                Accum& acc, RayCount& n) {
+    const glm::vec3 rel = local + (float(f.apron) - 0.5f);
+    return walkBrick(f, words, map, local, dv, t0, k, kEnd, n, [&](int, float t) {
+        const Rgba c = colourOf(f, Sample<T>(v, f.edge, rel + dv * t), dir);
+        if (c.a <= 0.0f) return true;
+        composite(acc, c);
+        return acc.t > f.ertT;
+    });
+}
+
+/// An isosurface's hit on the step from sample k - 1 (below f.iso) to sample k at parameter t
+/// (at or above it), the field read by `at(u)`: IsoModel's bisections; sample k itself when
+/// it is the ray's first kept sample, `first` (the volume's box or the clip cuts the surface).
+template <class At>
+float isoHit(const Frame& f, float t0, int first, int k, float t, const At& at) {
+    if (k == first) return t;
+    float lo = t0 + (float(k - 1) + 0.5f) * f.stepMm, hi = t;
+    for (int i = 0; i < IsoModel::kBisections; ++i) {
+        const float mid = 0.5f * (lo + hi);
+        (at(mid) >= f.iso ? hi : lo) = mid;
+    }
+    return 0.5f * (lo + hi);
+}
+
+/// The isosurface's colour: the function's at the iso value, opaque; shaded by `diffs` (the
+/// gradient's central differences at the hit).
+inline Rgba isoColour(const Frame& f, glm::vec3 diffs, glm::vec3 dir) {
+    Rgba c = classify(f, f.iso);
+    c.a = 1.0f;
+    return f.shading ? shade(f, c, diffs, dir) : c;
+}
+
+/// marchBrick for the other modes than composite: the projections take every sample's value
+/// (project()), an isosurface ends the ray at its first sample at or above the iso value,
+/// whose crossing it refines within this brick's voxels (isoHit). Leaps as walkBrick does,
+/// under the mode's own octrees (SkipRule).
+template <class T>
+bool marchBrickMode(const Frame& f, const T* v, const std::uint32_t* words, const std::uint8_t* map,
+                    glm::vec3 local, glm::vec3 dv, glm::vec3 dir, float t0, int first, int& k,
+                    int kEnd, Accum& acc, RayCount& n) {
+    const glm::vec3 rel = local + (float(f.apron) - 0.5f);
+    return walkBrick(f, words, map, local, dv, t0, k, kEnd, n, [&](int j, float t) {
+        const float value = detail::fetch(v, f.edge, rel + dv * t);
+        if (f.mode != BlendMode::Isosurface) return project(f, acc, value);
+        if (value < f.iso) return true;
+        const float hit = isoHit(f, t0, first, j, t,
+                                 [&](float u) { return detail::fetch(v, f.edge, rel + dv * u); });
+        composite(acc, isoColour(f, Sample<T>(v, f.edge, rel + dv * hit).diffs(), dir));
+        return false;
+    });
+}
+
+/// marchConstant for the other modes than composite (marchBrickMode).
+inline bool marchConstantMode(const Frame& f, float value, int& k, int kEnd, Accum& acc,
+                              RayCount& n) {
+    if (f.mode == BlendMode::Isosurface) {
+        if (value < f.iso) {
+            n.samples += std::uint64_t(kEnd - k);
+            k = kEnd;
+            return true;
+        }
+        // The surface is at the brick's first sample or before it, where it meets the brick
+        // of one value: no gradient there, the surface unshaded wherever it lies.
+        ++n.samples;
+        composite(acc, isoColour(f, glm::vec3(0.0f), glm::vec3(0.0f)));
+        return false;
+    }
+    for (; k < kEnd; ++k) {
+        ++n.samples;
+        if (!project(f, acc, value)) return false;
+    }
+    return true;
+}
+
+/// A projecting ray's colour once it is done: its value (the mean for Average) through the
+/// function as authored, premultiplied; transparent without samples.
+inline void resolveProjection(const Frame& f, Accum& acc) {
+    if (acc.n == 0) return;
+    const Rgba c = classify(f, f.mode == BlendMode::Average ? acc.v / float(acc.n) : acc.v);
+    acc.r = c.r * c.a;
+    acc.g = c.g * c.a;
+    acc.b = c.b * c.a;
+    acc.t = 1.0f - c.a;
 }
 
 /// Samples [k, kEnd) of a brick of one value `value`; false once the ray is opaque.
@@ -347,6 +465,7 @@ struct RayWalk {
     glm::vec3 invDv{0.0f};                 ///< 1 / dv (inf on an axis it does not move along)
     float t0 = 0.0f, invStep = 1.0f;
     int total = 0, k = 0, kEnd = 0;
+    int first = 0; ///< the first sample kept (0 unless a crop or clip cuts the ray's start)
     int index = 0; ///< the brick next() stopped at
     glm::ivec3 cell{0}, stepDir{0};
     glm::vec3 tDelta{0.0f}, tMax{0.0f};
@@ -382,6 +501,8 @@ struct RayWalk {
         t0 += shift * f.stepMm; // sample k at t0 + (k + 1/2) step: the entry + (k + jitter) step
         total = int(std::ceil((t1 - t0) * invStep - 0.5f));
         if (total <= 0) return false;
+        first = 0; // a crop or clip keeps samples [first, total) of the same lattice
+        if (f.clip.any && !clipSamples(f, o)) return false;
         if (phase != RayPhase::Fresh) {
             cell = r.cell;
             tMax = r.tMax;
@@ -402,9 +523,21 @@ struct RayWalk {
             const float plane = float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * f.brick);
             tMax[a] = (plane - ov[a]) * invDv[a];
         }
-        k = phase == RayPhase::Fresh ? 0 : r.k;
+        k = phase == RayPhase::Fresh ? first : r.k;
         entered = false;
         return true;
+    }
+
+    /// Narrows the samples to those the clip keeps: [first, total); false when none is.
+    bool clipSamples(const Frame& f, glm::vec3 o) {
+        float ta = -3.0e38f, tb = 3.0e38f;
+        f.clip.interval(o, d, ta, tb);
+        if (!(ta <= tb)) return false;
+        const float kb = std::ceil((tb - t0) * invStep - 0.5f);
+        if (kb < float(total)) total = kb > 0.0f ? int(kb) : 0;
+        const float ka = std::ceil((ta - t0) * invStep - 0.5f);
+        if (ka > 0.0f) first = ka < float(total) ? int(ka) : total;
+        return first < total;
     }
 
     /// On to the next brick of this batch, sampled or of one value, with samples [k, kEnd) of

@@ -44,8 +44,13 @@ bool marchSampled(const Frame& f, RayWalk& w, const BrickRef& b, Accum& acc, Fro
     bool more = true;
     if (f.pre)
         more = marchBrickPre(f, voxels, words, local, w.dv, w.d, w.t0, k, kEnd, acc, *front, n);
-    else if (!words || clipToSampled(f, f.boxes[w.index], local, w.dv, w.invDv, w.invStep, w.t0,
+    else if (words && !clipToSampled(f, f.boxes[w.index], local, w.dv, w.invDv, w.invStep, w.t0,
                                      kFirst, kLast))
+        more = true;
+    else if (f.mode != BlendMode::Composite)
+        more = marchBrickMode(f, voxels, words, map, local, w.dv, w.d, w.t0, w.first, kFirst, kLast,
+                              acc, n);
+    else
         more = f.simd ? marchBrickSimd(voxelTypeOf<T>(), f, b.voxels, words, local, w.dv, w.d, w.t0,
                                        kFirst, kLast, acc, n)
                       : marchBrick(f, voxels, words, map, local, w.dv, w.d, w.t0, kFirst, kLast,
@@ -86,6 +91,8 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayR
             if (!marchSampled<T>(f, w, b, acc, front, n)) return;
         } else if (f.pre) {
             if (!marchConstantPre(f, b, w.k, w.kEnd, acc, *front, n)) return;
+        } else if (f.mode != BlendMode::Composite) {
+            if (!marchConstantMode(f, b.constant, w.k, w.kEnd, acc, n)) return;
         } else if (!marchConstant(f, b.constant, w.k, w.kEnd, acc, n)) {
             return;
         }

@@ -169,6 +169,7 @@ SplatScene sceneOf(const Scene& scene, const View& view, const RenderOptions& op
     options.validate();
     Renderer::checkView(view, options, true); // both splatters draw regions
     Renderer::refusePreintegration(options, "splatters");
+    Renderer::refuseModesAndClips(options, "splatters");
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const std::uint32_t level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     return {level, LevelGeometry::of(scene.store, level),

@@ -211,6 +211,16 @@ inline void expectAThinSliceDrawsLess(render::Renderer& r, TestStore& t,
                 (unsigned long long)thin.samples);
 }
 
+/// A grey ramp over the volume's values, transparent black at the lowest and opaque white at
+/// the highest: an average projection's radiograph.
+inline render::TransferFunction greyRamp(const render::VolumeValueStats& stats) {
+    using render::Placement;
+    return render::TransferFunction::fromPoints(
+        {{Placement::Value, stats.valueMin, {0.0f, 0.0f, 0.0f, 0.0f}},
+         {Placement::Value, stats.valueMax, {1.0f, 1.0f, 1.0f, 1.0f}}},
+        "grey ramp", stats);
+}
+
 /// The sum of an image's alpha: how much it shows.
 inline double alphaSum(const render::Image& image) {
     double alpha = 0;

@@ -64,7 +64,9 @@ void expectAgreement(const protocol::SetCamera& c) {
     EXPECT_EQ(decoder, renderer) << show(c) << ": the decoder " << (decoder ? "passes" : "refuses")
                                  << " it, the renderer " << (renderer ? "draws" : "refuses")
                                  << " it";
-    if (decoder && renderer) EXPECT_TRUE(finiteBasis(c)) << show(c) << ": no finite view basis";
+    if (decoder && renderer) {
+        EXPECT_TRUE(finiteBasis(c)) << show(c) << ": no finite view basis";
+    }
 }
 
 TEST(CameraRules, TheDecoderAndTheRendererAgreeOnCamerasAtTheExtremesOfADouble) {

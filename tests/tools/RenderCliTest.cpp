@@ -152,6 +152,43 @@ TEST_F(RenderCli, BadOptionsAndTransferFunctionsAreNamed) {
     EXPECT_FALSE(std::filesystem::exists(out));
 }
 
+// --mode, --iso, --crop and --clip: a MIP of a cropped, clipped volume is the reference's
+// image; bad values are named; a renderer that draws composite only says so.
+TEST_F(RenderCli, ModesCropsAndClipsAreDrawnAndBadOnesNamed) {
+    const std::string cpu = dir.file("cpu.png"), ref = dir.file("ref.png"),
+                      stats = dir.file("s.json");
+    const std::string view = " --size 64,64 --tf ct-bone --orbit 40,25 --mode mip"
+                             " --crop 2,60,2,60,4,40 --clip=-1,0.2,0,48";
+    auto a =
+        brickcast("render " + store + " -o " + cpu + view + " --renderer cpu --stats " + stats);
+    ASSERT_EQ(a.exitCode, 0) << a.text;
+    auto b = brickcast("render " + store + " -o " + ref + view + " --reference");
+    ASSERT_EQ(b.exitCode, 0) << b.text;
+    EXPECT_LE(compareImages(readPng(cpu), readPng(ref)).maxAbs, 1.0 / 255.0 + 1e-6);
+    std::ifstream f(stats);
+    EXPECT_EQ(nlohmann::json::parse(f).at("mode"), "mip");
+    auto iso = brickcast("render " + store + " -o " + cpu + " --size 32,32 --mode iso --iso 900");
+    EXPECT_EQ(iso.exitCode, 0) << iso.text;
+    const std::string out = dir.file("x.png");
+    const std::pair<std::string, std::string> bad[] = {
+        {" --mode iso", "--iso"},
+        {" --iso 5", "--iso"},
+        {" --mode max", "max"},
+        {" --mode iso --iso 1e9", "iso:"},
+        {" --crop 10,5,0,1,0,1", "crop:"},
+        {" --crop 1,2,3", "--crop"},
+        {" --clip 0,0,0,1", "clip[0]: the normal is zero"},
+        {" --clip 1,0,0,nan", "--clip"},
+        {" --renderer splat --mode mip", "splatters: composite only, not mip"},
+    };
+    for (const auto& [args, named] : bad) {
+        auto r = brickcast("render " + store + " -o " + out + " --size 32,32" + args);
+        EXPECT_NE(r.exitCode, 0) << args;
+        EXPECT_TRUE(contains(r.text, named)) << args << ": " << r.text;
+    }
+    EXPECT_FALSE(std::filesystem::exists(out));
+}
+
 // GLVND with no vendor library: EGL offers no display at all.
 const std::string kNoEgl =
     "__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent.json EGL_PLATFORM=surfaceless";

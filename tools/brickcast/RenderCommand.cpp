@@ -50,7 +50,11 @@ namespace {
 
 struct RenderCliOptions {
     std::string store, output, size = "256,256", tf = "ct-skin", orbit, eye, target, up,
-                               ert = "0.99", skip = "all", statsPath, renderer = "auto";
+                               ert = "0.99", skip = "all", statsPath, renderer = "auto",
+                               mode = "composite";
+    std::optional<double> iso;      ///< --iso
+    std::string crop;               ///< --crop X0,X1,Y0,Y1,Z0,Z1 (mm)
+    std::vector<std::string> clips; ///< --clip NX,NY,NZ,D, each
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32, cells = render::RenderOptions{}.cellVoxels;
     bool ortho = false, noShading = false, noSimd = false, noPackets = false, noRayGuided = false,
@@ -103,6 +107,25 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.earlyTermination = o.ert != "off";
     if (r.earlyTermination) r.ertThreshold = tools::parseNumbers(o.ert, "--ert", 1, 1)[0];
     r.skip = render::parseSkipMode(o.skip);
+    r.mode = render::parseBlendMode(o.mode);
+    if ((r.mode == render::BlendMode::Isosurface) != o.iso.has_value())
+        throw std::invalid_argument(o.iso
+                                        ? "--iso: only with --mode iso"
+                                        : "--mode iso: needs --iso VALUE (in the volume's units)");
+    if (o.iso) r.isoValue = *o.iso;
+    if (!o.crop.empty()) {
+        const auto c = tools::parseNumbers(o.crop, "--crop", 6, 6);
+        r.clip.cropped = true;
+        r.clip.cropMin = {c[0], c[2], c[4]};
+        r.clip.cropMax = {c[1], c[3], c[5]};
+    }
+    if (o.clips.size() > render::Clip::kMaxPlanes)
+        throw std::invalid_argument("--clip: " + std::to_string(o.clips.size()) +
+                                    " planes, at most " + std::to_string(render::Clip::kMaxPlanes));
+    for (const std::string& text : o.clips) {
+        const auto p = tools::parseNumbers(text, "--clip", 4, 4);
+        r.clip.planes[r.clip.planeCount++] = {{p[0], p[1], p[2]}, p[3]};
+    }
     r.shading = !o.noShading;
     r.simd = !o.noSimd;
     r.packets = !o.noPackets;
@@ -127,6 +150,7 @@ nlohmann::json statsJson(const render::FrameStats& s, const std::string& rendere
             {"width", o.width},
             {"height", o.height},
             {"level", s.level},
+            {"mode", render::toString(o.mode)},
             {"samples", s.samples},
             {"samplesPerPixel", double(s.samples) / pixels},
             {"bricksTotal", s.bricksTotal},
@@ -602,6 +626,19 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--skip", o->skip,
                     "Empty-space skipping: none, bricks (first stage), all (+ per-brick octrees)")
         ->capture_default_str();
+    cmd->add_option("--mode", o->mode,
+                    "What a ray makes of its samples: composite, mip (maximum), minip (minimum), "
+                    "average, iso (the surface at --iso); CPU raycaster and reference")
+        ->capture_default_str();
+    cmd->add_option("--iso", o->iso, "With --mode iso: the surface's value, in the volume's units");
+    cmd->add_option("--crop", o->crop,
+                    "Draw only inside the box X0,X1,Y0,Y1,Z0,Z1 (mm; the volume spans 0 to "
+                    "dims x spacing); CPU raycaster and reference");
+    cmd->add_option("--clip", o->clips,
+                    "Keep the side NX*x + NY*y + NZ*z + D >= 0 of a plane (mm); up to six, "
+                    "each its own --clip (--clip=-1,0,0,90 when it starts with a minus); CPU "
+                    "raycaster and reference")
+        ->allow_extra_args(false);
     cmd->add_option("--octree-ratio", o->octreeRatio,
                     "Draw an octree node whole once this share of its leaves is non-empty")
         ->capture_default_str();

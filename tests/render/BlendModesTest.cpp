@@ -1,0 +1,216 @@
+// The other modes than composite (RenderOptions::mode, render/MODES.md): maximum, minimum and
+// average projections and the isosurface. The skip tables keep every value a mode may need;
+// on every shared scan the CPU raycaster draws the float64 reference's image (>= 50 dB at the
+// same step) and skipping and early termination change no pixel; bad input names its field.
+#include "RenderTestSupport.h"
+#include "render/BrickPlan.h"
+#include "render/CpuRaycaster.h"
+#include "render/ReferenceRenderer.h"
+
+#include <cmath>
+
+namespace bc::render {
+namespace {
+
+using test::TestStore;
+
+VolumeValueStats unitStats() {
+    VolumeValueStats s;
+    s.valueMin = 0.0;
+    s.valueMax = 1000.0;
+    s.histogram.assign(16, 1);
+    return s;
+}
+
+PointSpec at(double value, float a) {
+    return {Placement::Value, value, {0.8f, 0.6f, 0.4f, a}};
+}
+
+/// A generated 32^3 phantom in bricks of 16.
+std::unique_ptr<TestStore> phantom() {
+    auto source = brickstore::makeSynthetic(brickstore::SynthKind::Phantom, {32, 32, 32}, 1);
+    return test::ingestStore(*source, {16, 2, 4});
+}
+
+/// Visible from 300 to 600 only.
+TransferFunction band() {
+    return TransferFunction::fromPoints(
+        {at(0, 0), at(300, 0), at(400, 0.5f), at(600, 0.5f), at(600.5, 0), at(1000, 0)}, "band",
+        unitStats());
+}
+
+/// The table position of `value` in `t`.
+double entryOf(const TransferFunctionTable& t, double value) {
+    return (value - t.domainMin) / (t.domainMax - t.domainMin) * double(t.entries - 1);
+}
+
+TEST(SkipTables, EachModeKeepsTheValuesItMayNeed) {
+    const TransferFunctionTable unit = band().table(1.0, kClassificationTableEntries);
+    // Composite: the function itself.
+    EXPECT_EQ(skipTableOf(unit, {}).rgba, unit.rgba);
+    // Maximum: from the lowest visible value up; a range below it is transparent.
+    const TransferFunctionTable mip = skipTableOf(unit, {BlendMode::Maximum, 0.0});
+    EXPECT_TRUE(mip.transparent(0.0, 299.0));
+    EXPECT_FALSE(mip.transparent(0.0, 301.0));
+    EXPECT_FALSE(mip.transparent(900.0, 1000.0)) << "above the band a maximum still counts";
+    // Minimum: up to the highest visible value; a range above it is transparent.
+    const TransferFunctionTable minip = skipTableOf(unit, {BlendMode::Minimum, 0.0});
+    EXPECT_TRUE(minip.transparent(602.0, 1000.0));
+    EXPECT_FALSE(minip.transparent(599.0, 1000.0));
+    EXPECT_FALSE(minip.transparent(0.0, 10.0));
+    // Isosurface: at or above the value; below it nothing can be hit.
+    const TransferFunctionTable iso = skipTableOf(unit, {BlendMode::Isosurface, 700.0});
+    EXPECT_TRUE(iso.transparent(0.0, 699.0));
+    EXPECT_FALSE(iso.transparent(0.0, 700.0));
+    EXPECT_FALSE(iso.transparent(999.0, 1000.0));
+    // The boundary's entry is kept: every entry a value at or above 700 reads is visible.
+    for (auto i = std::uint32_t(std::floor(entryOf(iso, 700.0))); i < iso.entries; ++i)
+        ASSERT_GT(iso.rgba[4 * std::size_t(i) + 3], 0.0f) << i;
+    // Average keeps everything; colours are the function's.
+    const TransferFunctionTable average = skipTableOf(unit, {BlendMode::Average, 0.0});
+    EXPECT_FALSE(average.transparent(0.0, 1.0));
+    EXPECT_EQ(average.rgba[0], unit.rgba[0]);
+    // A function with nothing visible: the projections keep nothing.
+    const auto none = TransferFunction::fromPoints({at(0, 0), at(1000, 0)}, "none", unitStats())
+                          .table(1.0, kClassificationTableEntries);
+    EXPECT_TRUE(skipTableOf(none, {BlendMode::Maximum, 0.0}).transparent(0.0, 1000.0));
+    EXPECT_TRUE(skipTableOf(none, {BlendMode::Minimum, 0.0}).transparent(0.0, 1000.0));
+}
+
+TEST(SkipTables, ModesGetTheirOwnClassificationsAndShareThem) {
+    const auto t = phantom();
+    const TransferFunction tf = TransferFunction::preset("ct-bone", t->stats);
+    ClassificationCache cache;
+    const OccupancyConfig octree;
+    const auto composite = cache.get(*t->store, 0, tf, &octree);
+    const auto mip = cache.get(*t->store, 0, tf, &octree, nullptr, {BlendMode::Maximum, 0.0});
+    EXPECT_NE(composite, mip);
+    bool built = true;
+    EXPECT_EQ(cache.get(*t->store, 0, tf, &octree, &built, {BlendMode::Maximum, 0.0}), mip);
+    EXPECT_FALSE(built) << "a second MIP frame builds nothing";
+    const auto iso1 = cache.get(*t->store, 0, tf, &octree, nullptr, {BlendMode::Isosurface, 100});
+    const auto iso2 = cache.get(*t->store, 0, tf, &octree, nullptr, {BlendMode::Isosurface, 900});
+    EXPECT_NE(iso1, iso2) << "each iso value has its octrees";
+}
+
+/// The value where a preset first becomes visible: a surface the scan has.
+double isoOf(const TransferFunction& tf) {
+    const TransferFunctionTable t = tf.table(1.0, kClassificationTableEntries);
+    for (std::uint32_t i = 0; i < t.entries; ++i)
+        if (t.rgba[4 * std::size_t(i) + 3] > 0.0f)
+            return t.domainMin +
+                   (t.domainMax - t.domainMin) * (double(i) + 1.0) / double(t.entries - 1);
+    return 0.5 * (t.domainMin + t.domainMax);
+}
+
+struct ModeCase {
+    BlendMode mode;
+    const char* name;
+};
+
+/// The function a mode is looked at through, as a user would pick it: the scan's preset for
+/// the maximum and the isosurface; for the minimum a grey ramp opaque at the lowest value and
+/// transparent from the middle of the range up (dark structures, and bricks above the middle
+/// to skip); for the average a grey ramp over the whole range.
+TransferFunction modeFunction(const ModeCase& m, const std::string& preset,
+                              const VolumeValueStats& stats) {
+    const double lo = stats.valueMin, hi = stats.valueMax, mid = 0.5 * (lo + hi);
+    auto grey = [](double v, float a) {
+        return PointSpec{Placement::Value, v, {1.0f - a, 1.0f - a, 1.0f, a}};
+    };
+    if (m.mode == BlendMode::Minimum)
+        return TransferFunction::fromPoints({grey(lo, 1), grey(mid, 0), grey(hi, 0)}, "low", stats);
+    if (m.mode == BlendMode::Average) return test::greyRamp(stats);
+    return TransferFunction::preset(preset, stats);
+}
+
+const ModeCase kModes[] = {{BlendMode::Maximum, "mip"},
+                           {BlendMode::Minimum, "minip"},
+                           {BlendMode::Average, "average"},
+                           {BlendMode::Isosurface, "iso"}};
+
+/// Every shared scan, one preset each.
+std::vector<test::ScanPreset> modeScans() {
+    return {{"cthead", "ct-bone"},   {"CT_AVM", "vessels"}, {"frog", "mr"},
+            {"pancreas", "ct-bone"}, {"Iguana", "ct-bone"}, {"gaffer_smoke", "smoke"},
+            {"hydrogen", "smoke"},   {"headsq", "mr"}};
+}
+
+class ModesOnScans : public ::testing::TestWithParam<test::ScanPreset> {};
+
+TEST_P(ModesOnScans, TheCpuRaycasterDrawsTheReferencesImageAndSkippingChangesNoPixel) {
+    const auto t = test::ingestRealScan(GetParam().scan);
+    if (!t) return test::missingData("scan " + GetParam().scan);
+    const Box box = LevelGeometry::of(*t->store, 0).box;
+    const Camera camera = Camera::orbit(box, 35.0, 25.0);
+    ReferenceRenderer reference;
+    for (const ModeCase& m : kModes) {
+        SCOPED_TRACE(m.name);
+        const TransferFunction tf = modeFunction(m, GetParam().preset, t->stats);
+        RenderOptions o;
+        o.width = o.height = 96;
+        o.mode = m.mode;
+        o.isoValue = m.mode == BlendMode::Isosurface ? isoOf(tf) : 0.0;
+        FrameStats refStats;
+        const Image ref = reference.render(*t->store, *t->cache, tf, camera, o, refStats);
+        FrameStats fast;
+        const Image cpu = test::cpuFrame(*t, tf, camera, o, &fast);
+        const ImageComparison c = compareImages(cpu, ref);
+        test::printComparison(GetParam().scan + " " + m.name + " cpu vs reference", c);
+        EXPECT_GE(c.psnrDb, 50.0);
+        EXPECT_GT(test::alphaSum(ref), 1.0) << "the view shows something";
+        // Skipping and early termination off: the same image, to the bit.
+        RenderOptions plain = o;
+        plain.skip = SkipMode::None;
+        plain.earlyTermination = false;
+        FrameStats slow;
+        const Image unskipped = test::cpuFrame(*t, tf, camera, plain, &slow);
+        EXPECT_EQ(compareImages(cpu, unskipped).maxAbs, 0.0);
+        for (const SkipMode skip : {SkipMode::Bricks, SkipMode::All}) {
+            RenderOptions s = o;
+            s.skip = skip;
+            s.earlyTermination = false;
+            EXPECT_EQ(compareImages(test::cpuFrame(*t, tf, camera, s), unskipped).maxAbs, 0.0)
+                << toString(skip) << " without early termination";
+        }
+        if (m.mode != BlendMode::Average) {
+            EXPECT_LE(fast.samples, slow.samples) << "skipping took more samples";
+        }
+        std::printf("[modes] %s %s: %llu samples skipping, %llu without\n", GetParam().scan.c_str(),
+                    m.name, (unsigned long long)fast.samples, (unsigned long long)slow.samples);
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(RealScans, ModesOnScans, ::testing::ValuesIn(modeScans()),
+                         [](const auto& info) { return info.param.scan; });
+
+TEST(ModesBadInput, AnIsoValueOutsideTheVolumeOrNotFiniteIsRefusedNamingIso) {
+    const auto t = phantom();
+    const TransferFunction tf = TransferFunction::preset("ct-bone", t->stats);
+    const Camera camera = Camera::orbit(LevelGeometry::of(*t->store, 0).box, 30.0, 20.0);
+    RenderOptions o;
+    o.width = o.height = 32;
+    o.mode = BlendMode::Isosurface;
+    for (double bad : {tf.domainMax() + 1.0, tf.domainMin() - 1.0, std::nan("")}) {
+        o.isoValue = bad;
+        try {
+            test::cpuFrame(*t, tf, camera, o);
+            ADD_FAILURE() << "iso " << bad << " was drawn";
+        } catch (const std::invalid_argument& e) {
+            EXPECT_NE(std::string(e.what()).find("iso"), std::string::npos) << e.what();
+        }
+    }
+    EXPECT_THROW(parseBlendMode("max"), std::invalid_argument);
+    // Parts (the sort-last scale-out) are composite only for now.
+    o.isoValue = 0.5 * (tf.domainMin() + tf.domainMax());
+    o.parts = 2;
+    try {
+        test::cpuFrame(*t, tf, camera, o);
+        ADD_FAILURE() << "an isosurface was drawn in parts";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("parts"), std::string::npos) << e.what();
+    }
+}
+
+} // namespace
+} // namespace bc::render
