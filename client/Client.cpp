@@ -59,6 +59,10 @@ void Client::setFrameBudget(const protocol::SetFrameBudget& budget) {
     send(budget, nextId());
 }
 
+void Client::setModeAndClip(const protocol::SetModeAndClip& modeAndClip) {
+    send(modeAndClip, nextId());
+}
+
 std::uint32_t Client::requestFrame(protocol::FrameMode mode) {
     const std::uint32_t id = nextId();
     send(protocol::RequestFrame{mode}, id);

@@ -61,6 +61,9 @@ class Client {
     /// The session's frame-time target and error bound at rest (servers with
     /// protocol::kCapFrameBudget; older ones answer UnknownType).
     void setFrameBudget(const protocol::SetFrameBudget& budget);
+    /// The session's mode, iso value, crop box and clip planes (servers with
+    /// protocol::kCapModesAndClips; older ones answer UnknownType).
+    void setModeAndClip(const protocol::SetModeAndClip& modeAndClip);
     /// Sends RequestFrame; returns its request id.
     std::uint32_t requestFrame(protocol::FrameMode mode = protocol::FrameMode::Once);
     /// The next Frame (decoded). @throw ServerError when an Error arrives first.

@@ -240,6 +240,32 @@ void check(Rules& r, const SetFrameBudget& m) {
     if (m.restPsnrDb != 0) r.intRange("restPsnrDb", m.restPsnrDb, kMinRestPsnrDb, kMaxRestPsnrDb);
 }
 
+void check(Rules& r, const SetModeAndClip& m) {
+    r.enumValue("mode", std::uint8_t(m.mode), std::uint8_t(BlendMode::Isosurface));
+    r.finite("isoValue", m.isoValue);
+    r.finite("cropMin", m.cropMin);
+    r.finite("cropMax", m.cropMax);
+    if (!r.ok()) return;
+    for (std::size_t a = 0; a < 3 && r.ok(); ++a) {
+        if (m.cropped && !(m.cropMin[a] < m.cropMax[a]))
+            r.fail(ErrorCode::OutOfRange, "cropMax",
+                   "must exceed cropMin on every axis (the box is empty or inverted)");
+        if (!m.cropped && (m.cropMin[a] != 0 || m.cropMax[a] != 0))
+            r.fail(ErrorCode::OutOfRange, "cropMin", "must be 0 when cropped is 0");
+    }
+    r.count("planes", m.planes.size(), kMaxClipPlanes);
+    for (std::size_t i = 0; i < m.planes.size() && r.ok(); ++i) {
+        r.item("planes", std::ptrdiff_t(i));
+        const ClipPlane& p = m.planes[i];
+        r.finite("normal", p.normal);
+        r.finite("offset", p.offset);
+        const double largest =
+            std::max({std::abs(p.normal[0]), std::abs(p.normal[1]), std::abs(p.normal[2])});
+        if (r.ok() && !(largest > 1e-30))
+            r.fail(ErrorCode::OutOfRange, "normal", "is zero (a plane needs a direction)");
+    }
+}
+
 void check(Rules&, const AuthOk&) {}
 void check(Rules&, const ListVolumes&) {}
 void check(Rules&, const RequestStats&) {}

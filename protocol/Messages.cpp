@@ -13,7 +13,7 @@ namespace {
 using detail::ByteWriter;
 
 // Variant alternatives are in wire order: alternative i is message type i + 1.
-static_assert(std::variant_size_v<Message> == std::size_t(MessageType::SetFrameBudget));
+static_assert(std::variant_size_v<Message> == std::size_t(MessageType::SetModeAndClip));
 static_assert(
     std::is_same_v<std::variant_alternative_t<std::size_t(MessageType::SetCamera) - 1, Message>,
                    SetCamera>);
@@ -159,6 +159,22 @@ void write(ByteWriter& w, const Histogram& m) {
 void write(ByteWriter& w, const SetFrameBudget& m) {
     w.u16(m.interactiveMs);
     w.u8(m.restPsnrDb);
+}
+
+void write(ByteWriter& w, const SetModeAndClip& m) {
+    w.u8(std::uint8_t(m.mode));
+    w.f64(m.isoValue);
+    w.boolean(m.cropped);
+    for (double v : m.cropMin)
+        w.f64(v);
+    for (double v : m.cropMax)
+        w.f64(v);
+    w.u8(std::uint8_t(m.planes.size()));
+    for (const ClipPlane& p : m.planes) {
+        for (double v : p.normal)
+            w.f64(v);
+        w.f64(p.offset);
+    }
 }
 
 void write(ByteWriter&, const AuthOk&) {}

@@ -178,6 +178,24 @@ struct SetFrameBudget {
     bool operator==(const SetFrameBudget&) const = default;
 };
 
+/// A half-space kept: the world points x (mm) with dot(normal, x) + offset >= 0.
+struct ClipPlane {
+    std::array<double, 3> normal{0, 0, 1};
+    double offset = 0;
+    bool operator==(const ClipPlane&) const = default;
+};
+
+/// What a ray makes of its samples and what of the volume is drawn (PROTOCOL.md,
+/// SetModeAndClip): the mode, the iso value, a crop box (world mm) and up to six clip planes.
+struct SetModeAndClip {
+    BlendMode mode = BlendMode::Composite;
+    double isoValue = 0; ///< BlendMode::Isosurface: the surface's value, in the volume's units
+    bool cropped = false;
+    std::array<double, 3> cropMin{}, cropMax{}; ///< all 0 unless cropped
+    std::vector<ClipPlane> planes;              ///< at most kMaxClipPlanes
+    bool operator==(const SetModeAndClip&) const = default;
+};
+
 /// The open volume's level-0 voxels in equal bins over [valueMin, valueMax].
 struct Histogram {
     double valueMin = 0, valueMax = 0;
@@ -188,7 +206,7 @@ struct Histogram {
 using Message =
     std::variant<Hello, Auth, AuthOk, ListVolumes, VolumeList, OpenVolume, VolumeOpened, SetCamera,
                  SetTransferFunction, SetRenderOptions, RequestFrame, Frame, RequestStats, Stats,
-                 Error, Bye, RequestHistogram, Histogram, SetFrameBudget>;
+                 Error, Bye, RequestHistogram, Histogram, SetFrameBudget, SetModeAndClip>;
 
 inline constexpr std::size_t kRenderOptionsBytes = 24;
 inline constexpr std::size_t kFrameHeaderBytes = 60;

@@ -16,7 +16,8 @@ using detail::Rules;
 
 constexpr std::size_t kVolumeInfoMinBytes = 64; // with an empty name
 constexpr std::size_t kTfPointBytes = 25;
-constexpr std::size_t kStatMinBytes = 10; // with an empty name
+constexpr std::size_t kClipPlaneBytes = 32; ///< f64 normal[3], f64 offset
+constexpr std::size_t kStatMinBytes = 10;   // with an empty name
 constexpr std::size_t kSetCameraBytes = 93;
 
 /// Reads fields in order; the first short read or malformed field fails `rules` and every
@@ -299,6 +300,23 @@ Message readSetFrameBudget(PayloadReader& r) {
     return m;
 }
 
+Message readSetModeAndClip(PayloadReader& r) {
+    SetModeAndClip m;
+    m.mode = r.enumU8<BlendMode>("mode");
+    m.isoValue = r.f64("isoValue");
+    m.cropped = r.boolean("cropped");
+    r.f64s("cropMin", m.cropMin);
+    r.f64s("cropMax", m.cropMax);
+    const std::size_t n = r.count("planes", 1, kMaxClipPlanes, kClipPlaneBytes);
+    m.planes.resize(n);
+    for (std::size_t i = 0; i < n && r.rules().ok(); ++i) {
+        r.rules().item("planes", std::ptrdiff_t(i));
+        r.f64s("normal", m.planes[i].normal);
+        m.planes[i].offset = r.f64("offset");
+    }
+    return m;
+}
+
 Message readHistogram(PayloadReader& r) {
     Histogram m;
     m.valueMin = r.f64("valueMin");
@@ -336,8 +354,9 @@ constexpr PayloadKind kKinds[] = {
     {readRequestHistogram, 0},
     {readHistogram, {}},
     {readSetFrameBudget, 3},
+    {readSetModeAndClip, {}},
 };
-static_assert(std::size(kKinds) == std::size_t(MessageType::SetFrameBudget));
+static_assert(std::size(kKinds) == std::size_t(MessageType::SetModeAndClip));
 
 DecodeError decodeError(detail::Violation v, std::uint8_t type) {
     return DecodeError{v.code, false, type, 0, std::move(v.text)};

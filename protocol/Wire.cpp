@@ -44,6 +44,8 @@ const char* typeName(std::uint8_t type) {
         return "Histogram";
     case MessageType::SetFrameBudget:
         return "SetFrameBudget";
+    case MessageType::SetModeAndClip:
+        return "SetModeAndClip";
     }
     return "unknown";
 }
@@ -96,7 +98,25 @@ constexpr std::pair<Renderer, std::string_view> kRendererNames[] = {
     {Renderer::GpuSplatter, "splat-gpu"}, {Renderer::Auto, "auto"},
 };
 
+constexpr std::pair<BlendMode, std::string_view> kBlendModeNames[] = {
+    {BlendMode::Composite, "composite"}, {BlendMode::Maximum, "mip"},
+    {BlendMode::Minimum, "minip"},       {BlendMode::Average, "average"},
+    {BlendMode::Isosurface, "iso"},
+};
+
 } // namespace
+
+std::string_view blendModeName(BlendMode mode) {
+    for (const auto& [m, name] : kBlendModeNames)
+        if (m == mode) return name;
+    return "unknown";
+}
+
+std::optional<BlendMode> blendModeNamed(std::string_view name) {
+    for (const auto& [m, n] : kBlendModeNames)
+        if (n == name) return m;
+    return std::nullopt;
+}
 
 std::string_view rendererName(Renderer renderer) {
     for (const auto& [r, name] : kRendererNames)

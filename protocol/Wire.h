@@ -33,6 +33,8 @@ inline constexpr std::uint8_t kLevelAutomatic = 255;
 inline constexpr std::uint16_t kMaxInteractiveMs = 10000;
 inline constexpr std::uint8_t kMinRestPsnrDb = 20, kMaxRestPsnrDb = 50;
 inline constexpr std::uint8_t kMaxLevel = 15;
+/// SetModeAndClip's most clip planes.
+inline constexpr std::size_t kMaxClipPlanes = 6;
 
 enum class MessageType : std::uint8_t {
     Hello = 0x01,
@@ -54,6 +56,7 @@ enum class MessageType : std::uint8_t {
     RequestHistogram = 0x11,
     Histogram = 0x12,
     SetFrameBudget = 0x13,
+    SetModeAndClip = 0x14,
 };
 
 enum class ErrorCode : std::uint16_t {
@@ -82,7 +85,8 @@ enum Capability : std::uint32_t {
     kCapCpuRenderer = 1u << 1,
     kCapGpuRenderer = 1u << 2,
     kCapContinuous = 1u << 3,
-    kCapFrameBudget = 1u << 4, ///< takes SetFrameBudget (servers since 2026-12-06)
+    kCapFrameBudget = 1u << 4,   ///< takes SetFrameBudget (servers since 2026-12-06)
+    kCapModesAndClips = 1u << 5, ///< takes SetModeAndClip (servers since 2026-12-07)
 };
 
 /// RenderOptions.flags bits.
@@ -109,6 +113,15 @@ enum Technique : std::uint32_t {
 };
 
 enum class Codec : std::uint8_t { Raw = 0, Zstd = 1, ZstdDelta = 2, Jpeg = 3, Png = 4 };
+/// SetModeAndClip.mode: what a ray makes of its samples (render/MODES.md).
+enum class BlendMode : std::uint8_t {
+    Composite = 0,
+    Maximum = 1,
+    Minimum = 2,
+    Average = 3,
+    Isosurface = 4,
+};
+
 enum class Renderer : std::uint8_t {
     GpuRaycaster = 0,
     CpuRaycaster = 1,
@@ -137,5 +150,10 @@ const char* errorName(std::uint16_t code);
 std::string_view rendererName(Renderer renderer);
 /// The renderer named `name` (rendererName), or nullopt.
 std::optional<Renderer> rendererNamed(std::string_view name);
+/// A mode's name, as `--mode` and render::parseBlendMode spell it: "composite", "mip",
+/// "minip", "average", "iso"; "unknown" for other values.
+std::string_view blendModeName(BlendMode mode);
+/// The mode named `name` (blendModeName), or nullopt.
+std::optional<BlendMode> blendModeNamed(std::string_view name);
 
 } // namespace bc::protocol

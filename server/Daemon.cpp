@@ -225,8 +225,8 @@ struct Daemon::Impl {
     /// What every Hello announces; the GPU bit is added per Hello (Session::onHello) while
     /// nothing is known against the GPU renderers.
     std::uint32_t capabilities() const {
-        std::uint32_t caps =
-            protocol::kCapCpuRenderer | protocol::kCapContinuous | protocol::kCapFrameBudget;
+        std::uint32_t caps = protocol::kCapCpuRenderer | protocol::kCapContinuous |
+                             protocol::kCapFrameBudget | protocol::kCapModesAndClips;
         if (!config.token.empty()) caps |= protocol::kCapAuthRequired;
         return caps;
     }

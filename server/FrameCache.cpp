@@ -25,7 +25,8 @@ void appendBits(std::vector<std::uint8_t>& out, double v) {
 FrameKey frameKeyOf(std::uint64_t storeInstance, const std::string& renderer, bool refined,
                     bool shading, const render::Camera& camera,
                     const protocol::RenderOptions& options,
-                    std::shared_ptr<const render::TransferFunction> tf) {
+                    std::shared_ptr<const render::TransferFunction> tf,
+                    const protocol::SetModeAndClip& modeAndClip) {
     FrameKey key;
     key.storeInstance = storeInstance;
     key.renderer = renderer;
@@ -43,6 +44,7 @@ FrameKey frameKeyOf(std::uint64_t storeInstance, const std::string& renderer, bo
     message.options.renderer = protocol::Renderer::Auto;
     message.options.quality = protocol::Quality::Adaptive;
     protocol::encode(message, 0, key.request);
+    protocol::encode(modeAndClip, 0, key.request);
     key.tf = std::move(tf);
     return key;
 }

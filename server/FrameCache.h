@@ -14,6 +14,7 @@
 // function (compared by TransferFunction::sameFunction, not by a hash alone). A frame that
 // depends on more (drawn at a coarser level than asked for because level 0 exceeded the GPU
 // pool's share) is not kept.
+#include "protocol/Messages.h"
 #include "protocol/Wire.h"
 
 #include <cstdint>
@@ -65,7 +66,8 @@ struct FrameKey {
 FrameKey frameKeyOf(std::uint64_t storeInstance, const std::string& renderer, bool refined,
                     bool shading, const render::Camera& camera,
                     const protocol::RenderOptions& options,
-                    std::shared_ptr<const render::TransferFunction> tf);
+                    std::shared_ptr<const render::TransferFunction> tf,
+                    const protocol::SetModeAndClip& modeAndClip = {});
 
 /// A frame as kept. Delta frames depend on each connection's previous frame, so for ZstdDelta
 /// the pixels are kept and each session encodes them against its own base; every other codec

@@ -256,11 +256,21 @@ void RenderService::prepare(FrameDrawing& d) {
         throw VolumeOutOfService("volume '" + s.volume->name + "' is out of service: " + *why);
     std::string_view name = protocol::rendererName(o.renderer);
     d.rendererChoice = "asked for " + std::string(name);
+    const auto& mc = s.modeAndClip;
+    const bool composite =
+        mc.mode == protocol::BlendMode::Composite && !mc.cropped && mc.planes.empty();
     if (o.renderer == protocol::Renderer::Auto) {
         const render::RendererChoice& choice = autoChoice();
         name = choice.name;
         d.rendererChoice = choice.reason;
+        if (!composite && name != "cpu") { // the CPU raycaster draws every mode and cut
+            name = "cpu";
+            d.rendererChoice += "; the CPU raycaster for the session's mode or cut";
+        }
     }
+    if (!composite && mConfig.cluster && mConfig.cluster->ranks() > 1)
+        throw std::invalid_argument("mode: across MPI ranks frames are composite and uncut only "
+                                    "so far (SetModeAndClip)");
     d.kind = render::RendererRegistry::builtin().find(name);
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
     if (d.kind->needsGl) makeContext();
@@ -276,6 +286,7 @@ void RenderService::prepare(FrameDrawing& d) {
     d.budgeted = budgeted.has_value();
     if (!d.job.refined) d.divisor = budgeted ? budgeted->divisor : InteractiveBudget::kFirstDivisor;
     d.options = toRenderOptions(o, d.divisor);
+    applyModeAndClip(d.options, s.modeAndClip);
     if (budgeted) d.options.level = std::int32_t(budgeted->level);
     // The first pass at rest under an error bound, where the renderer draws a stride and the
     // frame is large enough: at half the session's step, checked against a sparse frame at the
@@ -541,7 +552,7 @@ std::optional<protocol::Frame> RenderService::fromCache(RenderSlot& slot, FrameD
         return std::nullopt;
     const auto& s = d.job.state;
     FrameKey key = frameKeyOf(s.volume->store->instance(), d.kind->name, d.job.refined,
-                              d.options.shading, d.view.camera, s.options, s.tf);
+                              d.options.shading, d.view.camera, s.options, s.tf, s.modeAndClip);
     const std::shared_ptr<const CachedFrame> kept = mFrames->find(key);
     if (!kept) {
         d.cacheKey = std::move(key);

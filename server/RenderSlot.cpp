@@ -75,6 +75,17 @@ void RenderSlot::setOptions(const protocol::RenderOptions& options) {
     changed();
 }
 
+void RenderSlot::setModeAndClip(const protocol::SetModeAndClip& modeAndClip) {
+    {
+        std::lock_guard lock(mMutex);
+        markChanged();
+        mState.modeAndClip = modeAndClip;
+        mDirty = true;
+        mResetDelta = true;
+    }
+    changed();
+}
+
 void RenderSlot::setFrameBudget(const protocol::SetFrameBudget& budget) {
     std::lock_guard lock(mMutex);
     mState.budget = budget;

@@ -47,6 +47,8 @@ class RenderSlot {
                              const protocol::SetTransferFunction& message);
     /// New options; the next delta frame is a keyframe (how a client asks for one).
     void setOptions(const protocol::RenderOptions& options);
+    /// The session's mode, iso value, crop box and clip planes; like setOptions.
+    void setModeAndClip(const protocol::SetModeAndClip& modeAndClip);
     /// The session's frame-time target and error bound at rest; from the next frame on (it
     /// draws nothing by itself).
     void setFrameBudget(const protocol::SetFrameBudget& budget);
@@ -68,6 +70,7 @@ class RenderSlot {
         std::shared_ptr<const render::TransferFunction> tf;
         protocol::SetTransferFunction tfMessage;
         protocol::RenderOptions options;
+        protocol::SetModeAndClip modeAndClip;
         protocol::SetFrameBudget budget;
     };
     /// A frame to draw: the state and whether it is the refined one.

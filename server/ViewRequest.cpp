@@ -19,6 +19,18 @@ render::Camera toCamera(const protocol::SetCamera& c) {
     return out;
 }
 
+void applyModeAndClip(render::RenderOptions& options, const protocol::SetModeAndClip& m) {
+    static_assert(int(protocol::BlendMode::Isosurface) == int(render::BlendMode::Isosurface));
+    options.mode = render::BlendMode(m.mode); // the same values, in the same order
+    options.isoValue = m.isoValue;
+    options.clip = {};
+    options.clip.cropped = m.cropped;
+    options.clip.cropMin = m.cropMin;
+    options.clip.cropMax = m.cropMax;
+    for (const protocol::ClipPlane& p : m.planes)
+        options.clip.planes[options.clip.planeCount++] = {p.normal, p.offset};
+}
+
 render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, std::uint32_t divisor) {
     using namespace protocol;
     render::RenderOptions r;

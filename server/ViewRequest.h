@@ -26,6 +26,9 @@ render::Camera toCamera(const protocol::SetCamera& camera);
 render::RenderOptions toRenderOptions(const protocol::RenderOptions& options,
                                       std::uint32_t divisor);
 
+/// `options` with the session's mode, iso value, crop box and clip planes (SetModeAndClip).
+void applyModeAndClip(render::RenderOptions& options, const protocol::SetModeAndClip& m);
+
 /// Presets a config added: name -> JSON text (Catalog::configPresets).
 using PresetTexts = std::map<std::string, std::string>;
 

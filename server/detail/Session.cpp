@@ -242,6 +242,8 @@ void Session::handle(protocol::Message& message, std::uint32_t request) {
                     onRequestStats(request);
                 } else if constexpr (std::is_same_v<M, protocol::SetFrameBudget>) {
                     mSlot->setFrameBudget(m); // the decoder checked its ranges
+                } else if constexpr (std::is_same_v<M, protocol::SetModeAndClip>) {
+                    onSetModeAndClip(m, request);
                 } else if constexpr (std::is_same_v<M, protocol::RequestHistogram>) {
                     onRequestHistogram(request);
                 } else if constexpr (std::is_same_v<M, protocol::Bye>) {
@@ -408,6 +410,24 @@ void Session::onSetRenderOptions(const protocol::SetRenderOptions& m, std::uint3
     toRenderOptions(m.options, 1).validate();
     mOptions = m.options;
     mSlot->setOptions(mOptions);
+}
+
+void Session::onSetModeAndClip(const protocol::SetModeAndClip& m, std::uint32_t request) {
+    // The decoder checked the values as render::Clip does; the iso value against the volume
+    // open now (a volume opened later is checked by its frames).
+    if (m.mode == protocol::BlendMode::Isosurface && mLease) {
+        const auto& stats = mLease.volume()->stats;
+        if (!(m.isoValue >= stats.valueMin && m.isoValue <= stats.valueMax))
+            return sendError(
+                ErrorCode::OutOfRange, false, std::uint8_t(MessageType::SetModeAndClip), request,
+                "SetModeAndClip.isoValue: " + std::to_string(m.isoValue) +
+                    " is outside the volume's values [" + std::to_string(stats.valueMin) + ", " +
+                    std::to_string(stats.valueMax) + "]");
+    }
+    render::RenderOptions check = toRenderOptions(mOptions, 1);
+    applyModeAndClip(check, m);
+    check.validate();
+    mSlot->setModeAndClip(m);
 }
 
 void Session::onRequestFrame(const protocol::RequestFrame& m, std::uint32_t request) {

@@ -113,6 +113,7 @@ class Session : public std::enable_shared_from_this<Session> {
     void onOpenVolume(const protocol::OpenVolume& open, std::uint32_t request);
     void onSetTransferFunction(const protocol::SetTransferFunction& tf, std::uint32_t request);
     void onSetRenderOptions(const protocol::SetRenderOptions& options, std::uint32_t request);
+    void onSetModeAndClip(const protocol::SetModeAndClip& m, std::uint32_t request);
     void onRequestFrame(const protocol::RequestFrame& frame, std::uint32_t request);
     void onRequestStats(std::uint32_t request);
     void onRequestHistogram(std::uint32_t request);

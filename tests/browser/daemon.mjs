@@ -275,10 +275,11 @@ export class TcpClient {
    * One frame of camera/tf/options (RequestFrame mode 0): returns the Frame body. An Error
    * answering any of these messages rejects.
    */
-  async renderOnce({ camera, tf, options }, timeoutMs = 120000) {
+  async renderOnce({ camera, tf, options, modeAndClip = null }, timeoutMs = 120000) {
     const ids = [];
     if (tf) ids.push(this.send(Type.SetTransferFunction, tf));
     ids.push(this.send(Type.SetRenderOptions, options));
+    if (modeAndClip) ids.push(this.send(Type.SetModeAndClip, modeAndClip));
     ids.push(this.send(Type.SetCamera, camera));
     ids.push(this.send(Type.RequestFrame, { mode: FrameMode.Once }));
     const m = await this.waitFor((x) => x.type === Type.Frame && x.body.cameraId === camera.cameraId,
@@ -293,12 +294,15 @@ export class TcpClient {
   }
 }
 
-/** Renders camera/tf/options once on a fresh TCP session; returns the Frame body (image copied). */
-export async function directRender(daemon, volume, { camera, tf, options }, { token = '' } = {}) {
+/**
+ * Renders camera/tf/options (and a SetModeAndClip body, when given) once on a fresh TCP session;
+ * returns the Frame body (image copied).
+ */
+export async function directRender(daemon, volume, { camera, tf, options, modeAndClip = null }, { token = '' } = {}) {
   const c = await TcpClient.connect(daemon.port, { token, ca: daemon.ca ?? null });
   try {
     await c.openVolume(volume);
-    const f = await c.renderOnce({ camera, tf, options });
+    const f = await c.renderOnce({ camera, tf, options, modeAndClip });
     return { ...f, image: new Uint8Array(f.image) };
   } finally {
     c.close();

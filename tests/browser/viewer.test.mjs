@@ -163,6 +163,7 @@ async function readView(page) {
     return {
       pixels: base64(new Uint8Array(img.data.buffer)), width: c.width, height: c.height, cssWidth: r.width, cssHeight: r.height,
       dpr: devicePixelRatio, frame: b.lastFrame, camera: b.camera(), tf: b.transferFunction(), options: b.renderOptions(),
+      modeAndClip: b.modeAndClip(),
       decoded: decoded && { width: decoded.width, height: decoded.height, data: base64(new Uint8Array(decoded.data.buffer)) },
     };
   });
@@ -184,7 +185,8 @@ function assertUnscaled(v) {
 /** The direct render of what the page shows (same camera, TF and options; raw codec). */
 async function renderLikePage(daemon, volume, v, quality = Quality.Refined, auth = {}) {
   assert.ok(v.camera && v.tf && v.options, 'the page has not sent a camera, a transfer function and options yet');
-  const f = await directRender(daemon, volume, { camera: v.camera, tf: v.tf, options: rawOptions(v.options, quality) }, auth);
+  const f = await directRender(daemon, volume,
+    { camera: v.camera, tf: v.tf, options: rawOptions(v.options, quality), modeAndClip: v.modeAndClip }, auth);
   assert.equal(f.codec, Codec.Raw, 'direct render: not a raw frame');
   assert.equal(f.width, v.width, 'direct render: width differs from the page frame');
   assert.equal(f.height, v.height, 'direct render: height differs from the page frame');
@@ -404,6 +406,37 @@ test('a transfer-function edit changes the image as the direct render does (exac
     const change2 = compareRgb(edited.pixels, skin.pixels, VIEW, VIEW);
     assert.ok(change2.differing > VIEW * VIEW * 0.01, `choosing ct-skin hardly changed the view (${change2.differing} pixels)`);
     await assertMatchesDirect(daemon, 'phantom', skin, 'after choosing ct-skin in the preset select');
+    await assertHealthy(v);
+  });
+});
+
+test('MIP, an isosurface and a crop box with a clip plane chosen in the page each show the direct render (exact)', { timeout: 90000 }, async () => {
+  await withDaemon({}, async ({ daemon, open }) => {
+    const v = await phantomViewer(open);
+    const { page } = v;
+    const first = await readView(page);
+    assert.equal(first.modeAndClip?.mode ?? 0, 0, 'the page did not start in composite');
+    let previous = first;
+    const steps = [
+      ['MIP chosen in the mode select', async () => page.selectOption('#mode', '1')],
+      ['an isosurface at the middle value', async () => page.selectOption('#mode', '4')],
+      ['a crop box and a clip plane', async () => page.evaluate(() => window.brickcast.setModeAndClip(
+        { cropped: true, low: [0.1, 0.2, 0.1], high: [0.9, 0.8, 0.7], clip: true, axis: '-x', position: 0.6 }))],
+    ];
+    for (const [what, act] of steps) {
+      const before = await page.evaluate(() => JSON.stringify(window.brickcast.modeAndClip()));
+      await act();
+      await page.waitForFunction((b) => JSON.stringify(window.brickcast.modeAndClip()) !== b, before, { timeout: FRAME_TIMEOUT });
+      await settleRefined(page); // a camera sent after the change: its refined frame shows it
+      const view = await readView(page);
+      const change = compareRgb(previous.pixels, view.pixels, VIEW, VIEW);
+      assert.ok(change.differing > VIEW * VIEW * 0.01, `${what} hardly changed the view (${change.differing} pixels)`);
+      await assertMatchesDirect(daemon, 'phantom', view, what);
+      previous = view;
+    }
+    const sent = await page.evaluate(() => window.brickcast.modeAndClip());
+    assert.equal(sent.mode, 4);
+    assert.ok(sent.crop && sent.planes.length === 1, `the cut was not sent: ${JSON.stringify(sent)}`);
     await assertHealthy(v);
   });
 });

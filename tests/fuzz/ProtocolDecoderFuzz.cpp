@@ -137,10 +137,17 @@ std::vector<std::vector<Message>> seedMessages() {
     hello.codecs = {Codec::Raw, Codec::Jpeg};
     hello.software = "seed";
     VolumeInfo volume{"cthead", {256, 256, 113}, {1, 1, 2}, VoxelType::U16, 4, 0, 4095, 1};
+    SetModeAndClip cut;
+    cut.mode = BlendMode::Isosurface;
+    cut.isoValue = 600;
+    cut.cropped = true;
+    cut.cropMax = {256, 256, 226};
+    cut.planes = {ClipPlane{{1, 0, 0}, -10}, ClipPlane{{0, 0.5, -1}, 100}};
     return {
         {hello, Auth{"token"}, ListVolumes{}},
         {OpenVolume{"cthead"}, camera, SetRenderOptions{}, RequestFrame{FrameMode::ContinuousOn}},
         {points, SetTransferFunction{}, RequestStats{}, Bye{}},
+        {cut, SetModeAndClip{}, SetFrameBudget{66, 40}},
         {VolumeList{{volume}}, VolumeOpened{volume}, AuthOk{}},
         {frame, Stats{{{"frames", 3}}}, Error{ErrorCode::OutOfRange, false, 10, "width"}},
         // The shapes of the adversarial passes: replies asked for and never read, a guessed

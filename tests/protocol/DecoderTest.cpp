@@ -563,6 +563,69 @@ TEST(DecoderRejects, FrameBudgetsOutOfRange) {
     EXPECT_THROW(encode(SetFrameBudget{0, 60}), ProtocolError);
 }
 
+// ---- SetModeAndClip ------------------------------------------------------------------------
+
+/// `b` with `value` written at payload offset `at`.
+template <typename T> Bytes patchedBytes(Bytes b, std::size_t at, T value) {
+    const auto raw = std::bit_cast<std::array<std::uint8_t, sizeof(T)>>(value);
+    std::memcpy(b.data() + kHeaderBytes + at, raw.data(), raw.size());
+    return b;
+}
+
+/// A MIP cropped to a box, with two planes: offsets are mode 0, isoValue 1, cropped 9, cropMin
+/// 10, cropMax 34, planeCount 58, planes from 59 (32 bytes each: normal, offset).
+SetModeAndClip sampleModeAndClip() {
+    SetModeAndClip m;
+    m.mode = BlendMode::Maximum;
+    m.cropped = true;
+    m.cropMin = {0, 0, 0};
+    m.cropMax = {10, 20, 30};
+    m.planes = {ClipPlane{{1, 0, 0}, -5}, ClipPlane{{0, -1, 1}, 2}};
+    return m;
+}
+
+TEST(DecoderRejects, ModesAndClipsOutOfRange) {
+    expectAccepted(encode(sampleModeAndClip(), 3));
+    expectAccepted(encode(SetModeAndClip{}, 3));
+    expectRejected(patched<std::uint8_t>(sampleModeAndClip(), 0, 5), ErrorCode::OutOfRange,
+                   "SetModeAndClip.mode");
+    for (double bad : {kNan, kInf, -kInf}) {
+        expectRejected(patched(sampleModeAndClip(), 1, bad), ErrorCode::OutOfRange,
+                       "SetModeAndClip.isoValue");
+        expectRejected(patched(sampleModeAndClip(), 18, bad), ErrorCode::OutOfRange,
+                       "SetModeAndClip.cropMin[1]");
+        expectRejected(patched(sampleModeAndClip(), 59 + 8, bad), ErrorCode::OutOfRange,
+                       "SetModeAndClip.planes[0].normal[1]");
+        expectRejected(patched(sampleModeAndClip(), 59 + 32 + 24, bad), ErrorCode::OutOfRange,
+                       "SetModeAndClip.planes[1].offset");
+    }
+    // An empty or inverted box; a box sent while not cropped; a zero normal.
+    expectRejected(patched(sampleModeAndClip(), 42, 0.0), ErrorCode::OutOfRange,
+                   "SetModeAndClip.cropMax");
+    expectRejected(patched(sampleModeAndClip(), 42, -1.0), ErrorCode::OutOfRange,
+                   "SetModeAndClip.cropMax");
+    expectRejected(patched<std::uint8_t>(sampleModeAndClip(), 9, 0), ErrorCode::OutOfRange,
+                   "SetModeAndClip.cropMin");
+    expectRejected(patched<std::uint8_t>(sampleModeAndClip(), 9, 2), ErrorCode::OutOfRange,
+                   "SetModeAndClip.cropped");
+    Bytes zero = patched(sampleModeAndClip(), 59 + 32, 0.0);
+    zero = patchedBytes(zero, 59 + 32 + 8, 0.0);
+    zero = patchedBytes(zero, 59 + 32 + 16, 0.0);
+    expectRejected(zero, ErrorCode::OutOfRange, "SetModeAndClip.planes[1].normal");
+    // Seven planes; a count the payload does not hold.
+    SetModeAndClip seven = sampleModeAndClip();
+    seven.planes.assign(6, ClipPlane{});
+    Bytes tooMany = encode(seven, 9);
+    tooMany[kHeaderBytes + 58] = 7;
+    tooMany.insert(tooMany.end(), 32, 0);
+    const auto length = std::uint32_t(tooMany.size() - kHeaderBytes);
+    std::memcpy(tooMany.data() + 8, &length, 4); // little-endian host, as the header is
+    expectRejected(tooMany, ErrorCode::OutOfRange, "SetModeAndClip.planes");
+    expectRejected(patched<std::uint8_t>(sampleModeAndClip(), 58, 3), ErrorCode::BadPayload,
+                   "SetModeAndClip.planes");
+    EXPECT_THROW(encode(SetModeAndClip{BlendMode::Isosurface, kNan}), ProtocolError);
+}
+
 // ---- SetCamera ----------------------------------------------------------------------------
 
 TEST(DecoderRejects, NanAndInfiniteCameraValues) {

@@ -378,6 +378,34 @@ TEST(Messages, SetFrameBudgetGoldenBytesRoundTrip) {
                  Bytes{BC_HEADER(0x13, 3, 4), 0x42, 0x00 /* interactiveMs 66 */, 0x28 /* 40 dB */});
 }
 
+TEST(Messages, SetModeAndClipGoldenBytesRoundTrip) {
+    SetModeAndClip m;
+    m.mode = BlendMode::Maximum;
+    m.cropped = true;
+    m.cropMin = {0, 10, 20};
+    m.cropMax = {100, 110, 120};
+    m.planes = {ClipPlane{{1, 0, 0}, -50}};
+    expectGolden(m, 7,
+                 Bytes{BC_HEADER(0x14, 91, 7),
+                       0x01 /* mode: maximum */,
+                       0, 0, 0, 0, 0, 0, 0, 0 /* isoValue 0 */,
+                       0x01 /* cropped */,
+                       0, 0, 0, 0, 0, 0, 0, 0 /* cropMin 0 */,
+                       0, 0, 0, 0, 0, 0, 0x24, 0x40 /* 10 */,
+                       0, 0, 0, 0, 0, 0, 0x34, 0x40 /* 20 */,
+                       0, 0, 0, 0, 0, 0, 0x59, 0x40 /* cropMax 100 */,
+                       0, 0, 0, 0, 0, 0x80, 0x5b, 0x40 /* 110 */,
+                       0, 0, 0, 0, 0, 0, 0x5e, 0x40 /* 120 */,
+                       0x01 /* planeCount */,
+                       0, 0, 0, 0, 0, 0, 0xf0, 0x3f /* normal 1 */,
+                       0, 0, 0, 0, 0, 0, 0, 0 /* 0 */,
+                       0, 0, 0, 0, 0, 0, 0, 0 /* 0 */,
+                       0, 0, 0, 0, 0, 0, 0x49, 0xc0 /* offset -50 */});
+    Bytes plain{BC_HEADER(0x14, 59, 1)};
+    plain.resize(plain.size() + 59, 0); // composite, iso 0, no crop, no planes
+    expectGolden(SetModeAndClip{}, 1, plain);
+}
+
 TEST(Messages, ByeGoldenBytesRoundTrip) {
     expectGolden(Bye{ByeReason::IdleTimeout}, 0,
                  Bytes{BC_HEADER(0x10, 2, 0), 0x02, 0x00 /* reason: idle timeout */});
@@ -409,6 +437,8 @@ TEST(Messages, TypeOfNamesEveryAlternative) {
     EXPECT_EQ(typeOf(Histogram{}), MessageType::Histogram);
     EXPECT_EQ(typeOf(SetFrameBudget{}), MessageType::SetFrameBudget);
     EXPECT_STREQ(typeName(0x13), "SetFrameBudget");
+    EXPECT_EQ(typeOf(SetModeAndClip{}), MessageType::SetModeAndClip);
+    EXPECT_STREQ(typeName(0x14), "SetModeAndClip");
     EXPECT_STREQ(typeName(0x11), "RequestHistogram");
     EXPECT_STREQ(typeName(0x0A), "SetRenderOptions");
     EXPECT_STREQ(typeName(0x42), "unknown");

@@ -230,8 +230,10 @@ struct KeyFields {
     render::Camera camera;
     protocol::RenderOptions options = smallCpuFrames(48);
     std::shared_ptr<const render::TransferFunction> tf;
+    protocol::SetModeAndClip modeAndClip;
     FrameKey key() const {
-        return frameKeyOf(storeInstance, renderer, refined, shading, camera, options, tf);
+        return frameKeyOf(storeInstance, renderer, refined, shading, camera, options, tf,
+                          modeAndClip);
     }
 };
 
@@ -296,6 +298,14 @@ TEST(FrameKeyTest, ViewsDifferingInAnyFieldAreTwoKeys) {
         {"flags", [](KeyFields& v) { v.options.flags = protocol::kFlagUnscaledInteractive; }},
         {"another function", [](KeyFields& v) { v.tf = functionPeakingAt(120); }},
         {"no function", [](KeyFields& v) { v.tf = nullptr; }},
+        {"mode", [](KeyFields& v) { v.modeAndClip.mode = protocol::BlendMode::Maximum; }},
+        {"isoValue", [](KeyFields& v) { v.modeAndClip.isoValue = 1; }},
+        {"crop",
+         [](KeyFields& v) {
+             v.modeAndClip.cropped = true;
+             v.modeAndClip.cropMax = {1, 1, 1};
+         }},
+        {"plane", [](KeyFields& v) { v.modeAndClip.planes = {protocol::ClipPlane{}}; }},
     };
     const FrameKey key = base.key();
     for (const auto& [field, change] : changes) {

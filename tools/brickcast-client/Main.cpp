@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <new>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -26,7 +27,8 @@ using namespace bc;
 
 struct Options {
     std::string host = "127.0.0.1", token, volume, tf, tfSwitch, codec = "zstd", renderer = "auto",
-                outputDir, cameraFile, size = "256,256", tlsCa;
+                outputDir, cameraFile, size = "256,256", tlsCa, mode = "composite";
+    std::optional<double> iso;
     std::uint16_t port = 7411;
     int frames = 36, saveEvery = 1, quality = 0;
     double step = 1.0, elevation = 20.0, distance = 1.0;
@@ -146,6 +148,14 @@ int fly(const Options& o) {
     const auto info = c.openVolume(o.volume.empty() ? volumes.front().name : o.volume);
     c.setRenderOptions(renderOptions(o));
     if (!o.tf.empty()) c.setTransferFunction(preset(o.tf));
+    const auto mode = protocol::blendModeNamed(o.mode);
+    if (!mode)
+        throw std::invalid_argument("--mode: '" + o.mode +
+                                    "' is not one of composite, mip, minip, average, iso");
+    if ((*mode == protocol::BlendMode::Isosurface) != o.iso.has_value())
+        throw std::invalid_argument(o.iso ? "--iso: only with --mode iso"
+                                          : "--mode iso: needs --iso VALUE");
+    if (*mode != protocol::BlendMode::Composite) c.setModeAndClip({*mode, o.iso.value_or(0.0)});
     std::string switchTo;
     int switchAt = -1;
     if (!o.tfSwitch.empty()) {
@@ -238,6 +248,9 @@ int main(int argc, char** argv) {
     app.add_option("--size", o.size, "Frame W,H")->capture_default_str();
     app.add_option("--step", o.step, "Sample step, voxels")->capture_default_str();
     app.add_option("--tf", o.tf, "Transfer-function preset");
+    app.add_option("--mode", o.mode, "composite, mip, minip, average or iso")
+        ->capture_default_str();
+    app.add_option("--iso", o.iso, "With --mode iso: the surface's value, in the volume's units");
     app.add_option("--tf-switch", o.tfSwitch,
                    "PRESET@FRAME: switch the transfer function mid-flight");
     app.add_option("--codec", o.codec, "raw, zstd, delta, jpeg or png")->capture_default_str();

@@ -53,7 +53,8 @@ using Clock = std::chrono::steady_clock;
 
 struct LoadtestOptions {
     std::string host = "127.0.0.1", token, volume = "phantom", paths = "orbit,zoom,jumps,tf-sweep",
-                size = "128,128", renderer = "auto", codec = "zstd", quality = "refined", csv;
+                size = "128,128", renderer = "auto", codec = "zstd", quality = "refined", csv,
+                mode = "composite";
     std::uint16_t port = 7411;
     std::uint32_t clients = 4, frames = 60, tfEvery = 10, warmup = 0;
     std::uint32_t interactiveMs = 0, restPsnrDb = 0;
@@ -342,6 +343,9 @@ void runLoadtest(const LoadtestOptions& o) {
         throw std::invalid_argument("--rest-psnr: needs --quality adaptive (a camera that rests)");
     if (!(o.truthStep >= 0.01 && o.truthStep <= 1))
         throw std::invalid_argument("--truth-step: 0.01..1 voxels");
+    if (!protocol::blendModeNamed(o.mode))
+        throw std::invalid_argument("--mode: '" + o.mode +
+                                    "' is not one of composite, mip, minip, average, iso");
     const auto paths = tools::splitList(o.paths);
     if (paths.empty()) throw std::invalid_argument("--paths: none given");
     for (const auto& p : paths)
@@ -390,6 +394,9 @@ void runLoadtest(const LoadtestOptions& o) {
                 client::Client c(cc);
                 const auto v = c.openVolume(o.volume);
                 c.setRenderOptions(ro);
+                if (const auto mode = *protocol::blendModeNamed(o.mode);
+                    mode != protocol::BlendMode::Composite) // an iso surface at the middle value
+                    c.setModeAndClip({mode, 0.5 * (v.valueMin + v.valueMax)});
                 if (o.interactiveMs > 0 || o.restPsnrDb > 0)
                     c.setFrameBudget({std::uint16_t(o.interactiveMs), std::uint8_t(o.restPsnrDb)});
                 const bool adaptive = ro.quality == protocol::Quality::Adaptive;
@@ -522,6 +529,10 @@ void addLoadtestCommand(CLI::App& app) {
                     "refined (every frame at full quality), interactive (every frame as a "
                     "moving camera's: half size, or the server's frame-time budget) or adaptive "
                     "(continuous mode: interactive frames while moving, refined at rest)")
+        ->capture_default_str();
+    cmd->add_option("--mode", o->mode,
+                    "What a ray makes of its samples: composite, mip, minip, average, iso (the "
+                    "surface at the middle of the volume's values)")
         ->capture_default_str();
     cmd->add_option("--csv", o->csv, "Write every frame as CSV");
     cmd->add_option("--warmup", o->warmup, "Frames of each client left out of the report")

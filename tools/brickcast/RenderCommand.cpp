@@ -524,9 +524,10 @@ void runRender(const RenderCliOptions& o) {
             };
             describe = [&o] {
                 return "CPU raycaster (float, " +
-                       (o.noSimd ? std::string("scalar")
-                                 : render::CpuRaycaster::simdTarget() +
-                                       (o.noPackets || o.preintegrate ? " samples" : " packets")) +
+                       (o.noSimd || o.mode != "composite"
+                            ? std::string("scalar")
+                            : render::CpuRaycaster::simdTarget() +
+                                  (o.noPackets || o.preintegrate ? " samples" : " packets")) +
                        ", " + std::to_string(std::thread::hardware_concurrency()) + " threads)";
             };
         } else {

@@ -17,6 +17,7 @@ export const Type = Object.freeze({
   OpenVolume: 0x06, VolumeOpened: 0x07, SetCamera: 0x08, SetTransferFunction: 0x09,
   SetRenderOptions: 0x0a, RequestFrame: 0x0b, Frame: 0x0c, RequestStats: 0x0d, Stats: 0x0e,
   Error: 0x0f, Bye: 0x10, RequestHistogram: 0x11, Histogram: 0x12, SetFrameBudget: 0x13,
+  SetModeAndClip: 0x14,
 });
 
 const typeNames = new Map(Object.entries(Type).map(([name, t]) => [t, name]));
@@ -40,7 +41,10 @@ export function errorName(code) {
 }
 
 // FrameBudget (bit 4, since 2026-12-06): the server takes SetFrameBudget; older servers answer it UnknownType.
-export const Capability = Object.freeze({ AuthRequired: 1, CpuRenderer: 2, GpuRenderer: 4, Continuous: 8, FrameBudget: 16 });
+// ModesAndClips (bit 5, since 2026-12-07): the server takes SetModeAndClip; older servers answer it UnknownType.
+export const Capability = Object.freeze({
+  AuthRequired: 1, CpuRenderer: 2, GpuRenderer: 4, Continuous: 8, FrameBudget: 16, ModesAndClips: 32,
+});
 export const Codec = Object.freeze({ Raw: 0, Zstd: 1, ZstdDelta: 2, Jpeg: 3, Png: 4 });
 // Auto (5, since 2026-12-03): the server picks the GPU raycaster on a hardware GPU, else the CPU raycaster.
 export const Renderer = Object.freeze({ GpuRaycaster: 0, CpuRaycaster: 1, Reference: 2, Splatter: 3, GpuSplatter: 4, Auto: 5 });
@@ -65,6 +69,12 @@ export const REST_PSNR_MAX_DB = 50;
 export const MAX_FRAME_SCALE = 8;
 /** FrameHeader.estimatedPsnrDb: 0 (no estimate) up to this, whole dB. */
 export const MAX_ESTIMATED_PSNR_DB = 50;
+/** SetModeAndClip.mode: what a ray makes of its samples (render/MODES.md). */
+export const Mode = Object.freeze({ Composite: 0, Maximum: 1, Minimum: 2, Average: 3, Isosurface: 4 });
+/** SetModeAndClip: at most this many clip planes. */
+export const MAX_CLIP_PLANES = 6;
+/** SetModeAndClip: a plane's normal whose largest |component| is not above this is zero (it has no direction). */
+const MIN_NORMAL_COMPONENT = 1e-30;
 
 /** Thrown for malformed input; `code` is the ErrorCode name the server would answer with. */
 export class ProtocolError extends Error {
@@ -277,6 +287,43 @@ function validateFrameBudget(b, code) {
   const db = b.restPsnrDb;
   if (!Number.isInteger(db) || !(db === 0 || (db >= REST_PSNR_MIN_DB && db <= REST_PSNR_MAX_DB)))
     throw new ProtocolError(code, `restPsnrDb: ${db} is neither 0 nor an integer in ${REST_PSNR_MIN_DB}..${REST_PSNR_MAX_DB}`);
+}
+
+/**
+ * SetModeAndClip as the server checks it (all OutOfRange, naming the field): a mode of 0..4, a
+ * finite isoValue (the server also wants it within the volume's [valueMin, valueMax] in mode 4,
+ * which only it knows), a crop box (null: none) of finite bounds with min < max on every axis,
+ * at most MAX_CLIP_PLANES planes with finite normals and offsets, no normal zero.
+ */
+function validateModeAndClip(m) {
+  checkInt(m.mode, 0, Mode.Isosurface, 'mode');
+  checkFinite(m.isoValue, 'isoValue');
+  if (m.crop != null) {
+    checkFinite3(m.crop.min, 'crop.min');
+    checkFinite3(m.crop.max, 'crop.max');
+    for (let a = 0; a < 3; ++a) {
+      if (!(m.crop.min[a] < m.crop.max[a]))
+        throw new ProtocolError('OutOfRange', `crop: axis ${'xyz'[a]} is ${m.crop.min[a]}..${m.crop.max[a]}, the box needs min < max on every axis`);
+    }
+  }
+  if (!Array.isArray(m.planes)) throw new ProtocolError('OutOfRange', `planes: expected an array of 0..${MAX_CLIP_PLANES}`);
+  if (m.planes.length > MAX_CLIP_PLANES)
+    throw new ProtocolError('OutOfRange', `planes: ${m.planes.length}, more than ${MAX_CLIP_PLANES}`);
+  m.planes.forEach((p, i) => {
+    const n = p?.normal;
+    checkFinite3(n, `planes[${i}].normal`);
+    // A normal whose length is zero or below what float resolves has no direction.
+    if (!(Math.max(Math.abs(n[0]), Math.abs(n[1]), Math.abs(n[2])) > MIN_NORMAL_COMPONENT))
+      throw new ProtocolError('OutOfRange', `planes[${i}].normal: (${n.join(', ')}) is zero (a plane needs a direction)`);
+    checkFinite(p.offset, `planes[${i}].offset`);
+  });
+}
+
+/** Three finite numbers; anything else is out of range, naming the field. */
+function checkFinite3(v, field) {
+  if (!(Array.isArray(v) || ArrayBuffer.isView(v)) || v.length !== 3)
+    throw new ProtocolError('OutOfRange', `${field}: expected 3 numbers, got ${v}`);
+  for (let i = 0; i < 3; ++i) checkFinite(v[i], `${field}[${i}]`);
 }
 
 function validateFrameScale(scale, estimatedPsnrDb, code, what) {
@@ -540,6 +587,42 @@ const codecs = {
       return m;
     },
   },
+  [Type.SetModeAndClip]: {
+    write(m, w) {
+      // crop and planes may be left out: no crop box, no planes.
+      const b = { mode: m.mode, isoValue: m.isoValue, crop: m.crop ?? null, planes: m.planes ?? [] };
+      validateModeAndClip(b);
+      w.u8(b.mode, 'mode');
+      w.f64(b.isoValue, 'isoValue');
+      w.bool(b.crop !== null, 'cropped');
+      // Not cropped: all six are 0.
+      const min = b.crop?.min ?? [0, 0, 0], max = b.crop?.max ?? [0, 0, 0];
+      for (let a = 0; a < 3; ++a) w.f64(min[a], `cropMin[${a}]`);
+      for (let a = 0; a < 3; ++a) w.f64(max[a], `cropMax[${a}]`);
+      w.u8(b.planes.length, 'planeCount');
+      b.planes.forEach((p, i) => {
+        for (let a = 0; a < 3; ++a) w.f64(p.normal[a], `planes[${i}].normal[${a}]`);
+        w.f64(p.offset, `planes[${i}].offset`);
+      });
+    },
+    read(r) {
+      const mode = r.u8('mode');
+      const isoValue = r.f64('isoValue');
+      const cropped = r.bool('cropped');
+      const vec = (k) => [r.f64(`${k}[0]`), r.f64(`${k}[1]`), r.f64(`${k}[2]`)];
+      const min = vec('cropMin'), max = vec('cropMax');
+      // As the server: a value outside its range is out of range, not malformed.
+      if (!cropped && [...min, ...max].some((v) => v !== 0))
+        throw new ProtocolError('OutOfRange', `crop: not cropped, but the box is (${min.join(', ')})..(${max.join(', ')}), not all 0`);
+      const count = r.u8('planeCount');
+      if (count > MAX_CLIP_PLANES) throw new ProtocolError('OutOfRange', `planes: ${count}, more than ${MAX_CLIP_PLANES}`);
+      const planes = [];
+      for (let i = 0; i < count; ++i) planes.push({ normal: vec(`planes[${i}].normal`), offset: r.f64(`planes[${i}].offset`) });
+      const m = { mode, isoValue, crop: cropped ? { min, max } : null, planes };
+      validateModeAndClip(m);
+      return m;
+    },
+  },
   [Type.Histogram]: {
     write(m, w) {
       const n = m.counts.length;
@@ -663,6 +746,13 @@ export const encodeRequestHistogram = (request) => encode(Type.RequestHistogram,
  * error bound, 20..50 dB)}. Only for a server whose Hello has Capability.FrameBudget.
  */
 export const encodeSetFrameBudget = (m, request) => encode(Type.SetFrameBudget, m, request);
+/**
+ * SetModeAndClip: {mode (Mode, u8), isoValue (f64, finite; used in mode 4, within the volume's
+ * [valueMin, valueMax]), crop (null, or {min: [3], max: [3]} in world mm with min < max), planes
+ * (0..6 of {normal: [3], offset}: each keeps the points x (mm) with dot(normal, x) + offset >= 0)};
+ * 59 + 32 × planes bytes. Only for a server whose Hello has Capability.ModesAndClips.
+ */
+export const encodeSetModeAndClip = (m, request) => encode(Type.SetModeAndClip, m, request);
 /** Error the client sends before it closes: {code, fatal, offendingType, message}. */
 export const encodeError = (m, request = 0) => encode(Type.Error, m, request);
 /** Bye with reason 0 normal, 1 shutting down, 2 idle timeout. */

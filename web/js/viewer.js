@@ -1,15 +1,18 @@
 // The page: wires the connection, the volume picker, the camera controls, the transfer-function
-// editor, the render options and the frame pipeline together, and exposes window.brickcast
-// for automated browser tests.
+// editor, the render options, the mode and cut controls and the frame pipeline together, and
+// exposes window.brickcast for automated browser tests.
 
 import { Connection, ServerError, DisconnectedError, socketUrl } from './connection.js';
 import {
   Type, Capability, Codec, Renderer, Quality, FrameMode, ErrorCode, TECHNIQUES_ALL, LEVEL_AUTOMATIC,
-  MAX_IMAGE_EDGE, ProtocolError, RenderFlags, encodeSetFrameBudget,
+  MAX_IMAGE_EDGE, ProtocolError, RenderFlags, Mode, encodeSetFrameBudget, encodeSetModeAndClip,
 } from './protocol.js';
 import { Trackball } from './trackball.js';
 import { attachControls } from './controls.js';
 import { TfEditor } from './tfeditor.js';
+import {
+  CLIP_AXES, clampIso, clipLabel, cropLabels, defaultCut, isoRangeOf, modeAndClipOf, orderCropRange,
+} from './modes.js';
 import {
   FrameStats, autoRendererOf, formatBytes, frameDetailLabel, frameSize, isInteractiveSizeOf, residencyLine, volumeLabel,
 } from './frames.js';
@@ -25,6 +28,8 @@ const IMAGE_TYPES = { [Codec.Jpeg]: 'image/jpeg', [Codec.Png]: 'image/png' };
 const FRAME_TARGET_TITLE = 'time to draw a frame while the camera moves: the server picks the pyramid level and image scale to meet it';
 const REST_PSNR_TITLE = 'at rest, refine until the estimated PSNR against the converged image reaches this';
 const NO_FRAME_BUDGET = 'this server does not support frame budgets (SetFrameBudget, Hello capability bit 4)';
+const NO_MODES = 'this server does not draw modes and cuts (SetModeAndClip, Hello capability bit 5)';
+const MODES_NEED_VOLUME = 'modes and cuts: open a volume first';
 
 const $ = (id) => document.getElementById(id);
 const els = {
@@ -35,6 +40,10 @@ const els = {
   status: $('status'), statusText: $('status-text'),
   statusDismiss: $('status-dismiss'), auth: $('auth'), authForm: $('auth-form'),
   authMessage: $('auth-message'), token: $('token'), tokenRemember: $('token-remember'),
+  modeAndCut: $('mode-and-cut'), mode: $('mode'), isoRow: $('iso-row'), iso: $('iso'),
+  isoRange: $('iso-range'), crop: $('crop'), clip: $('clip'), clipAxis: $('clip-axis'),
+  clipPosition: $('clip-position'), clipPositionValue: $('clip-position-value'),
+  cropAxes: ['x', 'y', 'z'].map((a) => ({ low: $(`crop-${a}-low`), high: $(`crop-${a}-high`), value: $(`crop-${a}-value`) })),
 };
 
 const conn = new Connection(socketUrl(location.href));
@@ -63,6 +72,11 @@ const state = {
   // server has it: a session starts with both 0; null when unknown (after an Error).
   frameBudget: { interactiveMs: 0, restPsnrDb: 0 },
   lastFrameBudget: null,
+  // The mode and cut controls (modes.js defaultCut's shape), whether the server takes
+  // SetModeAndClip (Capability.ModesAndClips, and no UnknownType since), and the last sent.
+  cut: defaultCut({ valueMin: 0, valueMax: 0 }),
+  modesSupported: false,
+  lastModeAndClip: null,
   maxEdge: 1024,
   deviceSize: { width: 0, height: 0 },
   lastDrawnCameraId: 0,
@@ -175,6 +189,21 @@ function sendFrameBudget(force = false) {
   return { ...b };
 }
 
+/**
+ * Sends SetModeAndClip as the mode and cut controls say when the server takes it
+ * (Capability.ModesAndClips) and it differs from the last sent (or always, with `force`);
+ * returns what was sent or null.
+ */
+function sendModeAndClip(force = false) {
+  if (!state.volume || conn.state !== 'ready' || !state.modesSupported) return null;
+  const m = modeAndClipOf(state.volume, state.cut);
+  if (!force && JSON.stringify(m) === JSON.stringify(state.lastModeAndClip)) return null;
+  if (!trySend(Type.SetModeAndClip, m)) return null;
+  state.lastModeAndClip = m;
+  return structuredClone(m);
+}
+const scheduleModeAndClip = coalesced(() => sendModeAndClip());
+
 // ---- connection --------------------------------------------------------------------------
 
 conn.addEventListener('state', (e) => {
@@ -263,6 +292,15 @@ conn.addEventListener('error', (e) => {
     if (err.code === ErrorCode.UnknownType) showFrameBudgetControls(false);
     return;
   }
+  if (err.offendingType === Type.SetModeAndClip) {
+    // What the session draws is unknown now: send the controls again at the next change.
+    state.lastModeAndClip = null;
+    if (err.code === ErrorCode.UnknownType) {
+      state.modesSupported = false;
+      showModeControls();
+    }
+    return;
+  }
   if (err.code === ErrorCode.UnknownVolume && err.request === 0 && state.volume) {
     // The volume we view was removed or changed shape by a catalog reload.
     closeVolume();
@@ -284,6 +322,10 @@ function onReady() {
   // volume is (re)opened (onVolumeOpened), or when a control changes.
   state.lastFrameBudget = { interactiveMs: 0, restPsnrDb: 0 };
   showFrameBudgetControls(conn.can(Capability.FrameBudget));
+  // Sent on every (re)open of a volume (onVolumeOpened).
+  state.modesSupported = conn.can(Capability.ModesAndClips);
+  state.lastModeAndClip = null;
+  showModeControls();
   conn.request(Type.ListVolumes, {}, Type.VolumeList).catch(report);
   const reopen = state.volume?.name ?? state.opening;
   if (reopen) openVolume(reopen).catch(report);
@@ -373,6 +415,11 @@ function onVolumeOpened(info) {
   sendRenderOptions();
   // Only when the user chose a budget: a session starts with both 0.
   sendFrameBudget();
+  // Another volume starts composite, uncut; the same one (a reconnect) keeps the controls.
+  if (!same) state.cut = defaultCut(info);
+  showCut();
+  showModeControls();
+  sendModeAndClip(true);
   trySend(Type.RequestFrame, { mode: FrameMode.ContinuousOn });
 }
 
@@ -381,6 +428,9 @@ function onVolumeReloaded(info) {
   state.volume = info;
   tfEditor.setVolume(info, true);
   requestHistogram();
+  // The iso value stays within the values the volume has now.
+  showCut();
+  scheduleModeAndClip(true);
   const i = state.volumes.findIndex((v) => v.name === info.name);
   if (i >= 0) {
     state.volumes[i] = info;
@@ -401,6 +451,7 @@ function closeVolume() {
   state.lastBitmap?.close();
   state.lastBitmap = null;
   tfEditor.setHistogram(null, '');
+  showModeControls();
 }
 
 function requestHistogram() {
@@ -567,6 +618,110 @@ function setRenderOptions(partial) {
   sendRenderOptions();
   return state.lastOptions && { ...state.lastOptions };
 }
+
+// ---- mode and cut ------------------------------------------------------------------------
+
+// The controls' own titles (or none), put back when the group is enabled again; the group has none then.
+const modeTitles = new Map([els.modeAndCut, ...els.modeAndCut.querySelectorAll('input, select')].map((el) => [el, el.title]));
+modeTitles.set(els.modeAndCut, '');
+
+/**
+ * The mode and cut group works only with a server that takes SetModeAndClip (older ones answer
+ * UnknownType) and an open volume (the iso value and the cuts are in its values and its mm).
+ */
+function showModeControls() {
+  const why = !state.modesSupported ? NO_MODES : !state.volume ? MODES_NEED_VOLUME : '';
+  els.modeAndCut.disabled = !!why;
+  for (const [el, title] of modeTitles) {
+    if (why || title) el.title = why || title;
+    else el.removeAttribute('title');
+  }
+}
+
+/** Shows state.cut in the controls: the iso value only in the isosurface mode, the sliders of a cut only while it is on. */
+function showCut() {
+  const c = state.cut, v = state.volume;
+  els.mode.value = String(c.mode);
+  const iso = c.mode === Mode.Isosurface;
+  els.isoRow.hidden = !iso;
+  els.iso.disabled = els.isoRange.disabled = !iso;
+  if (v) {
+    const r = isoRangeOf(v);
+    c.isoValue = clampIso(v, c.isoValue);
+    for (const el of [els.iso, els.isoRange]) {
+      el.min = String(r.min);
+      el.max = String(r.max);
+    }
+    els.isoRange.step = String(r.step);
+    els.isoRange.value = String(c.isoValue);
+    els.iso.value = String(c.isoValue);
+  }
+  els.crop.checked = c.cropped;
+  const labels = v ? cropLabels(v, c.low, c.high) : ['', '', ''];
+  els.cropAxes.forEach((axis, a) => {
+    axis.low.value = String(c.low[a]);
+    axis.high.value = String(c.high[a]);
+    axis.low.disabled = axis.high.disabled = !c.cropped;
+    axis.value.textContent = labels[a];
+  });
+  els.clip.checked = c.clip;
+  els.clipAxis.value = c.axis;
+  els.clipPosition.value = String(c.position);
+  els.clipAxis.disabled = els.clipPosition.disabled = !c.clip;
+  els.clipPositionValue.textContent = v ? clipLabel(v, c.axis, c.position) : '';
+}
+
+function cutChanged() {
+  showCut();
+  scheduleModeAndClip(true);
+}
+
+els.mode.addEventListener('change', () => { state.cut.mode = Number(els.mode.value); cutChanged(); });
+els.isoRange.addEventListener('input', () => { state.cut.isoValue = Number(els.isoRange.value); cutChanged(); });
+els.iso.addEventListener('input', () => {
+  // While typing: only numbers (an empty or partial entry waits), kept within the volume's values on 'change'.
+  const v = els.iso.value === '' ? NaN : Number(els.iso.value);
+  if (!Number.isFinite(v) || !state.volume) return;
+  state.cut.isoValue = clampIso(state.volume, v);
+  els.isoRange.value = String(state.cut.isoValue);
+  scheduleModeAndClip(true);
+});
+els.iso.addEventListener('change', cutChanged);
+els.crop.addEventListener('change', () => { state.cut.cropped = els.crop.checked; cutChanged(); });
+els.cropAxes.forEach((axis, a) => {
+  for (const moved of ['low', 'high']) {
+    axis[moved].addEventListener('input', () => {
+      // The slider moved stops short of the other one.
+      const r = orderCropRange(Number(axis.low.value), Number(axis.high.value), moved);
+      state.cut.low[a] = r.low;
+      state.cut.high[a] = r.high;
+      cutChanged();
+    });
+  }
+});
+els.clip.addEventListener('change', () => { state.cut.clip = els.clip.checked; cutChanged(); });
+els.clipAxis.addEventListener('change', () => { state.cut.axis = els.clipAxis.value; cutChanged(); });
+els.clipPosition.addEventListener('input', () => { state.cut.position = Number(els.clipPosition.value); cutChanged(); });
+
+/**
+ * Merges a partial mode and cut state ({mode, isoValue, cropped, low, high, clip, axis,
+ * position}, fractions of the volume's extent) into the controls, shows it and sends it now.
+ */
+function setModeAndClip(partial) {
+  if (!state.volume) throw new Error('no volume is open');
+  const cut = { ...structuredClone(state.cut), ...structuredClone(partial) };
+  if (!CLIP_AXES.includes(cut.axis)) throw new RangeError(`axis: '${cut.axis}' is not one of ${CLIP_AXES.join(' ')}`);
+  for (let a = 0; a < 3; ++a) ({ low: cut.low[a], high: cut.high[a] } = orderCropRange(cut.low[a], cut.high[a]));
+  cut.position = Number.isFinite(cut.position) ? Math.min(1, Math.max(0, cut.position)) : 0.5;
+  // Checked before the controls change: encode() would refuse it after.
+  encodeSetModeAndClip(modeAndClipOf(state.volume, cut));
+  state.cut = cut;
+  showCut();
+  scheduleModeAndClip.cancel();
+  return sendModeAndClip(true);
+}
+
+showCut();
 
 // ---- frames ------------------------------------------------------------------------------
 
@@ -764,6 +919,15 @@ window.brickcast = {
    * connected). Throws ProtocolError on a value out of range.
    */
   setFrameBudget: (partial) => setFrameBudget(partial),
+  /** The last SetModeAndClip sent on this session ({mode, isoValue, crop, planes}), or null (none yet, or unknown after an Error). */
+  modeAndClip: () => clone(state.lastModeAndClip),
+  /**
+   * Merges a partial {mode, isoValue, cropped, low: [3], high: [3], clip, axis ('+x' .. '-z'),
+   * position} (low, high and position fractions of the volume's extent) into the mode and cut
+   * controls, shows it and sends it now; returns what was sent, or null when the server does not
+   * take SetModeAndClip (or is not connected). Throws on a value out of range.
+   */
+  setModeAndClip: (partial) => setModeAndClip(partial),
 };
 
 conn.connect();

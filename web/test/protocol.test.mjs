@@ -6,7 +6,8 @@ import {
   Type, ErrorCode, ProtocolError, encode, decode, decodeHeader, encodeHello, encodeSetCamera,
   encodeSetRenderOptions, encodeSetTransferFunction, encodeAuth, encodeOpenVolume,
   encodeRequestHistogram, encodeRequestFrame, encodeListVolumes, encodeRequestStats, encodeBye,
-  encodeError, encodeSetFrameBudget, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags, Renderer, Capability,
+  encodeError, encodeSetFrameBudget, encodeSetModeAndClip, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags,
+  Renderer, Capability, Mode, MAX_CLIP_PLANES,
 } from '../js/protocol.js';
 
 const header = (type, length, request) => [
@@ -323,6 +324,96 @@ test('SetFrameBudget: values out of range are refused, naming the field', () => 
   throwsCode(() => decode(buf([...header(0x13, 4, 0), 0x42, 0x00, 0x28, 0x00])), 'BadPayload', /left over/);
 });
 
+// The example of PROTOCOL.md: MIP, cropped to (0, 10, 20)..(100, 110, 120) mm, keeping x >= 50 mm.
+const modeAndClip = {
+  mode: Mode.Maximum, isoValue: 0, crop: { min: [0, 10, 20], max: [100, 110, 120] },
+  planes: [{ normal: [1, 0, 0], offset: -50 }],
+};
+const modeAndClipBytes = [
+  ...header(0x14, 91, 7), 0x01, ...f64(0), 0x01,
+  ...f64(0), ...[0, 0, 0, 0, 0, 0, 0x24, 0x40], ...f64(20), ...f64(100), ...f64(110), ...f64(120),
+  0x01, ...[0, 0, 0, 0, 0, 0, 0xf0, 0x3f], ...f64(0), ...f64(0), ...[0, 0, 0, 0, 0, 0, 0x49, 0xc0],
+];
+
+test('SetModeAndClip: type 0x14, u8 mode, f64 isoValue, bool cropped, f64 cropMin[3], f64 cropMax[3], u8 planeCount, planes', () => {
+  const got = encodeSetModeAndClip(modeAndClip, 7);
+  assert.deepEqual(bytes(got), modeAndClipBytes);
+  assert.deepEqual(decode(got), { type: Type.SetModeAndClip, name: 'SetModeAndClip', flags: 0, request: 7, body: modeAndClip });
+  // Composite, no crop, no planes: 59 bytes, all 0.
+  const none = { mode: Mode.Composite, isoValue: 0, crop: null, planes: [] };
+  assert.deepEqual(bytes(encodeSetModeAndClip(none, 1)), [...header(0x14, 59, 1), ...Array(59).fill(0)]);
+  assert.deepEqual(decode(encodeSetModeAndClip(none, 1)).body, none);
+  // crop and planes left out: none.
+  assert.deepEqual(bytes(encodeSetModeAndClip({ mode: 0, isoValue: 0 }, 1)), [...header(0x14, 59, 1), ...Array(59).fill(0)]);
+  // 59 + 32 bytes a plane, up to six.
+  const six = { mode: Mode.Isosurface, isoValue: 1200.5, crop: null, planes: Array.from({ length: 6 }, (_, i) => ({ normal: [0, 0, i % 2 ? -1 : 1], offset: i })) };
+  const b = encodeSetModeAndClip(six, 3);
+  assert.equal(b.byteLength, 16 + 59 + 32 * 6);
+  assert.deepEqual(decode(b).body, six);
+  assert.deepEqual(bytes(b).slice(16 + 1, 16 + 9), f64(1200.5));
+  assert.equal(Type.SetModeAndClip, 0x14);
+  assert.equal(typeName(0x14), 'SetModeAndClip');
+  assert.equal(Capability.ModesAndClips, 1 << 5);
+  assert.deepEqual(Mode, { Composite: 0, Maximum: 1, Minimum: 2, Average: 3, Isosurface: 4 });
+  assert.equal(MAX_CLIP_PLANES, 6);
+});
+
+test('SetModeAndClip: values out of range are refused, naming the field', () => {
+  const ok = modeAndClip;
+  for (const mode of [5, 255, -1, 1.5, NaN, '1', undefined, null]) {
+    throwsCode(() => encodeSetModeAndClip({ ...ok, mode }), 'OutOfRange', /mode/);
+  }
+  for (const isoValue of [NaN, Infinity, -Infinity, '0', undefined, null]) {
+    throwsCode(() => encodeSetModeAndClip({ ...ok, isoValue }), 'OutOfRange', /isoValue/);
+  }
+  const crops = [
+    { min: [0, 10, 20], max: [100, 10, 120] }, // empty on y
+    { min: [0, 10, 130], max: [100, 110, 120] }, // inverted on z
+    { min: [NaN, 10, 20], max: [100, 110, 120] },
+    { min: [0, 10, 20], max: [100, Infinity, 120] },
+    { min: [0, 10], max: [100, 110, 120] },
+    { max: [100, 110, 120] },
+  ];
+  for (const crop of crops) throwsCode(() => encodeSetModeAndClip({ ...ok, crop }), 'OutOfRange', /crop/);
+  const plane = ok.planes[0];
+  throwsCode(() => encodeSetModeAndClip({ ...ok, planes: Array(7).fill(plane) }), 'OutOfRange', /planes: 7, more than 6/);
+  throwsCode(() => encodeSetModeAndClip({ ...ok, planes: plane }), 'OutOfRange', /planes/);
+  for (const normal of [[0, 0, 0], [1e-31, 0, -1e-31], [NaN, 1, 0], [0, Infinity, 0], [1, 0], undefined]) {
+    throwsCode(() => encodeSetModeAndClip({ ...ok, planes: [plane, { normal, offset: 0 }] }), 'OutOfRange', /planes\[1\]\.normal/);
+  }
+  for (const offset of [NaN, Infinity, undefined, '0']) {
+    throwsCode(() => encodeSetModeAndClip({ ...ok, planes: [{ ...plane, offset }] }), 'OutOfRange', /planes\[0\]\.offset/);
+  }
+  // The smallest normal that has a direction, and a crop box anywhere (in or out of the volume).
+  assert.deepEqual(decode(encodeSetModeAndClip({ ...ok, planes: [{ normal: [0, -1e-29, 0], offset: 3 }] })).body.planes,
+    [{ normal: [0, -1e-29, 0], offset: 3 }]);
+  assert.deepEqual(decode(encodeSetModeAndClip({ ...ok, crop: { min: [-5, -5, -5], max: [1e9, -4, 0] } })).body.crop,
+    { min: [-5, -5, -5], max: [1e9, -4, 0] });
+});
+
+test('SetModeAndClip: decoding as the server does', () => {
+  const at = (offset, values) => { const b = modeAndClipBytes.slice(); b.splice(16 + offset, values.length, ...values); return buf(b); };
+  throwsCode(() => decode(at(0, [5])), 'OutOfRange', /mode/);
+  throwsCode(() => decode(at(1, f64(NaN))), 'OutOfRange', /isoValue/);
+  throwsCode(() => decode(at(10 + 8, f64(110))), 'OutOfRange', /crop: axis y/); // cropMin.y == cropMax.y
+  throwsCode(() => decode(at(10 + 40, f64(-Infinity))), 'OutOfRange', /crop/);
+  throwsCode(() => decode(at(9, [2])), 'BadPayload', /cropped/);
+  // Not cropped: the six must be 0.
+  throwsCode(() => decode(at(9, [0])), 'OutOfRange', /crop: not cropped/);
+  const uncropped = [...header(0x14, 59, 1), ...Array(59).fill(0)];
+  assert.equal(decode(buf(uncropped)).body.crop, null);
+  throwsCode(() => decode(at(59, f64(0))), 'OutOfRange', /planes\[0\]\.normal/); // normal (0, 0, 0)
+  throwsCode(() => decode(at(59 + 24, f64(NaN))), 'OutOfRange', /planes\[0\]\.offset/);
+  // planeCount over 6, and a count its bytes do not match.
+  const seven = [...header(0x14, 59 + 32 * 7, 0), ...modeAndClipBytes.slice(16, 16 + 58), 7];
+  for (let i = 0; i < 7; ++i) seven.push(...modeAndClipBytes.slice(16 + 59));
+  throwsCode(() => decode(buf(seven)), 'OutOfRange', /planes: 7, more than 6/);
+  const two = modeAndClipBytes.slice(); two[16 + 58] = 2;
+  throwsCode(() => decode(buf(two)), 'BadPayload', /too short/);
+  const noPlanes = [...header(0x14, 91, 7), ...modeAndClipBytes.slice(16, 16 + 58), 0, ...modeAndClipBytes.slice(16 + 59)];
+  throwsCode(() => decode(buf(noPlanes)), 'BadPayload', /left over/);
+});
+
 test('Stats: decodes the golden bytes of MessagesTest.cpp', () => {
   const m = decode(buf([
     ...header(0x0e, 32, 8), 0x02, 0x00, 0x06, 0x00, ...ascii('frames'), ...f64(12),
@@ -357,6 +448,7 @@ test('round trips: every type decodes to what was encoded', () => {
     [Type.AuthOk, {}], [Type.ListVolumes, {}], [Type.RequestStats, {}], [Type.RequestHistogram, {}],
     [Type.Auth, { token: 'tøken' }], [Type.RequestFrame, { mode: 2 }], [Type.Bye, { reason: 1 }],
     [Type.SetFrameBudget, { interactiveMs: 200, restPsnrDb: 45 }],
+    [Type.SetModeAndClip, { mode: Mode.Average, isoValue: -3.25, crop: null, planes: [{ normal: [0.6, 0.8, 0], offset: 12 }] }],
     [Type.Stats, { counters: [{ name: 'bricks resident', value: 3 }] }],
     [Type.Histogram, { valueMin: 0, valueMax: 255, counts: new Float64Array([1, 2, 3, 4]) }],
     [Type.Error, { code: 13, fatal: false, offendingType: 0x0b, message: 'no OpenGL' }],
