@@ -86,8 +86,6 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.mode = o.mode;
     f.clip = ClipF::of(o.clip);
     f.iso = float(o.isoValue);
-    f.valueMin = float(table.domainMin);
-    f.valueMax = float(table.domainMax);
     f.simd = o.simd && o.mode == BlendMode::Composite;
     f.packets = f.simd && o.packets && !o.preintegrate;
     f.jitter = o.jitter;

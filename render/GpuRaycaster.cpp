@@ -108,6 +108,18 @@ void GpuRaycaster::ensurePool(const brickstore::BrickStore& store) {
     mPoolStorePath = store.path();
 }
 
+BrickPlan GpuRaycaster::planFor(const brickstore::BrickStore& store, const Prepared& p,
+                                const View& view, const PixelRect& region,
+                                const RenderOptions& options) {
+    const LevelGeometry g = LevelGeometry::of(store, p.level);
+    BrickPlan plan = planBricks(store, g, *p.classified.skipTable, view, region, options.skip,
+                                p.classified.occupancy);
+    if (options.parts > 1) // only this part's bricks: the others' samples are theirs
+        keepOwned(plan, mPartitions.get(store, p.level, options.parts).region(options.part));
+    if (options.clip.any()) keepInside(plan, g, options.clip); // neither uploaded nor drawn
+    return plan;
+}
+
 std::uint32_t GpuRaycaster::chooseLevel(const brickstore::BrickStore& store,
                                         const TransferFunctionTable& table, const ViewBasis& view,
                                         const RenderOptions& options) {
@@ -127,15 +139,17 @@ GpuRaycaster::Prepared GpuRaycaster::prepare(const Scene& scene, const View& vie
     options.validate();
     checkView(view, options, true, true);
     refusePreintegration(options, "GPU raycaster");
-    refuseModesAndClips(options, "GPU raycaster");
+    if (options.mode != BlendMode::Composite && options.parts > 1)
+        throw std::invalid_argument(std::string("parts: mode ") + toString(options.mode) +
+                                    " is drawn whole, not in parts (composite only)");
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
     const auto asked = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
     if (options.interactive && options.parts == 1) { // parts: every rank draws one level
-        const auto tablesOnly = scene.classifications.get(scene.store, asked, scene.tf, nullptr)
-                                    ->table(options.stepVoxels);
-        p.level = chooseLevel(scene.store, *tablesOnly, view.basis, options);
+        const auto tablesOnly = scene.classifications.get(scene.store, asked, scene.tf, nullptr,
+                                                          nullptr, SkipRule::of(options));
+        p.level = chooseLevel(scene.store, *tablesOnly->skipTable(), view.basis, options);
     } else {
         p.level = asked;
     }
@@ -167,15 +181,26 @@ std::uint64_t GpuRaycaster::sceneKey(const brickstore::BrickStore& store, std::u
     mix(&options.octree.ratioThreshold, sizeof(double));
     mix(&options.octree.levelLimit, sizeof(std::uint32_t));
     mix(&options.stepVoxels, sizeof(double));
+    // What a ray samples and where it stops: its mode, and what the clip leaves.
+    mix(&options.mode, sizeof options.mode);
+    mix(&options.isoValue, sizeof(double));
+    mix(&options.clip.cropped, sizeof(bool));
+    mix(options.clip.cropMin.data(), sizeof(double) * 3);
+    mix(options.clip.cropMax.data(), sizeof(double) * 3);
+    mix(&options.clip.planeCount, sizeof(std::uint32_t));
+    for (std::uint32_t i = 0; i < options.clip.planeCount; ++i) {
+        mix(options.clip.planes[i].normal.data(), sizeof(double) * 3);
+        mix(&options.clip.planes[i].offset, sizeof(double));
+    }
     return h;
 }
 
 bool GpuRaycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
                                     std::uint64_t scene, const RenderOptions& options,
                                     const OccupancyTrees* octree, FrameStats& stats) {
-    if (!options.occlusionFrustums) {
+    if (!options.occlusionFrustums || !detail::drawsFrustums(options)) {
         if (mGpu->occlusion) mGpu->occlusion->invalidate();
-        stats.occlusionReason = "off";
+        stats.occlusionReason = options.occlusionFrustums ? "composite, uncut frames only" : "off";
         return false;
     }
     if (!mGpu->occlusion) mGpu->occlusion = std::make_unique<detail::OcclusionFrustums>();

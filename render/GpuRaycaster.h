@@ -79,6 +79,10 @@ class GpuRaycaster final : public Renderer, public GpuResidency {
     Prepared prepare(const Scene& scene, const View& view, const RenderOptions& options,
                      FrameStats& stats);
     void ensurePool(const brickstore::BrickStore& store);
+    /// The bricks of level p.level the rays of `region` of `view` draw: planned by the mode's
+    /// skip table, only this part's (RenderOptions::parts), none wholly outside the clip.
+    BrickPlan planFor(const brickstore::BrickStore& store, const Prepared& p, const View& view,
+                      const PixelRect& region, const RenderOptions& options);
     /// Pins the next bricks of `plan` into pool slots and marks them in `pages`; returns their
     /// indices.
     std::vector<std::uint64_t> fillBatch(const BrickPlan& plan, std::size_t& next,
@@ -115,9 +119,11 @@ class GpuRaycaster final : public Renderer, public GpuResidency {
     bool prepareOcclusion(const LevelGeometry& g, const ViewBasis& view, std::uint64_t scene,
                           const RenderOptions& options, const OccupancyTrees* octree,
                           FrameStats& stats);
-    /// The pixels of `region` (of an image `imageHeight` rows high) after `passes` passes.
+    /// The pixels of `region` (of an image `imageHeight` rows high) after `passes` passes:
+    /// clamped to [0, 1] (to [0, inf) when not `clamp`), or as the passes left them when `raw`
+    /// (a projection's value, count and flag).
     Image readBack(int passes, const PixelRect& region, std::uint32_t imageHeight, bool clamp,
-                   FrameStats& stats);
+                   bool raw, FrameStats& stats);
     std::uint32_t chooseLevel(const brickstore::BrickStore& store,
                               const TransferFunctionTable& table, const ViewBasis& view,
                               const RenderOptions& options);

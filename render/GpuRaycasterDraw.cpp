@@ -17,6 +17,38 @@
 namespace bc::render {
 namespace {
 
+/// A projection's pixels as the passes leave them (texel value or sum, count, flag) mapped
+/// through `table` as the shader's classify() maps a texel (float, the same lerp):
+/// premultiplied; transparent where the ray took no sample.
+void resolveProjections(Image& image, BlendMode mode, const TransferFunctionTable& table,
+                        const TexelMapping& m) {
+    const double span = table.domainMax - table.domainMin, last = double(table.entries - 1);
+    const auto scale = float(m.scale / span * last),
+               offset = float((m.offset - table.domainMin) / span * last);
+    const int entries = int(table.entries);
+    for (std::uint32_t y = 0; y < image.height; ++y)
+        for (std::uint32_t x = 0; x < image.width; ++x) {
+            float* px = image.pixel(x, y);
+            const float count = px[1];
+            if (count <= 0.0f) {
+                std::fill(px, px + 4, 0.0f);
+                continue;
+            }
+            const float v = mode == BlendMode::Average ? px[0] / count : px[0];
+            const float u = std::clamp(v * scale + offset, 0.0f, float(entries - 1));
+            const int i = std::min(int(u), entries - 2);
+            const float w = u - float(i);
+            const float* e = table.rgba.data() + 4 * std::size_t(i);
+            float c[4];
+            for (int k = 0; k < 4; ++k)
+                c[k] = e[k] * (1.0f - w) + e[k + 4] * w;
+            px[0] = std::clamp(c[0] * c[3], 0.0f, 1.0f);
+            px[1] = std::clamp(c[1] * c[3], 0.0f, 1.0f);
+            px[2] = std::clamp(c[2] * c[3], 0.0f, 1.0f);
+            px[3] = std::clamp(c[3], 0.0f, 1.0f);
+        }
+}
+
 using detail::Clock;
 using detail::msSince;
 
@@ -126,16 +158,14 @@ Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     // frustums and ray guidance are off for it and keep the last whole frame's findings.
     const bool slice = !options.region.whole();
     const PixelRect drawn = options.drawn();
-    BrickPlan plan = planBricks(store, g, table, view, options.region, options.skip, occupancy);
-    if (options.parts > 1) // only this part's bricks: the others' samples are theirs
-        keepOwned(plan, mPartitions.get(store, level, options.parts).region(options.part));
+    const BrickPlan plan = planFor(store, p, view, options.region, options);
     recordPlan(plan, level, stats);
 
     mGpu->ensureTargets(options.width, options.height);
     mGpu->uploadTable(table);
     const std::uint64_t sceneId = sceneKey(store, level, table, options);
     const bool guided = options.rayGuided && !slice;
-    const bool captures = options.occlusionFrustums && !slice;
+    const bool captures = options.occlusionFrustums && detail::drawsFrustums(options) && !slice;
     bool useStarts = false;
     if (slice)
         stats.occlusionReason = "a slice of a frame";
@@ -170,7 +200,10 @@ Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     }
 
     const auto readStart = Clock::now();
-    Image image = readBack(pass, drawn, options.height, options.parts == 1, stats);
+    const bool projection =
+        options.mode != BlendMode::Composite && options.mode != BlendMode::Isosurface;
+    Image image = readBack(pass, drawn, options.height, options.parts == 1, projection, stats);
+    if (projection) resolveProjections(image, options.mode, table, mPool->texelMapping());
     stats.readbackMs = msSince(readStart);
     if (captures) {
         const auto captureStart = Clock::now();
@@ -266,7 +299,7 @@ void GpuRaycaster::drawPass(int pass) {
 }
 
 Image GpuRaycaster::readBack(int passes, const PixelRect& region, std::uint32_t imageHeight,
-                             bool clamp, FrameStats& stats) {
+                             bool clamp, bool raw, FrameStats& stats) {
     const std::uint32_t width = region.width, height = region.height;
     Image image(width, height);
     std::vector<float> rows(std::size_t(width) * height * 4);
@@ -282,10 +315,11 @@ Image GpuRaycaster::readBack(int passes, const PixelRect& region, std::uint32_t 
     const std::size_t rowFloats = std::size_t(width) * 4;
     // A part's segments are not clamped above: the compositing clamps (render/SCALEOUT.md).
     const float top = clamp ? 1.0f : std::numeric_limits<float>::max();
+    const float bottom = raw ? std::numeric_limits<float>::lowest() : 0.0f;
     for (std::uint32_t y = 0; y < height; ++y) // GL rows go bottom-up
         std::transform(rows.begin() + std::ptrdiff_t((height - 1 - y) * rowFloats),
                        rows.begin() + std::ptrdiff_t((height - y) * rowFloats), image.pixel(0, y),
-                       [top](float v) { return std::clamp(v, 0.0f, top); });
+                       [=](float v) { return raw ? v : std::clamp(v, bottom, top); });
     return image;
 }
 

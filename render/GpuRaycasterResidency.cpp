@@ -109,10 +109,7 @@ std::uint32_t GpuRaycaster::prefetch(const Scene& scene, const View& view,
     const brickstore::BrickStore& store = scene.store;
     const std::uint32_t level = p.level;
     const TransferFunctionTable& table = *p.classified.table;
-    const LevelGeometry g = LevelGeometry::of(store, level);
-    BrickPlan plan = planBricks(store, g, table, view.basis, options.skip, p.classified.occupancy);
-    if (options.parts > 1)
-        keepOwned(plan, mPartitions.get(store, level, options.parts).region(options.part));
+    const BrickPlan plan = planFor(store, p, view, {}, options);
     const std::uint64_t levelFirst = store.layout().levels()[level].firstBrick;
     const std::uint64_t sceneId = sceneKey(store, level, table, options);
     brickstore::BrickCache& cache = scene.cache;

@@ -94,8 +94,8 @@ struct RenderOptions {
     /// BlendMode::Isosurface: the value whose surface is drawn, in the volume's units (the
     /// transfer function's domain); it must lie within the volume's values.
     double isoValue = 0.0;
-    /// The crop box and clip planes (render/Clip.h): the CPU raycaster and the reference
-    /// honour them; other renderers refuse a clip.
+    /// The crop box and clip planes (render/Clip.h): the raycasters and the reference honour
+    /// them; the splatters refuse a clip.
     Clip clip;
     bool shading = true;      ///< Blinn-Phong from central-difference gradients
     std::int32_t level = 0;   ///< pyramid level; see `interactive`

@@ -71,12 +71,12 @@ void Renderer::refuseModesAndClips(const RenderOptions& options, const char* ren
     if (options.clip.any())
         throw std::invalid_argument(std::string(options.clip.cropped ? "crop" : "clip") + ": the " +
                                     renderer +
-                                    ": whole volumes only (the CPU raycaster and the reference "
+                                    ": whole volumes only (the raycasters and the reference "
                                     "crop and clip)");
     if (options.mode != BlendMode::Composite)
         throw std::invalid_argument(std::string("mode: the ") + renderer +
                                     ": composite only, not " + toString(options.mode) +
-                                    " (the CPU raycaster and the reference draw every mode)");
+                                    " (the raycasters and the reference draw every mode)");
 }
 
 } // namespace bc::render

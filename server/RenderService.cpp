@@ -263,10 +263,6 @@ void RenderService::prepare(FrameDrawing& d) {
         const render::RendererChoice& choice = autoChoice();
         name = choice.name;
         d.rendererChoice = choice.reason;
-        if (!composite && name != "cpu") { // the CPU raycaster draws every mode and cut
-            name = "cpu";
-            d.rendererChoice += "; the CPU raycaster for the session's mode or cut";
-        }
     }
     if (!composite && mConfig.cluster && mConfig.cluster->ranks() > 1)
         throw std::invalid_argument("mode: across MPI ranks frames are composite and uncut only "

@@ -76,8 +76,6 @@ struct Frame {
     BlendMode mode = BlendMode::Composite;
     ClipF clip;    ///< RenderOptions::clip: samples outside are not taken
     float iso = 0; ///< RenderOptions::isoValue
-    float valueMin = 0,
-          valueMax = 0; ///< the volume's values: a projection that reaches its end stops
 };
 
 struct Rgba {
@@ -138,18 +136,19 @@ struct Accum {
     std::uint32_t n = 0;
 };
 
-/// Takes a sample's value into a projecting ray; false once nothing can change it (the ray
-/// has reached the volume's largest or smallest value, under early termination).
+/// Takes a sample's value into a projecting ray; false once nothing can change its colour
+/// (under early termination: a maximum at or past the table's last entry, a minimum at or
+/// before its first, where classify() clamps, so any further value gives the same colour).
 inline bool project(const Frame& f, Accum& acc, float value) {
     switch (f.mode) {
     case BlendMode::Maximum:
         if (acc.n == 0 || value > acc.v) acc.v = value;
         ++acc.n;
-        return !(f.ertT >= 0.0f && acc.v >= f.valueMax);
+        return !(f.ertT >= 0.0f && acc.v * f.tfScale + f.tfOffset >= float(f.entries - 1));
     case BlendMode::Minimum:
         if (acc.n == 0 || value < acc.v) acc.v = value;
         ++acc.n;
-        return !(f.ertT >= 0.0f && acc.v <= f.valueMin);
+        return !(f.ertT >= 0.0f && acc.v * f.tfScale + f.tfOffset <= 0.0f);
     default: // Average
         acc.v += value;
         ++acc.n;

@@ -24,6 +24,13 @@ inline double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
+/// Whether a frame may start its rays at the last frame's occlusion frustums and record its
+/// first hits for the next: composite, uncut frames (the first hits of a projection or a cut
+/// are not those of the scene's surfaces).
+inline bool drawsFrustums(const RenderOptions& options) {
+    return options.mode == BlendMode::Composite && !options.clip.any();
+}
+
 /// Unpins the pool's slots when a batch ends, also when a brick load throws mid-batch.
 struct BatchPins {
     BrickPool& pool;

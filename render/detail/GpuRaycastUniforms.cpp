@@ -9,6 +9,8 @@
 
 #include <glm/vec3.hpp>
 
+#include <array>
+
 namespace bc::render::detail {
 namespace {
 
@@ -69,6 +71,30 @@ void setShadingUniforms(GLuint p, const LevelGeometry& g, const RenderOptions& o
     f1(p, "uShininess", ShadingModel::kShininess);
 }
 
+/// The mode (the iso value as a pool texel) and the clip.
+void setModeUniforms(GLuint p, const RenderOptions& o, const BrickPool& pool) {
+    const TexelMapping m = pool.texelMapping();
+    uniform1i(p, "uMode", int(o.mode));
+    f1(p, "uIso", (o.isoValue - m.offset) / m.scale);
+    const Clip& c = o.clip;
+    uniform1i(p, "uCropped", c.cropped);
+    vec3(p, "uCropMin", glm::dvec3(c.cropMin[0], c.cropMin[1], c.cropMin[2]));
+    vec3(p, "uCropMax", glm::dvec3(c.cropMax[0], c.cropMax[1], c.cropMax[2]));
+    // The planes as the CPU raycaster's rays take them: unit normals, offsets float holds.
+    const ClipF f = ClipF::of(c);
+    std::array<float, 4 * Clip::kMaxPlanes> planes{};
+    for (int i = 0; i < f.planeCount; ++i) {
+        const auto k = std::size_t(i);
+        planes[4 * k] = f.normals[k].x;
+        planes[4 * k + 1] = f.normals[k].y;
+        planes[4 * k + 2] = f.normals[k].z;
+        planes[4 * k + 3] = f.offsets[k];
+    }
+    uniform1i(p, "uPlaneCount", f.planeCount);
+    glProgramUniform4fv(p, glGetUniformLocation(p, "uPlanes"), GLsizei(Clip::kMaxPlanes),
+                        planes.data());
+}
+
 } // namespace
 
 void uniform1i(GLuint program, const char* name, GLint value) {
@@ -81,6 +107,7 @@ void setFrameUniforms(GLuint program, const LevelGeometry& g, const ViewBasis& v
     setViewUniforms(program, v, o);
     setGridUniforms(program, g, o, pool);
     setShadingUniforms(program, g, o, table, pool);
+    setModeUniforms(program, o, pool);
     gl::glCheck("setting raycaster uniforms");
 }
 

@@ -50,6 +50,17 @@ uniform int uOctDepth;        // octree levels below a brick; 0 switches the sec
 uniform int uOccWords;        // words per brick in occ[]
 uniform int uLeafAxis;        // leaves per brick axis
 uniform float uLeaf;          // leaf edge in voxels
+// RenderOptions::mode (render/MODES.md): 0 composite, 1 maximum, 2 minimum, 3 average,
+// 4 isosurface at uIso (a texel value). A projecting ray carries (value, count, finished, 0)
+// from pass to pass in place of a colour; the renderer maps it through the table at the end.
+uniform int uMode;
+uniform float uIso;
+// RenderOptions::clip: the crop box and the planes (normal, offset: kept where
+// dot(normal, x) + offset >= 0), world mm.
+uniform bool uCropped;
+uniform vec3 uCropMin, uCropMax;
+uniform int uPlaneCount;
+uniform vec4 uPlanes[6];
 
 out vec4 outColor;
 
@@ -100,6 +111,59 @@ void composite(inout vec4 acc, vec4 c) {
     acc.a += (1.0 - acc.a) * c.a;
 }
 
+// Takes texel value v into a projecting ray; false once no further value can change its
+// colour (early termination: past the table's last entry for a maximum, before its first for
+// a minimum, where classify() clamps).
+bool project(inout vec4 acc, float v) {
+    if (uMode == 3) { acc.r += v; acc.g += 1.0; return true; }
+    if (acc.g == 0.0 || (uMode == 1 ? v > acc.r : v < acc.r)) acc.r = v;
+    acc.g += 1.0;
+    float u = acc.r * uTfScale + uTfOffset;
+    if (uErt <= 1.0 && (uMode == 1 ? u >= float(uTfEntries - 1) : u <= 0.0)) { acc.b = 1.0; return false; }
+    return true;
+}
+
+// Whether the ray is done: opaque enough (composite), hit (isosurface), finished (projections).
+bool finished(vec4 acc) {
+    return uMode == 0 ? acc.a >= uErt : uMode == 4 ? acc.a > 0.0 : acc.b > 0.0;
+}
+
+// The isosurface's hit on the step from sample k - 1 (below uIso) to sample k at parameter t
+// (at or above it), refined by 12 bisections within the slot's voxels; sample k itself when it
+// is the ray's first kept sample (the volume's box or the clip cuts the surface there).
+float isoHit(int kFirst, int k, float t, float t0, vec3 rel, vec3 dv, ivec3 slot) {
+    if (k == kFirst) return t;
+    float lo = t0 + (float(k - 1) + 0.5) * uStepMm, hi = t;
+    for (int i = 0; i < 12; ++i) {
+        float mid = 0.5 * (lo + hi);
+        if (fetch(rel + dv * mid, slot) >= uIso) hi = mid; else lo = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+// The isosurface's colour, opaque: the table's at uIso.
+vec4 isoColour() {
+    return vec4(classify(uIso).rgb, 1.0);
+}
+
+// Narrows [t, tb] to what the crop box and the planes keep (world origin o, direction d).
+void clipInterval(vec3 o, vec3 d, inout float ta, inout float tb) {
+    if (uCropped) {
+        for (int a = 0; a < 3; ++a) {
+            if (d[a] == 0.0) { if (o[a] < uCropMin[a] || o[a] > uCropMax[a]) tb = -3.0e38; continue; }
+            float u0 = (uCropMin[a] - o[a]) / d[a], u1 = (uCropMax[a] - o[a]) / d[a];
+            ta = max(ta, min(u0, u1));
+            tb = min(tb, max(u0, u1));
+        }
+    }
+    for (int i = 0; i < uPlaneCount; ++i) {
+        float nd = dot(uPlanes[i].xyz, d), no = dot(uPlanes[i].xyz, o) + uPlanes[i].w;
+        if (nd == 0.0) { if (no < 0.0) tb = -3.0e38; continue; }
+        float t = -no / nd;
+        if (nd > 0.0) ta = max(ta, t); else tb = min(tb, t);
+    }
+}
+
 // The coarsest octree level (1..uOctDepth) whose node holding `leaf` is empty, or 0.
 int emptyLevel(int base, ivec3 leaf) {
     int first = 0;
@@ -126,7 +190,7 @@ float exitParameter(vec3 p0, vec3 dv, vec3 lo, float size) {
 void main() {
     vec4 acc = uFirstPass ? vec4(0.0) : texelFetch(uPrev, ivec2(gl_FragCoord.xy), 0);
     int resumeAt = uResume ? imageLoad(uResumeAt, ivec2(gl_FragCoord.xy)).r : 0;
-    if (acc.a >= uErt || resumeAt < 0) { outColor = acc; return; }
+    if (finished(acc) || resumeAt < 0) { outColor = acc; return; }
     vec2 s = 2.0 * gl_FragCoord.xy / uViewport - 1.0;
     vec3 o = uOrtho ? uEye + s.x * uRight + s.y * uUp : uEye;
     vec3 d = uOrtho ? uForward : normalize(uForward + s.x * uRight + s.y * uUp);
@@ -149,10 +213,22 @@ void main() {
     }
     int total = int(ceil((t1 - t0) / uStepMm - 0.5));
     if (total <= 0) { outColor = acc; return; }
+    // A crop or clip keeps samples [kFirst, total) of the same lattice.
+    int kFirst = 0;
+    if (uCropped || uPlaneCount > 0) {
+        float ta = -3.0e38, tb = 3.0e38;
+        clipInterval(o, d, ta, tb);
+        if (!(ta <= tb)) { outColor = acc; return; }
+        float kb = ceil((tb - t0) / uStepMm - 0.5);
+        if (kb < float(total)) total = kb > 0.0 ? int(kb) : 0;
+        float ka = ceil((ta - t0) / uStepMm - 0.5);
+        if (ka > 0.0) kFirst = ka < float(total) ? int(ka) : total;
+        if (kFirst >= total) { outColor = acc; return; }
+    }
 
     // Occlusion frustums: no sample before the proxies' nearest face can be non-empty. The
     // lattice of sample positions stays that of the box entry; the start only drops samples.
-    int k = resumeAt;
+    int k = max(resumeAt, kFirst);
     if (uUseStart && !uResume) {
         float ts = texelFetch(uStart, ivec2(gl_FragCoord.xy), 0).r;
         k = ts >= 1.0e37 ? total : clamp(int(floor((ts - t0) / uStepMm - 0.5)) - 1, 0, total);
@@ -227,12 +303,36 @@ void main() {
                     }
                 }
                 tHit = min(tHit, t);
-                vec4 c = classify(fetch(q, slot));
+                float value = fetch(q, slot);
                 ++taken;
+                if (uMode == 4) {
+                    if (value < uIso) continue;
+                    vec3 h = rel + dv * isoHit(kFirst, k, t, t0, rel, dv, slot);
+                    acc = uShading ? shade(isoColour(), h, slot, d) : isoColour();
+                    break;
+                }
+                if (uMode != 0) {
+                    if (!project(acc, value)) break;
+                    continue;
+                }
+                vec4 c = classify(value);
                 if (c.a <= 0.0) continue;
                 if (uShading) c = shade(c, q, slot, d);
                 composite(acc, c);
                 if (acc.a >= uErt) break;
+            }
+        } else if (e.x == -2 && kEnd > k && uMode != 0) {
+            // A brick of one value: a projection takes it once a sample; an isosurface is hit
+            // at its first sample or not at all (no gradient: the surface unshaded).
+            float value = intBitsToFloat(e.y);
+            if (uMode == 4) {
+                if (value >= uIso) { ++taken; acc = isoColour(); }
+                else { taken += uint(kEnd - k); k = kEnd; }
+            } else {
+                for (; k < kEnd; ++k) {
+                    ++taken;
+                    if (!project(acc, value)) break;
+                }
             }
         } else if (e.x == -2 && kEnd > k) {
             vec4 c = classify(intBitsToFloat(e.y));
@@ -245,7 +345,7 @@ void main() {
                 if (acc.a >= uErt) break;
             }
         }
-        if (acc.a >= uErt) break;
+        if (finished(acc)) break;
         k = max(k, kEnd);
         int a = tMax.x <= tMax.y ? (tMax.x <= tMax.z ? 0 : 2) : (tMax.y <= tMax.z ? 1 : 2);
         cell[a] += stepDir[a];

@@ -5,6 +5,7 @@
 #include "RenderTestSupport.h"
 #include "render/BrickPlan.h"
 #include "render/CpuRaycaster.h"
+#include "render/GpuRaycaster.h"
 #include "render/ReferenceRenderer.h"
 
 #include <cmath>
@@ -182,6 +183,56 @@ TEST_P(ModesOnScans, TheCpuRaycasterDrawsTheReferencesImageAndSkippingChangesNoP
 }
 
 INSTANTIATE_TEST_SUITE_P(RealScans, ModesOnScans, ::testing::ValuesIn(modeScans()),
+                         [](const auto& info) { return info.param.scan; });
+
+// The GPU raycaster (llvmpipe in CI, 64^2): each mode, whole and cut, is the reference's image
+// and skipping and early termination change no pixel.
+class ModesGl : public ::testing::TestWithParam<test::ScanPreset> {};
+
+TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChangesNoPixel) {
+    const auto t = test::ingestRealScan(GetParam().scan);
+    if (!t) return test::missingData("scan " + GetParam().scan);
+    test::glContext();
+    const Box box = LevelGeometry::of(*t->store, 0).box;
+    const Camera camera = Camera::orbit(box, 35.0, 25.0);
+    Clip cut;
+    cut.cropped = true;
+    for (int a = 0; a < 3; ++a) {
+        cut.cropMin[a] = box.min[a] + 0.1 * box.size()[a];
+        cut.cropMax[a] = box.min[a] + 0.85 * box.size()[a];
+    }
+    cut.planeCount = 1;
+    cut.planes[0] = {{0.3, 1.0, -0.2}, -0.5 * box.size().y};
+    ReferenceRenderer reference;
+    GpuRaycaster gpu, plainGpu;
+    for (const ModeCase& m : kModes)
+        for (const bool cropped : {false, true}) {
+            SCOPED_TRACE(std::string(m.name) + (cropped ? " cut" : " whole"));
+            const TransferFunction tf = modeFunction(m, GetParam().preset, t->stats);
+            RenderOptions o;
+            o.width = o.height = 64;
+            o.mode = m.mode;
+            o.isoValue = m.mode == BlendMode::Isosurface ? isoOf(tf) : 0.0;
+            if (cropped) o.clip = cut;
+            FrameStats stats;
+            const Image ref = reference.render(*t->store, *t->cache, tf, camera, o, stats);
+            const Image fast = test::gpuFrame(*t, gpu, tf, camera, o);
+            const ImageComparison c = compareImages(fast, ref);
+            test::printComparison(
+                GetParam().scan + " " + m.name + (cropped ? " cut" : "") + " gpu vs reference", c);
+            EXPECT_GE(c.psnrDb, 50.0);
+            RenderOptions plain = o;
+            plain.skip = SkipMode::None;
+            plain.earlyTermination = false;
+            EXPECT_EQ(compareImages(test::gpuFrame(*t, plainGpu, tf, camera, plain), fast).maxAbs,
+                      0.0);
+        }
+}
+
+INSTANTIATE_TEST_SUITE_P(RealScans, ModesGl,
+                         ::testing::Values(test::ScanPreset{"cthead", "ct-bone"},
+                                           test::ScanPreset{"CT_AVM", "vessels"},
+                                           test::ScanPreset{"headsq", "mr"}),
                          [](const auto& info) { return info.param.scan; });
 
 TEST(ModesBadInput, AnIsoValueOutsideTheVolumeOrNotFiniteIsRefusedNamingIso) {

@@ -1,7 +1,7 @@
 // SetModeAndClip through the daemon: a session's MIP, isosurface and average of a cropped,
 // clipped volume are the direct render of the same request, to the byte (raw codec); the
 // cut is part of the frame cache's key; bad values are answered naming the field and the
-// session goes on; auto draws the modes on the CPU raycaster.
+// session goes on.
 #include "ServerTestSupport.h"
 
 #include "../render/RenderTestSupport.h"
@@ -82,7 +82,7 @@ TEST_F(ModesAndClips, EachModeOfACutVolumeIsTheDirectRenderOfTheRequest) {
     client::Client c(d.clientConfig());
     EXPECT_TRUE(c.server().capabilities & protocol::kCapModesAndClips);
     const auto v = c.openVolume("p");
-    const auto o = options(protocol::Renderer::Auto); // auto: the CPU raycaster for a mode
+    const auto o = options(protocol::Renderer::CpuRaycaster);
     c.setRenderOptions(o);
     const auto tf = preset("ct-bone");
     c.setTransferFunction(tf);
@@ -99,9 +99,7 @@ TEST_F(ModesAndClips, EachModeOfACutVolumeIsTheDirectRenderOfTheRequest) {
         c.requestFrame();
         const client::ReceivedFrame f = c.nextFrame();
         EXPECT_EQ(f.header.cameraId, id);
-        protocol::RenderOptions asDrawn = o;
-        asDrawn.renderer = protocol::Renderer::CpuRaycaster;
-        EXPECT_EQ(f.rgba, direct(camera, tf, asDrawn, m));
+        EXPECT_EQ(f.rgba, direct(camera, tf, o, m));
         ++id;
     }
     // Uncut, the same view differs: the cut reached the renderer.
@@ -110,10 +108,8 @@ TEST_F(ModesAndClips, EachModeOfACutVolumeIsTheDirectRenderOfTheRequest) {
     c.setCamera(camera);
     c.requestFrame();
     const client::ReceivedFrame uncut = c.nextFrame();
-    protocol::RenderOptions asDrawn = o;
-    asDrawn.renderer = protocol::Renderer::CpuRaycaster;
-    EXPECT_EQ(uncut.rgba, direct(camera, tf, asDrawn, {}));
-    EXPECT_NE(uncut.rgba, direct(camera, tf, asDrawn, m));
+    EXPECT_EQ(uncut.rgba, direct(camera, tf, o, {}));
+    EXPECT_NE(uncut.rgba, direct(camera, tf, o, m));
 }
 
 TEST_F(ModesAndClips, TheCutIsPartOfTheFrameCachesKey) {

@@ -629,16 +629,16 @@ void addRenderCommand(CLI::App& app) {
         ->capture_default_str();
     cmd->add_option("--mode", o->mode,
                     "What a ray makes of its samples: composite, mip (maximum), minip (minimum), "
-                    "average, iso (the surface at --iso); CPU raycaster and reference")
+                    "average, iso (the surface at --iso); the raycasters and the reference")
         ->capture_default_str();
     cmd->add_option("--iso", o->iso, "With --mode iso: the surface's value, in the volume's units");
     cmd->add_option("--crop", o->crop,
                     "Draw only inside the box X0,X1,Y0,Y1,Z0,Z1 (mm; the volume spans 0 to "
-                    "dims x spacing); CPU raycaster and reference");
+                    "dims x spacing); the raycasters and the reference");
     cmd->add_option("--clip", o->clips,
                     "Keep the side NX*x + NY*y + NZ*z + D >= 0 of a plane (mm); up to six, "
-                    "each its own --clip (--clip=-1,0,0,90 when it starts with a minus); CPU "
-                    "raycaster and reference")
+                    "each its own --clip (--clip=-1,0,0,90 when it starts with a minus); the "
+                    "raycasters and the reference")
         ->allow_extra_args(false);
     cmd->add_option("--octree-ratio", o->octreeRatio,
                     "Draw an octree node whole once this share of its leaves is non-empty")
