@@ -1,5 +1,7 @@
 #include "render/Composite.h"
 
+#include "render/TransferFunction.h"
+
 #include <algorithm>
 #include <stdexcept>
 #include <string>
@@ -33,6 +35,70 @@ void clampToUnit(Image& image) {
         v = std::clamp(v, 0.0f, 1.0f);
 }
 
+PartsCombine combineFor(BlendMode mode) {
+    switch (mode) {
+    case BlendMode::Maximum:
+        return PartsCombine::Maximum;
+    case BlendMode::Minimum:
+        return PartsCombine::Minimum;
+    case BlendMode::Average:
+        return PartsCombine::Sum;
+    case BlendMode::Composite:
+    case BlendMode::Isosurface:
+        break;
+    }
+    return PartsCombine::Over;
+}
+
+void resolveProjections(Image& image, BlendMode mode, const TransferFunctionTable& table) {
+    // The CPU raycaster's classify(): its Frame's tfScale and tfOffset, its lerp.
+    const double span = table.domainMax - table.domainMin, last = double(table.entries - 1);
+    const auto scale = float(last / span), offset = float(-table.domainMin * last / span);
+    const int entries = int(table.entries);
+    for (std::size_t p = 0; p + 3 < image.rgba.size(); p += 4) {
+        float* px = &image.rgba[p];
+        const float count = px[1];
+        if (!(count > 0.0f)) {
+            std::fill(px, px + 4, 0.0f);
+            continue;
+        }
+        const float v = mode == BlendMode::Average ? px[0] / count : px[0];
+        const float u = std::clamp(v * scale + offset, 0.0f, float(entries - 1));
+        const int i = std::min(int(u), entries - 2);
+        const float w = u - float(i);
+        const float* e = table.rgba.data() + 4 * std::size_t(i);
+        float c[4];
+        for (int k = 0; k < 4; ++k)
+            c[k] = e[k] * (1.0f - w) + e[k + 4] * w;
+        for (int k = 0; k < 3; ++k)
+            px[k] = std::clamp(c[k] * c[3], 0.0f, 1.0f);
+        px[3] = std::clamp(c[3], 0.0f, 1.0f);
+    }
+}
+
+void combineUnder(Image& frame, const PixelRect& frameRect, const PartialImage& back,
+                  PartsCombine how) {
+    if (how == PartsCombine::Over) return compositeUnder(frame, frameRect, back);
+    requireSize(frame, frameRect, "the frame");
+    requireSize(back.image, back.rect, "a partial image");
+    const auto shared = overlap(frameRect, back.rect);
+    if (!shared) return;
+    for (std::uint32_t y = shared->y; y < shared->y + shared->height; ++y) {
+        float* f = frame.pixel(shared->x - frameRect.x, y - frameRect.y);
+        const float* b = back.image.pixel(shared->x - back.rect.x, y - back.rect.y);
+        for (std::uint32_t x = 0; x < shared->width; ++x, f += 4, b += 4) {
+            if (!(b[1] > 0.0f)) continue; // no samples behind
+            if (!(f[1] > 0.0f) || how == PartsCombine::Sum) {
+                f[0] = f[1] > 0.0f ? f[0] + b[0] : b[0];
+                f[1] += b[1];
+                continue;
+            }
+            if (how == PartsCombine::Maximum ? b[0] > f[0] : b[0] < f[0]) f[0] = b[0];
+            f[1] += b[1];
+        }
+    }
+}
+
 void compositeUnder(Image& frame, const PixelRect& frameRect, const PartialImage& back) {
     requireSize(frame, frameRect, "the frame");
     requireSize(back.image, back.rect, "a partial image");
@@ -56,6 +122,16 @@ Image compositeFrontToBack(std::uint32_t width, std::uint32_t height,
     for (const PartialImage& p : frontToBack)
         compositeUnder(frame, whole, p);
     clampToUnit(frame);
+    return frame;
+}
+
+Image compositeFrontToBack(std::uint32_t width, std::uint32_t height,
+                           std::span<const PartialImage> frontToBack, PartsCombine how) {
+    if (how == PartsCombine::Over) return compositeFrontToBack(width, height, frontToBack);
+    Image frame(width, height);
+    const PixelRect whole{0, 0, width, height};
+    for (const PartialImage& p : frontToBack)
+        combineUnder(frame, whole, p, how);
     return frame;
 }
 

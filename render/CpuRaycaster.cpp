@@ -255,24 +255,13 @@ class FramePasses {
         return keptBytes;
     }
     const RayCount& count() const { return mCount; }
-    /// The projections: each marched ray's value into its colour (resolveProjection), once
-    /// every batch is drawn.
-    void resolveProjections() {
-        if (mF.mode == BlendMode::Composite || mF.mode == BlendMode::Isosurface ||
-            !mMarched.visible)
-            return;
-        const PixelRect& m = mMarched.rect;
-        for (std::uint32_t y = m.y; y < m.y + m.height; ++y)
-            for (std::uint32_t x = m.x; x < m.x + m.width; ++x)
-                detail::resolveProjection(
-                    mF, mRays[std::size_t(y - mRegion.y) * mRegion.width + (x - mRegion.x)].acc);
-    }
-    /// The region's image; clamped to [0, 1] unless `clamp` is false (imageOf).
-    Image image(bool clamp) const {
+    /// The region's image; clamped to [0, 1] unless `clamp` is false, a projection's raw
+    /// pixels when `raw` (imageOf).
+    Image image(bool clamp, bool raw) const {
         Footprint local = mMarched; // in the region's coordinates
         local.rect.x -= mRegion.x;
         local.rect.y -= mRegion.y;
-        return detail::imageOf(mRays, mRegion.width, mRegion.height, local, clamp);
+        return detail::imageOf(mRays, mRegion.width, mRegion.height, local, clamp, raw);
     }
 
   private:
@@ -328,9 +317,6 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     const auto frameStart = Clock::now();
     asked.validate();
     checkView(view, asked, true, true, true);
-    if (asked.mode != BlendMode::Composite && asked.parts > 1)
-        throw std::invalid_argument(std::string("parts: mode ") + toString(asked.mode) +
-                                    " is drawn whole, not in parts (composite only)");
     // An average takes every sample inside the volume: nothing is skipped.
     RenderOptions options = asked;
     if (options.mode == BlendMode::Average) options.skip = SkipMode::None;
@@ -355,12 +341,17 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     FramePasses passes(scene, view, options, g, plan, f, bricks, fine);
     stats.hostKeptBytes =
         passes.draw(batches, options.hostKeptBefore, stats) - options.hostKeptBefore;
-    passes.resolveProjections();
     stats.samples = passes.count().samples;
     stats.octreeLeaps = passes.count().leaps;
     stats.occlusionReason = "not on the CPU raycaster";
     stats.totalMs = msSince(frameStart);
-    return passes.image(options.parts == 1);
+    // A projection's parts stay raw: they combine by their mode (render/Composite.h).
+    const bool projection =
+        options.mode != BlendMode::Composite && options.mode != BlendMode::Isosurface;
+    Image image = passes.image(options.parts == 1, projection);
+    if (projection && options.parts == 1)
+        resolveProjections(image, options.mode, *classified.table);
+    return image;
 }
 
 } // namespace bc::render

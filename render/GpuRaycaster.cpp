@@ -139,9 +139,6 @@ GpuRaycaster::Prepared GpuRaycaster::prepare(const Scene& scene, const View& vie
     options.validate();
     checkView(view, options, true, true);
     refusePreintegration(options, "GPU raycaster");
-    if (options.mode != BlendMode::Composite && options.parts > 1)
-        throw std::invalid_argument(std::string("parts: mode ") + toString(options.mode) +
-                                    " is drawn whole, not in parts (composite only)");
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());

@@ -6,6 +6,7 @@
 #include "brickstore/BrickCache.h"
 #include "brickstore/BrickStore.h"
 #include "render/BrickPlan.h"
+#include "render/Composite.h"
 #include "render/detail/GpuRaycastState.h"
 #include "render/detail/GpuRaycastUniforms.h"
 #include "render/detail/RaycastShader.h"
@@ -17,36 +18,17 @@
 namespace bc::render {
 namespace {
 
-/// A projection's pixels as the passes leave them (texel value or sum, count, flag) mapped
-/// through `table` as the shader's classify() maps a texel (float, the same lerp):
-/// premultiplied; transparent where the ray took no sample.
-void resolveProjections(Image& image, BlendMode mode, const TransferFunctionTable& table,
-                        const TexelMapping& m) {
-    const double span = table.domainMax - table.domainMin, last = double(table.entries - 1);
-    const auto scale = float(m.scale / span * last),
-               offset = float((m.offset - table.domainMin) / span * last);
-    const int entries = int(table.entries);
-    for (std::uint32_t y = 0; y < image.height; ++y)
-        for (std::uint32_t x = 0; x < image.width; ++x) {
-            float* px = image.pixel(x, y);
-            const float count = px[1];
-            if (count <= 0.0f) {
-                std::fill(px, px + 4, 0.0f);
-                continue;
-            }
-            const float v = mode == BlendMode::Average ? px[0] / count : px[0];
-            const float u = std::clamp(v * scale + offset, 0.0f, float(entries - 1));
-            const int i = std::min(int(u), entries - 2);
-            const float w = u - float(i);
-            const float* e = table.rgba.data() + 4 * std::size_t(i);
-            float c[4];
-            for (int k = 0; k < 4; ++k)
-                c[k] = e[k] * (1.0f - w) + e[k + 4] * w;
-            px[0] = std::clamp(c[0] * c[3], 0.0f, 1.0f);
-            px[1] = std::clamp(c[1] * c[3], 0.0f, 1.0f);
-            px[2] = std::clamp(c[2] * c[3], 0.0f, 1.0f);
-            px[3] = std::clamp(c[3], 0.0f, 1.0f);
-        }
+/// A projection's pixels as the passes leave them (texel value or sum, count, flag) in the
+/// volume's units: value, or the values' sum, then the count (render/Composite.h's raw pixels).
+void nativeProjections(Image& image, BlendMode mode, const TexelMapping& m) {
+    for (std::size_t p = 0; p + 3 < image.rgba.size(); p += 4) {
+        float* px = &image.rgba[p];
+        const double count = px[1];
+        px[0] = count > 0.0
+                    ? float(px[0] * m.scale + (mode == BlendMode::Average ? count : 1.0) * m.offset)
+                    : 0.0f;
+        px[2] = px[3] = 0.0f;
+    }
 }
 
 using detail::Clock;
@@ -203,7 +185,10 @@ Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     const bool projection =
         options.mode != BlendMode::Composite && options.mode != BlendMode::Isosurface;
     Image image = readBack(pass, drawn, options.height, options.parts == 1, projection, stats);
-    if (projection) resolveProjections(image, options.mode, table, mPool->texelMapping());
+    if (projection) { // parts stay raw: they combine by their mode (render/Composite.h)
+        nativeProjections(image, options.mode, mPool->texelMapping());
+        if (options.parts == 1) resolveProjections(image, options.mode, table);
+    }
     stats.readbackMs = msSince(readStart);
     if (captures) {
         const auto captureStart = Clock::now();

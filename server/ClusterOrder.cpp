@@ -105,6 +105,19 @@ void putOptions(Writer& w, const render::RenderOptions& o) {
     w.u32(o.part);
     w.u64(o.hostKeptBefore);
     w.u32(o.stride);
+    w.u8(std::uint8_t(o.mode));
+    w.f64(o.isoValue);
+    w.u8(o.clip.cropped);
+    for (double v : o.clip.cropMin)
+        w.f64(v);
+    for (double v : o.clip.cropMax)
+        w.f64(v);
+    w.u32(o.clip.planeCount);
+    for (std::uint32_t i = 0; i < o.clip.planeCount; ++i) {
+        for (double v : o.clip.planes[i].normal)
+            w.f64(v);
+        w.f64(o.clip.planes[i].offset);
+    }
 }
 
 render::RenderOptions getOptions(Reader& r) {
@@ -143,6 +156,25 @@ render::RenderOptions getOptions(Reader& r) {
     o.part = r.u32("part");
     o.hostKeptBefore = r.u64("hostKeptBefore");
     o.stride = r.u32("stride");
+    const std::uint8_t mode = r.u8("mode");
+    if (mode > std::uint8_t(render::BlendMode::Isosurface))
+        throw std::runtime_error("cluster order: mode " + std::to_string(mode) + " is not a mode");
+    o.mode = render::BlendMode(mode);
+    o.isoValue = r.f64("isoValue");
+    o.clip.cropped = r.flag("clip.cropped");
+    for (double& v : o.clip.cropMin)
+        v = r.f64("clip.cropMin");
+    for (double& v : o.clip.cropMax)
+        v = r.f64("clip.cropMax");
+    o.clip.planeCount = r.u32("clip.planeCount");
+    if (o.clip.planeCount > render::Clip::kMaxPlanes)
+        throw std::runtime_error("cluster order: " + std::to_string(o.clip.planeCount) +
+                                 " clip planes");
+    for (std::uint32_t i = 0; i < o.clip.planeCount; ++i) {
+        for (double& v : o.clip.planes[i].normal)
+            v = r.f64("clip.planes.normal");
+        o.clip.planes[i].offset = r.f64("clip.planes.offset");
+    }
     return o;
 }
 

@@ -3,6 +3,7 @@
 #include "brickstore/Error.h"
 #include "render/BrickPool.h"
 #include "render/Classification.h"
+#include "render/Composite.h"
 #include "render/EglContext.h"
 #include "render/RefinementEstimate.h"
 #include "render/RendererChoice.h"
@@ -256,17 +257,12 @@ void RenderService::prepare(FrameDrawing& d) {
         throw VolumeOutOfService("volume '" + s.volume->name + "' is out of service: " + *why);
     std::string_view name = protocol::rendererName(o.renderer);
     d.rendererChoice = "asked for " + std::string(name);
-    const auto& mc = s.modeAndClip;
-    const bool composite =
-        mc.mode == protocol::BlendMode::Composite && !mc.cropped && mc.planes.empty();
+
     if (o.renderer == protocol::Renderer::Auto) {
         const render::RendererChoice& choice = autoChoice();
         name = choice.name;
         d.rendererChoice = choice.reason;
     }
-    if (!composite && mConfig.cluster && mConfig.cluster->ranks() > 1)
-        throw std::invalid_argument("mode: across MPI ranks frames are composite and uncut only "
-                                    "so far (SetModeAndClip)");
     d.kind = render::RendererRegistry::builtin().find(name);
     if (!d.kind) throw std::runtime_error("no renderer " + std::string(name));
     if (d.kind->needsGl) makeContext();
@@ -371,6 +367,16 @@ render::Image RenderService::drawRegion(render::Renderer& renderer, const FrameD
     } catch (const ClusterFailed&) {
         withCounters([](RenderCounters& c) { c.clusterFailures += 1; });
         throw;
+    }
+    if (const auto combine = render::combineFor(options.mode);
+        combine != render::PartsCombine::Over) { // a projection's combined values, as colours
+        const auto levels = std::uint32_t(s.volume->store->layout().levels().size());
+        const auto level = std::min<std::uint32_t>(std::uint32_t(options.level), levels - 1);
+        render::resolveProjections(image, options.mode,
+                                   *mClassifications
+                                        ->get(*s.volume->store, level, *s.tf, nullptr, nullptr,
+                                              render::SkipRule::of(options))
+                                        ->table(1.0));
     }
     // The frame's work is every rank's; its time is rank 0's wall time.
     stats.samples = ranks.samples();

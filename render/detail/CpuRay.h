@@ -130,8 +130,8 @@ inline Rgba shade(const Frame& f, Rgba c, glm::vec3 diffs, glm::vec3 dir) {
 struct Accum {
     float r = 0, g = 0, b = 0, t = 1;
     /// The projections (BlendMode Maximum, Minimum, Average): the largest, smallest or summed
-    /// value of the samples so far, and how many there were; resolveProjection() turns them
-    /// into the colour above once the ray is done.
+    /// value of the samples so far, and how many there were; the frame's image carries them
+    /// raw and render::resolveProjections turns them into colours.
     float v = 0;
     std::uint32_t n = 0;
 };
@@ -412,17 +412,6 @@ inline bool marchConstantMode(const Frame& f, float value, int& k, int kEnd, Acc
         if (!project(f, acc, value)) return false;
     }
     return true;
-}
-
-/// A projecting ray's colour once it is done: its value (the mean for Average) through the
-/// function as authored, premultiplied; transparent without samples.
-inline void resolveProjection(const Frame& f, Accum& acc) {
-    if (acc.n == 0) return;
-    const Rgba c = classify(f, f.mode == BlendMode::Average ? acc.v / float(acc.n) : acc.v);
-    acc.r = c.r * c.a;
-    acc.g = c.g * c.a;
-    acc.b = c.b * c.a;
-    acc.t = 1.0f - c.a;
 }
 
 /// Samples [k, kEnd) of a brick of one value `value`; false once the ray is opaque.

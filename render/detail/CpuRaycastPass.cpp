@@ -200,7 +200,7 @@ void marchPass(brickstore::VoxelType type, const Frame& f, PixelLattice lattice,
 }
 
 Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height,
-              const Footprint& marched, bool clamp) {
+              const Footprint& marched, bool clamp, bool raw) {
     Image image(width, height); // transparent black
     if (!marched.visible) return image;
     const PixelRect& m = marched.rect;
@@ -211,6 +211,11 @@ Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height,
                               for (std::uint32_t x = m.x; x < m.x + m.width; ++x) {
                                   const Accum& c = rays[std::size_t(y) * width + x].acc;
                                   float* px = image.pixel(x, y);
+                                  if (raw) {
+                                      px[0] = c.v;
+                                      px[1] = float(c.n);
+                                      continue;
+                                  }
                                   px[0] = std::clamp(c.r, 0.0f, top);
                                   px[1] = std::clamp(c.g, 0.0f, top);
                                   px[2] = std::clamp(c.b, 0.0f, top);

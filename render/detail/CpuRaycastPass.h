@@ -27,8 +27,8 @@ void marchPass(brickstore::VoxelType type, const Frame& f, PixelLattice lattice,
 /// The region's image: the rays' colours over `marched` (region coordinates; not visible: no
 /// pixel), transparent black elsewhere; clamped to [0, 1] unless `clamp` is false (a part's
 /// segments, which the compositing clamps once laid together: a shaded segment's colour may
-/// exceed 1).
+/// exceed 1). `raw`: a projection's pixels (value, count, 0, 0; render/Composite.h).
 Image imageOf(const RayStates& rays, std::uint32_t width, std::uint32_t height,
-              const Footprint& marched, bool clamp);
+              const Footprint& marched, bool clamp, bool raw = false);
 
 } // namespace bc::render::detail

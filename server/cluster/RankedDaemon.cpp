@@ -94,6 +94,7 @@ SliceLayout layoutOf(render::PartitionCache& partitions, const brickstore::Brick
     s.frame.width = slice.width;
     s.frame.height = slice.height;
     s.frame.frontToBack = partition.frontToBack(g, view.basis);
+    s.frame.combine = render::combineFor(options.mode);
     for (std::uint32_t r = 0; r < ranks; ++r) {
         const render::Footprint whole = render::footprint(g, partition.region(r), view);
         render::Footprint local;

@@ -185,7 +185,7 @@ Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,
     if (covered) {
         band = Image(covered->width, covered->height);
         for (const PartialImage& p : pieces)
-            render::compositeUnder(band, *covered, p);
+            render::combineUnder(band, *covered, p, frame.combine);
     }
     if (me != std::uint32_t(root)) {
         if (covered) {
@@ -232,7 +232,7 @@ Image compositeDirectSend(MPI_Comm comm, int root, const SortLastFrame& frame,
             std::memcpy(out.pixel(b.rect.x, b.rect.y + y), b.image.pixel(0, y),
                         std::size_t(b.rect.width) * 4 * sizeof(float));
     }
-    render::clampToUnit(out);
+    if (frame.combine == render::PartsCombine::Over) render::clampToUnit(out);
     stats.ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return out;

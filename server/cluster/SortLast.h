@@ -43,6 +43,9 @@ struct SortLastFrame {
     std::uint32_t width = 0, height = 0;
     std::vector<render::Footprint> footprints;
     std::vector<std::uint32_t> frontToBack;
+    /// How the parts combine: over (composite, isosurface), or a projection's raw pixels,
+    /// which the root then resolves (render::resolveProjections).
+    render::PartsCombine combine = render::PartsCombine::Over;
 };
 
 struct CompositeStats {
@@ -57,7 +60,8 @@ std::array<std::uint32_t, 2> bandRows(std::uint32_t height, std::uint32_t band,
 
 /// Collective over `comm` (every rank calls it with the same frame, root and tag). `mine`: this
 /// rank's partial image over frame.footprints[rank].rect (ignored when that is not visible).
-/// Returns the composited frame, clamped to [0, 1], at `root`, an empty image elsewhere.
+/// Returns the composited frame, clamped to [0, 1] (raw for a projection), at `root`, an empty
+/// image elsewhere.
 /// Messages carry `tag` (distinct per frame in flight). @throw ClusterError when a message
 /// has not arrived within `timeout` (naming the ranks it waits for) or MPI fails; the
 /// communicator is not usable for further frames after that. std::invalid_argument when the

@@ -233,13 +233,61 @@ Image partsFrame(Renderer& renderer, test::TestStore& t, const TransferFunction&
         images.push_back({f.rect, renderer.render(*t.store, *t.cache, tf, cam, po, stats)});
         samples += stats.samples;
     }
-    return compositeFrontToBack(o.width, o.height, images);
+    const PartsCombine how = combineFor(o.mode);
+    Image frame = compositeFrontToBack(o.width, o.height, images, how);
+    if (how != PartsCombine::Over) // a projection's combined values: the table's colours
+        resolveProjections(frame, o.mode, tf.table(1.0, kClassificationTableEntries));
+    return frame;
 }
 
 Image partsFrame(test::TestStore& t, const TransferFunction& tf, const Camera& cam,
                  const RenderOptions& o, std::uint32_t parts, std::uint64_t& samples) {
     CpuRaycaster raycaster;
     return partsFrame(raycaster, t, tf, cam, o, parts, samples);
+}
+
+// The other modes: the projections' parts combine by max, min and sums, the isosurface's over
+// (the front-most hit), whole and cut, to the one-part frame.
+TEST(PartitionFrames, EveryModesPartsCombineToTheOnePartFrame) {
+    auto t = test::ingestRealScan("cthead");
+    if (!t) return test::missingData("scan cthead");
+    const LevelGeometry g = LevelGeometry::of(*t->store, 0);
+    const auto bone = TransferFunction::preset("ct-bone", t->stats);
+    const auto ramp = test::greyRamp(t->stats);    // the average's radiograph
+    const auto low = TransferFunction::fromPoints( // the minimum's: opaque at the lowest values
+        {{Placement::Value, t->stats.valueMin, {1, 1, 1, 1}},
+         {Placement::Value, t->stats.valueMax, {0, 0, 0, 0}}},
+        "low", t->stats);
+    const Camera cam = testCameras(g.box)[3];
+    for (const BlendMode mode :
+         {BlendMode::Maximum, BlendMode::Minimum, BlendMode::Average, BlendMode::Isosurface})
+        for (const bool cut : {false, true}) {
+            const TransferFunction& tf = mode == BlendMode::Average   ? ramp
+                                         : mode == BlendMode::Minimum ? low
+                                                                      : bone;
+            RenderOptions o;
+            o.width = o.height = 80;
+            o.mode = mode;
+            o.isoValue = 0.4 * (tf.domainMin() + tf.domainMax());
+            if (cut) {
+                o.clip.cropped = true;
+                o.clip.cropMin = {20, 10, 30};
+                o.clip.cropMax = {230, 240, 200};
+                o.clip.planeCount = 1;
+                o.clip.planes[0] = {{-1, 0.2, 0.3}, 170};
+            }
+            FrameStats whole;
+            const Image one = test::cpuFrame(*t, tf, cam, o, &whole);
+            for (std::uint32_t parts : {2u, 5u}) {
+                std::uint64_t samples = 0;
+                const Image composited = partsFrame(*t, tf, cam, o, parts, samples);
+                // The average's sums add in another order: within float rounding.
+                EXPECT_LE(compareImages(one, composited).maxAbs,
+                          mode == BlendMode::Average ? 1e-5 : 0.0)
+                    << toString(mode) << (cut ? " cut, " : ", ") << parts << " parts";
+                EXPECT_GT(test::alphaSum(composited), 1.0) << toString(mode);
+            }
+        }
 }
 
 TEST(PartitionFrames, PartsCompositeToTheOnePartFrameWithItsSamples) {

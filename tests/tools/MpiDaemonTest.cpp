@@ -175,6 +175,47 @@ std::vector<client::ReceivedFrame> orbit(const client::ClientConfig& config,
     return out;
 }
 
+/// One frame of each mode (MIP, the isosurface at the middle value, the average), cut to a box
+/// and a plane, of one view.
+std::vector<client::ReceivedFrame> cutModes(const client::ClientConfig& config,
+                                            const std::string& volume) {
+    client::Client c(config);
+    const auto v = c.openVolume(volume);
+    c.setTransferFunction(preset("ct-bone"));
+    protocol::RenderOptions o = smallCpuFrames(72);
+    o.codec = protocol::Codec::Raw;
+    o.techniques &= ~protocol::kTechEarlyTermination;
+    c.setRenderOptions(o);
+    protocol::SetModeAndClip m;
+    m.cropped = true;
+    for (int a = 0; a < 3; ++a) {
+        m.cropMin[a] = 0.1 * v.dims[a] * v.spacingMm[a];
+        m.cropMax[a] = 0.8 * v.dims[a] * v.spacingMm[a];
+    }
+    m.planes = {protocol::ClipPlane{{1, 0.3, 0}, -0.4 * v.dims[0] * v.spacingMm[0]}};
+    std::vector<client::ReceivedFrame> out;
+    std::uint32_t id = 1;
+    for (const auto mode : {protocol::BlendMode::Maximum, protocol::BlendMode::Isosurface,
+                            protocol::BlendMode::Average}) {
+        m.mode = mode;
+        m.isoValue = mode == protocol::BlendMode::Isosurface ? 0.5 * (v.valueMin + v.valueMax) : 0;
+        c.setModeAndClip(m);
+        if (mode == protocol::BlendMode::Average) { // a grey ramp: a radiograph
+            protocol::SetTransferFunction ramp;
+            ramp.kind = protocol::TfKind::Points;
+            ramp.shadingSource = protocol::ShadingSource::Message;
+            ramp.points = {{protocol::Placement::Fraction, 0, {0, 0, 0, 0}},
+                           {protocol::Placement::Fraction, 1, {1, 1, 1, 1}}};
+            c.setTransferFunction(ramp);
+        }
+        c.setCamera(orbitCamera(v, 40.0 * id, id));
+        ++id;
+        c.requestFrame();
+        out.push_back(c.nextFrame());
+    }
+    return out;
+}
+
 /// The first `passes` refined frames at rest of one view under an error bound at rest, early
 /// termination off: the pass at the session's step, then at half of it, and so on (72^2 frames
 /// are too small for the sparse check that would start at half the step).
@@ -374,6 +415,35 @@ TEST_F(MpiDaemon, TwoRanksServeTheOneProcessGpuFrames) {
 using MpiDaemonSlow = MpiDaemon;
 TEST_F(MpiDaemonSlow, FourRanksServeTheOneProcessGpuFrames) {
     expectRanksServeTheOneProcessGpuFrames(4);
+}
+
+// A session's modes and cuts across two ranks: the projections combine by their mode, the
+// isosurface over front to back, and rank 0 maps the combined values through the table.
+TEST_F(MpiDaemon, TwoRanksServeTheOneProcessFramesOfEachModeCut) {
+#ifdef BC_MPIEXEC
+    const std::string config = writeConfig(
+        "c.toml", "[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [96, 96, 96]\n");
+    const std::string onePort = dir.file("one.port"), port = dir.file("ranks.port");
+    Job one = startJob(
+        dir, {"-np", "1", BC_BRICKCASTD_EXE, "--config", config, "--port-file", onePort, "--quiet"},
+        onePort, 120);
+    JobGuard oneGuard{one};
+    ASSERT_TRUE(one.started) << one.text();
+    const auto want = cutModes(one.client, "p");
+    Job job = startJob(
+        dir, {"-np", "2", BC_BRICKCASTD_EXE, "--config", config, "--port-file", port, "--quiet"},
+        port, 120);
+    JobGuard guard{job};
+    ASSERT_TRUE(job.started) << job.text();
+    const auto got = cutModes(job.client, "p");
+    for (std::size_t i = 0; i < want.size(); ++i) {
+        EXPECT_LE(maxLevels(got[i], want[i]), 1) << "mode " << i;
+        EXPECT_GT(std::count_if(want[i].rgba.begin(), want[i].rgba.end(),
+                                [](std::uint8_t b) { return b > 0; }),
+                  100)
+            << "mode " << i << ": the frame shows (nearly) nothing";
+    }
+#endif
 }
 
 // Under an error bound at rest, each refinement pass halves the step: the worker ranks draw

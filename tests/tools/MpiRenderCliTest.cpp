@@ -108,6 +108,26 @@ TEST_F(MpiRenderCli, TwoAndFourRanksDrawTheOneProcessFrameOfARealScan) {
         }
 }
 
+// Each mode, whole and cut, across two ranks: the projections combine by max, min or sums
+// (render/Composite.h), the isosurface over front to back (the front-most hit).
+TEST_F(MpiRenderCli, TwoRanksDrawTheOneProcessFrameOfEveryModeWholeAndCut) {
+    if (!test::haveData("stanford_cthead_256x256x113_uint16.raw"))
+        return test::missingData("scan cthead");
+    const std::string store = dir.file("cthead.bcs");
+    auto r = brickcast("ingest " + test::dataPath("stanford_cthead_256x256x113_uint16.raw") +
+                       " --dims 256,256,113 --type u16 --spacing 1,1,2 --endian little --brick 32 "
+                       "-q -o " +
+                       store);
+    ASSERT_EQ(r.exitCode, 0) << r.text;
+    // Without early termination the ranks take the one process's samples. An isosurface's
+    // ray stops at its hit in each part, so the ranks take more: it is compared as with early
+    // termination (no count of samples).
+    for (const std::string mode : {"mip", "minip", "average", "iso --iso 1200"})
+        for (const char* cut : {"", " --crop 20,230,10,250,20,200 --clip=-1,0.4,0.2,180"})
+            expectRanksDrawTheFrame(store, "--tf ct-bone --orbit 30,20 --mode " + mode + cut, 2,
+                                    mode.rfind("iso", 0) == 0);
+}
+
 TEST_F(MpiRenderCli, AGeneratedVolumeUnderAHostBudgetPerRankSmallerThanIt) {
     // 192^3 u8 vessels (7 MiB of voxels, 6^3 bricks of 32): each rank's host cache holds
     // 1 MiB, so every rank draws its part in batches, as one process does.

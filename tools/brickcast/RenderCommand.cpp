@@ -318,7 +318,11 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
     const auto ranks = std::uint32_t(mpi.size()), me = std::uint32_t(mpi.rank());
     const render::Partition partition = render::Partition::ofLevel(*store, level, ranks);
     const render::View view = render::View::of(camera, options.width, options.height);
-    SortLastFrame frame{options.width, options.height, {}, partition.frontToBack(g, view.basis)};
+    SortLastFrame frame{options.width,
+                        options.height,
+                        {},
+                        partition.frontToBack(g, view.basis),
+                        render::combineFor(options.mode)};
     for (std::uint32_t r = 0; r < ranks; ++r)
         frame.footprints.push_back(render::footprint(g, partition.region(r), view));
     brickstore::BrickCache cache(*store, brickstore::BrickCacheConfig{o.hostBudgetMb << 20});
@@ -365,6 +369,12 @@ void renderAcrossRanks(const RenderCliOptions& o, const server::cluster::MpiRunt
     MPI_Gather(mine, 5, MPI_DOUBLE, all.data(), 5, MPI_DOUBLE, 0, MPI_COMM_WORLD);
     if (me != 0) return;
     checkLeafTables(*store, level);
+    if (frame.combine != render::PartsCombine::Over) // the projection's combined values
+        render::resolveProjections(
+            image, options.mode,
+            *classifications
+                 .get(*store, level, tf, nullptr, nullptr, render::SkipRule::of(options))
+                 ->table(1.0));
     render::writePng(o.output, image);
     double maxMs = 0, sumMs = 0, bytes = 0;
     std::uint64_t samples = 0;
