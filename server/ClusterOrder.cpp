@@ -105,6 +105,13 @@ void putOptions(Writer& w, const render::RenderOptions& o) {
     w.u32(o.part);
     w.u64(o.hostKeptBefore);
     w.u32(o.stride);
+    // The mode and clip only when the frame has them, so that a composite, uncut frame's order
+    // stays as small as before: written always, the 62 bytes made a stopped rank's frame fail
+    // as "an order's broadcast did not complete" rather than naming the rank that did not
+    // answer (MpiDaemon.ARankKilledOrStoppedFailsItsFramesWithinTheTimeout, Open MPI 4.1).
+    const bool cut = o.mode != render::BlendMode::Composite || o.clip.any();
+    w.u8(cut);
+    if (!cut) return;
     w.u8(std::uint8_t(o.mode));
     w.f64(o.isoValue);
     w.u8(o.clip.cropped);
@@ -156,6 +163,7 @@ render::RenderOptions getOptions(Reader& r) {
     o.part = r.u32("part");
     o.hostKeptBefore = r.u64("hostKeptBefore");
     o.stride = r.u32("stride");
+    if (!r.flag("cut")) return o;
     const std::uint8_t mode = r.u8("mode");
     if (mode > std::uint8_t(render::BlendMode::Isosurface))
         throw std::runtime_error("cluster order: mode " + std::to_string(mode) + " is not a mode");

@@ -339,7 +339,7 @@ class VtkScene:
         return "?"
 
 
-def make_mapper(vtk, kind, image, step_mm, crop_box):
+def make_mapper(vtk, kind, image, step_mm, crop_box, blend="composite"):
     if kind == "vtk-cpu":
         m = vtk.vtkFixedPointVolumeRayCastMapper()
         m.SetImageSampleDistance(1.0)
@@ -352,7 +352,8 @@ def make_mapper(vtk, kind, image, step_mm, crop_box):
     m.AutoAdjustSampleDistancesOff()
     m.LockSampleDistanceToInputSpacingOff()
     m.SetSampleDistance(step_mm)
-    m.SetBlendModeToComposite()
+    {"composite": m.SetBlendModeToComposite, "mip": m.SetBlendModeToMaximumIntensity,
+     "minip": m.SetBlendModeToMinimumIntensity}[blend]()
     m.SetInputData(image)
     if crop_box is not None:
         m.CroppingOn()
@@ -378,6 +379,8 @@ def brickcast_render(args, store, out_png, tf, view, size, step, extra):
            "--orbit", ",".join("%g" % v for v in view["orbit"]),
            "--size", f"{size},{size}", "--step", "%g" % step,
            "--fov", "%g" % args.fov, "--stats", stats_path] + extra
+    if getattr(args, "blend", "composite") != "composite":  # every frame of the pair in the mode
+        cmd += ["--mode", args.blend]
     if view["up"]:
         cmd += ["--up", ",".join("%g" % u for u in view["up"])]
     t = time.perf_counter()
@@ -525,6 +528,8 @@ class ReferenceCache:
                "spacing": spec["spacing"], "tf": sha256_of(tf_path), "view": view["text"],
                "fov": self.args.fov, "size": size, "shade": shade,
                "model": self.model(store, scan, tf, view, shade), **what}
+        if getattr(self.args, "blend", "composite") != "composite":  # composite keys unchanged
+            key["blend"] = self.args.blend
         digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:20]
         return key, digest
 
@@ -636,7 +641,7 @@ def vtk_fixed_point(args, ctx, scan, tf, tfd, view, size, shade):
     scene = ctx["scenes"][size]
     box_max = [d * s for d, s in zip(spec["dims"], spec["spacing"])]
     step_mm = args.step * min(spec["spacing"])
-    mapper = make_mapper(vtk, "vtk-cpu", ctx["image"], step_mm, ([0.0] * 3, box_max))
+    mapper = make_mapper(vtk, "vtk-cpu", ctx["image"], step_mm, ([0.0] * 3, box_max), args.blend)
     scene.set_volume(mapper, vtk_property(vtk, tfd, args.tf_nodes, shade, min(spec["spacing"])))
     scene.set_camera(orbit_camera(box_max, *view["orbit"][:2],
                                   dist=view["orbit"][2] if len(view["orbit"]) > 2 else 1.0,
@@ -714,6 +719,9 @@ def parse_args():
                          "step; bench/vtk/README.md); a pre-integrated frame has no same-step "
                          "reference (its dB after / is n/a)")
     ap.add_argument("--fov", type=float, default=30.0)
+    ap.add_argument("--blend", choices=["composite", "mip", "minip"], default="composite",
+                    help="the blend mode of both sides: brickcast --mode, VTK's mapper's "
+                         "SetBlendMode (its fixed-point mapper draws composite, MIP and MinIP)")
     ap.add_argument("--frames", type=int, default=10, help="timed frames per renderer and pair")
     ap.add_argument("--warmup", type=int, default=2)
     ap.add_argument("--bc-ert", default="0.99", help="brickcast --ert (its default 0.99)")

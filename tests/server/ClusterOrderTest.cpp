@@ -73,6 +73,9 @@ void expectSame(const render::RenderOptions& a, const render::RenderOptions& b) 
     EXPECT_EQ(a.part, b.part);
     EXPECT_EQ(a.hostKeptBefore, b.hostKeptBefore);
     EXPECT_EQ(a.stride, b.stride);
+    EXPECT_EQ(a.mode, b.mode);
+    EXPECT_EQ(a.isoValue, b.isoValue);
+    EXPECT_EQ(a.clip, b.clip);
 }
 
 TEST(ClusterOrder, EveryFieldArrivesAsSent) {
@@ -88,6 +91,19 @@ TEST(ClusterOrder, EveryFieldArrivesAsSent) {
     EXPECT_EQ(got.camera.orthoHeight, sent.camera.orthoHeight);
     EXPECT_EQ(got.tf, sent.tf);
     expectSame(got.options, sent.options);
+    // A mode and a cut travel too (only when the frame has them: ClusterOrder.cpp).
+    ClusterOrder cut = anOrder();
+    cut.options.preintegrate = false; // composite only
+    cut.options.mode = render::BlendMode::Isosurface;
+    cut.options.isoValue = 612.5;
+    cut.options.clip.cropped = true;
+    cut.options.clip.cropMin = {1, 2, 3};
+    cut.options.clip.cropMax = {40, 50, 60};
+    cut.options.clip.planeCount = 2;
+    cut.options.clip.planes[0] = {{1, 0, 0}, -4};
+    cut.options.clip.planes[1] = {{0, -0.5, 2}, 7};
+    expectSame(decodeOrder(encodeOrder(cut)).options, cut.options);
+    EXPECT_GT(encodeOrder(cut).size(), encodeOrder(sent).size());
 }
 
 std::string errorOf(const std::vector<std::uint8_t>& bytes) {

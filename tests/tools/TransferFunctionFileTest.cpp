@@ -23,7 +23,7 @@ TEST(TransferFunctionFileTest, NamesTheFileOrListsThePresets) {
         ADD_FAILURE() << "accepted an unknown preset";
     } catch (const render::RenderInputError& e) {
         EXPECT_EQ(e.file(), "no-such-preset");
-        EXPECT_NE(std::string(e.what()).find("ct-bone, ct-skin, mr, smoke, vessels"),
+        EXPECT_NE(std::string(e.what()).find("ct-bone, ct-skin, grey, mr, smoke, vessels"),
                   std::string::npos)
             << e.what();
     }
