@@ -19,6 +19,23 @@ void requireSize(const Image& image, const PixelRect& rect, const char* what) {
                                     std::to_string(rect.width) + "x" + std::to_string(rect.height));
 }
 
+/// Runs `pixel(f, b)` over the pixels `back` shares with `frame` (at `frameRect`): f the frame's
+/// RGBA, b the back image's.
+template <class Pixel>
+void forSharedPixels(Image& frame, const PixelRect& frameRect, const PartialImage& back,
+                     const Pixel& pixel) {
+    requireSize(frame, frameRect, "the frame");
+    requireSize(back.image, back.rect, "a partial image");
+    const auto shared = overlap(frameRect, back.rect);
+    if (!shared) return;
+    for (std::uint32_t y = shared->y; y < shared->y + shared->height; ++y) {
+        float* f = frame.pixel(shared->x - frameRect.x, y - frameRect.y);
+        const float* b = back.image.pixel(shared->x - back.rect.x, y - back.rect.y);
+        for (std::uint32_t x = 0; x < shared->width; ++x, f += 4, b += 4)
+            pixel(f, b);
+    }
+}
+
 } // namespace
 
 std::optional<PixelRect> overlap(const PixelRect& a, const PixelRect& b) {
@@ -79,40 +96,22 @@ void resolveProjections(Image& image, BlendMode mode, const TransferFunctionTabl
 void combineUnder(Image& frame, const PixelRect& frameRect, const PartialImage& back,
                   PartsCombine how) {
     if (how == PartsCombine::Over) return compositeUnder(frame, frameRect, back);
-    requireSize(frame, frameRect, "the frame");
-    requireSize(back.image, back.rect, "a partial image");
-    const auto shared = overlap(frameRect, back.rect);
-    if (!shared) return;
-    for (std::uint32_t y = shared->y; y < shared->y + shared->height; ++y) {
-        float* f = frame.pixel(shared->x - frameRect.x, y - frameRect.y);
-        const float* b = back.image.pixel(shared->x - back.rect.x, y - back.rect.y);
-        for (std::uint32_t x = 0; x < shared->width; ++x, f += 4, b += 4) {
-            if (!(b[1] > 0.0f)) continue; // no samples behind
-            if (!(f[1] > 0.0f) || how == PartsCombine::Sum) {
-                f[0] = f[1] > 0.0f ? f[0] + b[0] : b[0];
-                f[1] += b[1];
-                continue;
-            }
-            if (how == PartsCombine::Maximum ? b[0] > f[0] : b[0] < f[0]) f[0] = b[0];
-            f[1] += b[1];
-        }
-    }
+    forSharedPixels(frame, frameRect, back, [how](float* f, const float* b) {
+        if (!(b[1] > 0.0f)) return; // no samples behind
+        if (!(f[1] > 0.0f) || how == PartsCombine::Sum)
+            f[0] = f[1] > 0.0f ? f[0] + b[0] : b[0];
+        else if (how == PartsCombine::Maximum ? b[0] > f[0] : b[0] < f[0])
+            f[0] = b[0];
+        f[1] += b[1];
+    });
 }
 
 void compositeUnder(Image& frame, const PixelRect& frameRect, const PartialImage& back) {
-    requireSize(frame, frameRect, "the frame");
-    requireSize(back.image, back.rect, "a partial image");
-    const auto shared = overlap(frameRect, back.rect);
-    if (!shared) return;
-    for (std::uint32_t y = shared->y; y < shared->y + shared->height; ++y) {
-        float* f = frame.pixel(shared->x - frameRect.x, y - frameRect.y);
-        const float* b = back.image.pixel(shared->x - back.rect.x, y - back.rect.y);
-        for (std::uint32_t x = 0; x < shared->width; ++x, f += 4, b += 4) {
-            const float t = 1.0f - f[3];
-            for (int c = 0; c < 4; ++c)
-                f[c] += t * b[c];
-        }
-    }
+    forSharedPixels(frame, frameRect, back, [](float* f, const float* b) {
+        const float t = 1.0f - f[3];
+        for (int c = 0; c < 4; ++c)
+            f[c] += t * b[c];
+    });
 }
 
 Image compositeFrontToBack(std::uint32_t width, std::uint32_t height,

@@ -65,21 +65,18 @@ void RenderSlot::setTransferFunction(std::shared_ptr<const render::TransferFunct
 }
 
 void RenderSlot::setOptions(const protocol::RenderOptions& options) {
-    {
-        std::lock_guard lock(mMutex);
-        markChanged();
-        mState.options = options;
-        mDirty = true;
-        mResetDelta = true;
-    }
-    changed();
+    changeDrawing([&](State& s) { s.options = options; });
 }
 
 void RenderSlot::setModeAndClip(const protocol::SetModeAndClip& modeAndClip) {
+    changeDrawing([&](State& s) { s.modeAndClip = modeAndClip; });
+}
+
+void RenderSlot::changeDrawing(const std::function<void(State&)>& change) {
     {
         std::lock_guard lock(mMutex);
         markChanged();
-        mState.modeAndClip = modeAndClip;
+        change(mState);
         mDirty = true;
         mResetDelta = true;
     }

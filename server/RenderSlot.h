@@ -101,6 +101,9 @@ class RenderSlot {
     void continueRefinement(std::uint32_t pass);
     void changed();
     void markChanged(); ///< with mMutex held
+    /// Applies `change` to the state; the next frame is due and the next delta frame a
+    /// keyframe (how new options, modes and cuts take effect).
+    void changeDrawing(const std::function<void(State&)>& change);
 
     RenderService& mService;
     Deliver mDeliver;

@@ -16,14 +16,6 @@ namespace {
 
 using test::TestStore;
 
-VolumeValueStats unitStats() {
-    VolumeValueStats s;
-    s.valueMin = 0.0;
-    s.valueMax = 1000.0;
-    s.histogram.assign(16, 1);
-    return s;
-}
-
 PointSpec at(double value, float a) {
     return {Placement::Value, value, {0.8f, 0.6f, 0.4f, a}};
 }
@@ -38,7 +30,7 @@ std::unique_ptr<TestStore> phantom() {
 TransferFunction band() {
     return TransferFunction::fromPoints(
         {at(0, 0), at(300, 0), at(400, 0.5f), at(600, 0.5f), at(600.5, 0), at(1000, 0)}, "band",
-        unitStats());
+        test::unitStats());
 }
 
 /// The table position of `value` in `t`.
@@ -73,8 +65,9 @@ TEST(SkipTables, EachModeKeepsTheValuesItMayNeed) {
     EXPECT_FALSE(average.transparent(0.0, 1.0));
     EXPECT_EQ(average.rgba[0], unit.rgba[0]);
     // A function with nothing visible: the projections keep nothing.
-    const auto none = TransferFunction::fromPoints({at(0, 0), at(1000, 0)}, "none", unitStats())
-                          .table(1.0, kClassificationTableEntries);
+    const auto none =
+        TransferFunction::fromPoints({at(0, 0), at(1000, 0)}, "none", test::unitStats())
+            .table(1.0, kClassificationTableEntries);
     EXPECT_TRUE(skipTableOf(none, {BlendMode::Maximum, 0.0}).transparent(0.0, 1000.0));
     EXPECT_TRUE(skipTableOf(none, {BlendMode::Minimum, 0.0}).transparent(0.0, 1000.0));
 }

@@ -14,14 +14,6 @@ namespace {
 
 using test::TestStore;
 
-VolumeValueStats unitStats() {
-    VolumeValueStats s;
-    s.valueMin = 0.0;
-    s.valueMax = 1000.0;
-    s.histogram.assign(16, 1);
-    return s;
-}
-
 PointSpec at(double value, float r, float g, float b, float a) {
     return {Placement::Value, value, {r, g, b, a}};
 }
@@ -31,7 +23,7 @@ TransferFunction thinPeak() {
     return TransferFunction::fromPoints({at(0, 1, 1, 1, 0), at(490, 1, 0.5f, 0.2f, 0),
                                          at(500, 1, 0.5f, 0.2f, 0.8f), at(510, 1, 0.5f, 0.2f, 0),
                                          at(1000, 1, 1, 1, 0)},
-                                        "thin peak", unitStats());
+                                        "thin peak", test::unitStats());
 }
 
 TEST(Preintegration, TransparentValuesGiveExactlyZero) {
@@ -78,7 +70,7 @@ TEST(Preintegration, APeakBetweenTwoTransparentValuesIsCaught) {
 TEST(Preintegration, ASegmentOfOneValueIsTheStepCorrectedOpacity) {
     const auto tf = TransferFunction::fromPoints(
         {at(0, 0.2f, 0.4f, 0.6f, 0.0f), at(300, 0.9f, 0.3f, 0.1f, 0.3f), at(1000, 1, 1, 1, 0.95f)},
-        "ramp", unitStats());
+        "ramp", test::unitStats());
     const PreintegratedTable t = tf.preintegrated();
     for (double d : {0.05, 0.5, 1.0, 2.0, 4.0}) {
         const TransferFunctionTable plain = tf.table(d);
@@ -118,7 +110,7 @@ TEST(Preintegration, NumericalEdges) {
     }
     // Opacity 1: a capped extinction, opaque at any step of 0.5 and more, finite integrals.
     const auto opaque = TransferFunction::fromPoints({at(0, 1, 1, 1, 1), at(1000, 1, 1, 1, 1)},
-                                                     "opaque", unitStats())
+                                                     "opaque", test::unitStats())
                             .preintegrated();
     const auto e = opaque.end(10.0), f = opaque.end(990.0);
     EXPECT_TRUE(std::isfinite(f.integral[0]));

@@ -211,6 +211,16 @@ inline void expectAThinSliceDrawsLess(render::Renderer& r, TestStore& t,
                 (unsigned long long)thin.samples);
 }
 
+/// The values of a volume running 0..1000 with a flat histogram: for transfer functions placed
+/// by value without a scan.
+inline render::VolumeValueStats unitStats() {
+    render::VolumeValueStats s;
+    s.valueMin = 0.0;
+    s.valueMax = 1000.0;
+    s.histogram.assign(16, 1);
+    return s;
+}
+
 /// A grey ramp over the volume's values, transparent black at the lowest and opaque white at
 /// the highest: an average projection's radiograph.
 inline render::TransferFunction greyRamp(const render::VolumeValueStats& stats) {

@@ -79,19 +79,31 @@ class MpiRenderCli : public ::testing::Test {
 #endif
     }
     void expectRanksDrawTheOneProcessGpuFrame(int ranks);
+    /// The real scan cthead ingested in bricks of 32 into the scratch folder: its store, or
+    /// "" when the data is missing (skipped) or the ingest failed (a failure recorded).
+    std::string ingestCthead() {
+        if (!test::haveData("stanford_cthead_256x256x113_uint16.raw")) {
+            test::missingData("scan cthead");
+            return {};
+        }
+        const std::string store = dir.file("cthead.bcs");
+        auto r = brickcast("ingest " + test::dataPath("stanford_cthead_256x256x113_uint16.raw") +
+                           " --dims 256,256,113 --type u16 --spacing 1,1,2 --endian little "
+                           "--brick 32 -q -o " +
+                           store);
+        if (r.exitCode != 0) {
+            ADD_FAILURE() << r.text;
+            return {};
+        }
+        return store;
+    }
 
     test::TempDir dir;
 };
 
 TEST_F(MpiRenderCli, TwoAndFourRanksDrawTheOneProcessFrameOfARealScan) {
-    if (!test::haveData("stanford_cthead_256x256x113_uint16.raw"))
-        return test::missingData("scan cthead");
-    const std::string store = dir.file("cthead.bcs");
-    auto r = brickcast("ingest " + test::dataPath("stanford_cthead_256x256x113_uint16.raw") +
-                       " --dims 256,256,113 --type u16 --spacing 1,1,2 --endian little --brick 32 "
-                       "-q -o " +
-                       store);
-    ASSERT_EQ(r.exitCode, 0) << r.text;
+    const std::string store = ingestCthead();
+    if (store.empty()) return;
     for (const char* view :
          {"--tf ct-bone --orbit 30,20", "--tf ct-skin --orbit 210,10 --up 0,0,-1"})
         for (int ranks : {2, 4}) {
@@ -111,14 +123,8 @@ TEST_F(MpiRenderCli, TwoAndFourRanksDrawTheOneProcessFrameOfARealScan) {
 // Each mode, whole and cut, across two ranks: the projections combine by max, min or sums
 // (render/Composite.h), the isosurface over front to back (the front-most hit).
 TEST_F(MpiRenderCli, TwoRanksDrawTheOneProcessFrameOfEveryModeWholeAndCut) {
-    if (!test::haveData("stanford_cthead_256x256x113_uint16.raw"))
-        return test::missingData("scan cthead");
-    const std::string store = dir.file("cthead.bcs");
-    auto r = brickcast("ingest " + test::dataPath("stanford_cthead_256x256x113_uint16.raw") +
-                       " --dims 256,256,113 --type u16 --spacing 1,1,2 --endian little --brick 32 "
-                       "-q -o " +
-                       store);
-    ASSERT_EQ(r.exitCode, 0) << r.text;
+    const std::string store = ingestCthead();
+    if (store.empty()) return;
     // Without early termination the ranks take the one process's samples. An isosurface's
     // ray stops at its hit in each part, so the ranks take more: it is compared as with early
     // termination (no count of samples).
