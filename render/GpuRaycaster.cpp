@@ -53,7 +53,9 @@ void GpuRaycaster::Gpu::uploadTable(const TransferFunctionTable& table) {
 
 GpuRaycaster::GpuRaycaster(const GpuRaycasterConfig& config)
     : mConfig(config), mGpu(std::make_unique<Gpu>()) {
-    mGpu->program = detail::buildShaderProgram(detail::ShaderProgram::Raycast);
+    mGpu->plainProgram = detail::buildShaderProgram(detail::ShaderProgram::Raycast);
+    mGpu->modesProgram = detail::buildShaderProgram(detail::ShaderProgram::RaycastModes);
+    mGpu->program = mGpu->plainProgram.get();
     GLuint vao = 0;
     glCreateVertexArrays(1, &vao);
     mGpu->vao = gl::VertexArray(vao);
@@ -139,6 +141,9 @@ GpuRaycaster::Prepared GpuRaycaster::prepare(const Scene& scene, const View& vie
     options.validate();
     checkView(view, options, true, true);
     refusePreintegration(options, "GPU raycaster");
+    mGpu->program = options.mode == BlendMode::Composite && !options.clip.any()
+                        ? mGpu->plainProgram.get()
+                        : mGpu->modesProgram.get();
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());

@@ -153,7 +153,7 @@ Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
         stats.occlusionReason = "a slice of a frame";
     else
         useStarts = prepareOcclusion(g, view.basis, sceneId, options, occupancy, stats);
-    const GLuint program = mGpu->program.get();
+    const GLuint program = mGpu->program;
     detail::setFrameUniforms(program, g, view.basis, options, table, *mPool);
     detail::setOccupancyUniforms(program, occupancy);
     detail::uniform1i(program, "uUseStart", useStarts);
@@ -232,7 +232,7 @@ bool GpuRaycaster::drawGuided(const BrickPlan& plan, const std::vector<std::size
     std::uint64_t sampled = 0;
     const BrickPlan now = withoutDeferred(plan, deferred, sampled);
     if (sampled >= mPool->capacity()) return false; // no slot would be left for a request
-    const GLuint program = mGpu->program.get();
+    const GLuint program = mGpu->program;
     detail::BatchPins pins{*mPool};
     auto uploadStart = Clock::now();
     std::size_t next = 0;
@@ -272,7 +272,7 @@ bool GpuRaycaster::drawGuided(const BrickPlan& plan, const std::vector<std::size
 }
 
 void GpuRaycaster::drawPass(int pass) {
-    const GLuint program = mGpu->program.get();
+    const GLuint program = mGpu->program;
     glBindFramebuffer(GL_FRAMEBUFFER, mGpu->fbo[(pass + 1) % 2].get());
     glBindTextureUnit(2, mGpu->accum[pass % 2].get());
     detail::uniform1i(program, "uFirstPass", pass == 0);
@@ -309,7 +309,7 @@ Image GpuRaycaster::readBack(int passes, const PixelRect& region, std::uint32_t 
 }
 
 void GpuRaycaster::bindFrame(std::size_t pageInts, std::uint64_t brickCount, bool feedback) {
-    const GLuint program = mGpu->program.get();
+    const GLuint program = mGpu->program;
     mGpu->resetFeedback(brickCount);
     glBindImageTexture(1, mGpu->resumeAt.get(), 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32I);
     detail::uniform1i(program, "uBrickCount", GLint(brickCount));
@@ -344,7 +344,7 @@ void GpuRaycaster::Gpu::clearRequests() {
 }
 
 void GpuRaycaster::Gpu::bindForDraw(GLuint poolTexture) {
-    glUseProgram(program.get());
+    glUseProgram(program);
     glBindVertexArray(vao.get());
     glBindTextureUnit(0, poolTexture);
     glBindTextureUnit(1, tf.get());

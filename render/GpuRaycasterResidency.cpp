@@ -160,7 +160,7 @@ void GpuRaycaster::uploadCells(const Scene& scene, const FrameClassification& cl
                                const RenderOptions& options, const BrickPlan& plan,
                                const std::vector<std::size_t>& deferred, std::uint64_t brickCount,
                                FrameStats& stats) {
-    const GLuint program = mGpu->program.get();
+    const GLuint program = mGpu->program;
     FineOccupancy* fine = frameCells(classified, options);
     detail::uniform1i(program, "uCells", fine != nullptr);
     if (!fine) {

@@ -40,7 +40,10 @@ struct BatchPins {
 } // namespace detail
 
 struct GpuRaycaster::Gpu {
-    gl::Program program;
+    /// The shader built for composite, uncut frames and with the modes and cuts
+    /// (ShaderPrograms.cpp); `program` is the frame's, one of the two (prepare()).
+    gl::Program plainProgram, modesProgram;
+    GLuint program = 0;
     gl::VertexArray vao;
     gl::Texture tf;
     gl::Buffer pages, counters;

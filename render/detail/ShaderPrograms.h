@@ -11,7 +11,8 @@ namespace bc::render::detail {
 
 /// The programs the renderers build; each has one row in the table of ShaderPrograms.cpp.
 enum class ShaderProgram {
-    Raycast,           ///< GpuRaycaster: one full-screen pass per brick batch
+    Raycast,           ///< GpuRaycaster: one full-screen pass per brick batch (composite, uncut)
+    RaycastModes,      ///< the same with every mode and the crop and clip (BC_MODES 1)
     OcclusionReduce,   ///< OcclusionFrustums: first-hit image -> nearest depth per block
     OcclusionFrustums, ///< OcclusionFrustums: one frustum per block -> ray starts
     OcclusionPieces,   ///< OcclusionFrustums: the box outside the last view -> ray starts

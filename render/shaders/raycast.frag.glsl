@@ -124,9 +124,16 @@ bool project(inout vec4 acc, float v) {
 }
 
 // Whether the ray is done: opaque enough (composite), hit (isosurface), finished (projections).
+// BC_MODES (ShaderPrograms.cpp): 0 builds the composite, uncut program, 1 the modes and cuts.
+#if BC_MODES
 bool finished(vec4 acc) {
     return uMode == 0 ? acc.a >= uErt : uMode == 4 ? acc.a > 0.0 : acc.b > 0.0;
 }
+#else
+bool finished(vec4 acc) {
+    return acc.a >= uErt;
+}
+#endif
 
 // The isosurface's hit on the step from sample k - 1 (below uIso) to sample k at parameter t
 // (at or above it), refined by 12 bisections within the slot's voxels; sample k itself when it
@@ -215,6 +222,7 @@ void main() {
     if (total <= 0) { outColor = acc; return; }
     // A crop or clip keeps samples [kFirst, total) of the same lattice.
     int kFirst = 0;
+#if BC_MODES
     if (uCropped || uPlaneCount > 0) {
         float ta = -3.0e38, tb = 3.0e38;
         clipInterval(o, d, ta, tb);
@@ -225,6 +233,7 @@ void main() {
         if (ka > 0.0) kFirst = ka < float(total) ? int(ka) : total;
         if (kFirst >= total) { outColor = acc; return; }
     }
+#endif
 
     // Occlusion frustums: no sample before the proxies' nearest face can be non-empty. The
     // lattice of sample positions stays that of the box entry; the start only drops samples.
@@ -305,6 +314,7 @@ void main() {
                 tHit = min(tHit, t);
                 float value = fetch(q, slot);
                 ++taken;
+#if BC_MODES
                 if (uMode == 4) {
                     if (value < uIso) continue;
                     vec3 h = rel + dv * isoHit(kFirst, k, t, t0, rel, dv, slot);
@@ -315,12 +325,14 @@ void main() {
                     if (!project(acc, value)) break;
                     continue;
                 }
+#endif
                 vec4 c = classify(value);
                 if (c.a <= 0.0) continue;
                 if (uShading) c = shade(c, q, slot, d);
                 composite(acc, c);
                 if (acc.a >= uErt) break;
             }
+#if BC_MODES
         } else if (e.x == -2 && kEnd > k && uMode != 0) {
             // A brick of one value: a projection takes it once a sample; an isosurface is hit
             // at its first sample or not at all (no gradient: the surface unshaded).
@@ -334,6 +346,7 @@ void main() {
                     if (!project(acc, value)) break;
                 }
             }
+#endif
         } else if (e.x == -2 && kEnd > k) {
             vec4 c = classify(intBitsToFloat(e.y));
             if (c.a > 0.0) tHit = min(tHit, t0 + (float(k) + 0.5) * uStepMm);
