@@ -312,14 +312,11 @@ std::string CpuRaycaster::simdTarget() {
 }
 CpuRaycaster::~CpuRaycaster() = default;
 
-Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& asked,
+Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOptions& options,
                            FrameStats& stats) {
     const auto frameStart = Clock::now();
-    asked.validate();
-    checkView(view, asked, true, true, true);
-    // An average takes every sample inside the volume: nothing is skipped.
-    RenderOptions options = asked;
-    if (options.mode == BlendMode::Average) options.skip = SkipMode::None;
+    options.validate();
+    checkView(view, options, true, true, true);
     stats = FrameStats{};
     const brickstore::BrickStore& store = scene.store;
     const auto levels = std::uint32_t(store.layout().levels().size());
@@ -346,8 +343,7 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     stats.occlusionReason = "not on the CPU raycaster";
     stats.totalMs = msSince(frameStart);
     // A projection's parts stay raw: they combine by their mode (render/Composite.h).
-    const bool projection =
-        options.mode != BlendMode::Composite && options.mode != BlendMode::Isosurface;
+    const bool projection = isProjection(options.mode);
     Image image = passes.image(options.parts == 1, projection);
     if (projection && options.parts == 1)
         resolveProjections(image, options.mode, *classified.table);

@@ -141,9 +141,8 @@ GpuRaycaster::Prepared GpuRaycaster::prepare(const Scene& scene, const View& vie
     options.validate();
     checkView(view, options, true, true);
     refusePreintegration(options, "GPU raycaster");
-    mGpu->program = options.mode == BlendMode::Composite && !options.clip.any()
-                        ? mGpu->plainProgram.get()
-                        : mGpu->modesProgram.get();
+    mGpu->program =
+        detail::compositeUncut(options) ? mGpu->plainProgram.get() : mGpu->modesProgram.get();
     ensurePool(scene.store);
     Prepared p;
     const auto levels = std::uint32_t(scene.store.layout().levels().size());
@@ -200,7 +199,7 @@ std::uint64_t GpuRaycaster::sceneKey(const brickstore::BrickStore& store, std::u
 bool GpuRaycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,
                                     std::uint64_t scene, const RenderOptions& options,
                                     const OccupancyTrees* octree, FrameStats& stats) {
-    if (!options.occlusionFrustums || !detail::drawsFrustums(options)) {
+    if (!options.occlusionFrustums || !detail::compositeUncut(options)) {
         if (mGpu->occlusion) mGpu->occlusion->invalidate();
         stats.occlusionReason = options.occlusionFrustums ? "composite, uncut frames only" : "off";
         return false;

@@ -147,7 +147,7 @@ Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     mGpu->uploadTable(table);
     const std::uint64_t sceneId = sceneKey(store, level, table, options);
     const bool guided = options.rayGuided && !slice;
-    const bool captures = options.occlusionFrustums && detail::drawsFrustums(options) && !slice;
+    const bool captures = options.occlusionFrustums && detail::compositeUncut(options) && !slice;
     bool useStarts = false;
     if (slice)
         stats.occlusionReason = "a slice of a frame";
@@ -182,8 +182,7 @@ Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     }
 
     const auto readStart = Clock::now();
-    const bool projection =
-        options.mode != BlendMode::Composite && options.mode != BlendMode::Isosurface;
+    const bool projection = isProjection(options.mode);
     Image image = readBack(pass, drawn, options.height, options.parts == 1, projection, stats);
     if (projection) { // parts stay raw: they combine by their mode (render/Composite.h)
         nativeProjections(image, options.mode, mPool->texelMapping());

@@ -225,8 +225,7 @@ void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_
     }
     samples += std::uint64_t(total);
     s.done = true;
-    if (mode != BlendMode::Composite && mode != BlendMode::Isosurface)
-        resolveProjection(mode, c.table, s);
+    if (isProjection(mode)) resolveProjection(mode, c.table, s);
 }
 
 /// Runs `pixel(x, y, i, samples, oracle)` for every pixel of `region` (i: its index in the

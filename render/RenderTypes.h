@@ -34,6 +34,10 @@ enum class BlendMode { Composite, Maximum, Minimum, Average, Isosurface };
 /// naming the choices otherwise.
 BlendMode parseBlendMode(const std::string& text);
 const char* toString(BlendMode mode);
+/// Maximum, Minimum or Average: a ray keeps one value, mapped through the table at the end.
+inline bool isProjection(BlendMode mode) {
+    return mode == BlendMode::Maximum || mode == BlendMode::Minimum || mode == BlendMode::Average;
+}
 
 /// Occlusion-frustum ray starts (render/OCCLUSION.md).
 struct OcclusionConfig {

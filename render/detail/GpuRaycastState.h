@@ -24,10 +24,10 @@ inline double msSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-/// Whether a frame may start its rays at the last frame's occlusion frustums and record its
-/// first hits for the next: composite, uncut frames (the first hits of a projection or a cut
-/// are not those of the scene's surfaces).
-inline bool drawsFrustums(const RenderOptions& options) {
+/// A composite, uncut frame: the only kind that may start its rays at the last frame's
+/// occlusion frustums and record its first hits for the next (those of a projection or a cut
+/// are not the scene's surfaces), and the kind the plain shader build draws.
+inline bool compositeUncut(const RenderOptions& options) {
     return options.mode == BlendMode::Composite && !options.clip.any();
 }
 
