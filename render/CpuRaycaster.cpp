@@ -86,17 +86,21 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.mode = o.mode;
     f.clip = ClipF::of(o.clip);
     f.iso = float(o.isoValue);
-    f.simd = o.simd && o.mode == BlendMode::Composite;
+    f.simd = o.simd;
     f.packets = f.simd && o.packets && !o.preintegrate;
     f.jitter = o.jitter;
+    f.running =
+        o.skip != SkipMode::None && (o.mode == BlendMode::Maximum || o.mode == BlendMode::Minimum);
     f.segment = o.stepVoxels;
     f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);
     return f;
 }
 
-/// Every brick of the level: what it draws and in which batch (`ends` as planBatches gives).
-std::vector<BrickRef> brickRefs(const BrickPlan& plan, const std::vector<std::size_t>& ends,
-                                std::uint64_t brickCount) {
+/// Every brick of the level: what it draws and in which batch (`ends` as planBatches gives),
+/// and under a running skip (f.running) the bound on its values that the mode compares.
+std::vector<BrickRef> brickRefs(const brickstore::BrickStore& store, const BrickPlan& plan,
+                                const std::vector<std::size_t>& ends, std::uint64_t brickCount,
+                                const Frame& f) {
     std::vector<BrickRef> bricks(std::max<std::uint64_t>(brickCount, 1));
     for (std::size_t batch = 0, i = 0; batch < ends.size(); ++batch)
         for (; i < ends[batch]; ++i) {
@@ -105,6 +109,10 @@ std::vector<BrickRef> brickRefs(const BrickPlan& plan, const std::vector<std::si
             ref.batch = std::uint32_t(batch);
             ref.slot = b.draw == BrickDraw::Constant ? Slot::Constant : Slot::Sampled;
             ref.constant = b.constantValue;
+            if (!f.running) continue;
+            const brickstore::ValueRange r = store.record(b.key).range;
+            ref.bound = f.mode == BlendMode::Maximum ? interpolatedUpper(r.min, r.max)
+                                                     : interpolatedLower(r.min, r.max);
         }
     return bricks;
 }
@@ -170,19 +178,31 @@ Batches batchesOf(const brickstore::BrickStore& store, const brickstore::BrickCa
     return b;
 }
 
-/// Points `f` at the octrees' words and boxes (when they have levels below the brick) and at
-/// the distance maps of the classification's octrees; returns those maps, null when none.
+/// Points `f` at the octrees' words and boxes (when they have levels below the brick and some
+/// drawn brick of `plan` is not drawn whole: else they would leap over nothing) and at the
+/// distance maps of the classification's octrees; returns those maps, null when none. Under a
+/// running skip, points it at the leaves' bounds.
 FineOccupancy* useOccupancy(Frame& f, const FrameClassification& classified,
-                            const RenderOptions& options) {
+                            const RenderOptions& options, const BrickPlan& plan) {
     const OccupancyTrees* occupancy = classified.occupancy;
     const bool octree = occupancy != nullptr;
     if (octree && occupancy->depth() > 0) {
-        f.occ = occupancy->words().data();
         f.octDepth = int(occupancy->depth());
-        f.occWords = int(occupancy->wordsPerBrick());
         f.leafAxis = int(occupancy->leavesPerAxis());
         f.leaf = float(occupancy->leafVoxels());
-        f.boxes = occupancy->sampledBoxes().data();
+        const bool leaps = std::any_of(plan.drawn.begin(), plan.drawn.end(), [&](const auto& b) {
+            return b.draw == BrickDraw::Sampled && !occupancy->drawnWhole(b.index);
+        });
+        if (leaps) {
+            f.occ = occupancy->words().data();
+            f.occWords = int(occupancy->wordsPerBrick());
+            f.boxes = occupancy->sampledBoxes().data();
+        }
+        if (f.running) {
+            f.leafBound = f.mode == BlendMode::Maximum ? occupancy->leafUpper().data()
+                                                       : occupancy->leafLower().data();
+            f.leafCount = f.leafAxis * f.leafAxis * f.leafAxis;
+        }
     }
     FineOccupancy* fine = f.occ && classified.classification
                               ? classified.classification->fine(options.cellVoxels)
@@ -327,19 +347,20 @@ Image CpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     const BrickPlan plan = planOf(store, g, level, classified, view, options, mPartitions, stats);
     Batches batches = batchesOf(store, scene.cache, g, plan, options);
     stats.batches = std::uint32_t(batches.ends.size());
-    std::vector<BrickRef> bricks = brickRefs(plan, batches.ends, g.brickCount());
     Frame f = frameOf(g, view.basis, options, *classified.table);
+    std::vector<BrickRef> bricks = brickRefs(store, plan, batches.ends, g.brickCount(), f);
     const std::vector<float> tfPairs = detail::tfPairTable(f.tf, f.entries);
     f.tfPairs = tfPairs.data();
     f.bricks = bricks.data();
     f.pre = classified.preintegrated.get();
-    FineOccupancy* fine = useOccupancy(f, classified, options);
+    FineOccupancy* fine = useOccupancy(f, classified, options, plan);
 
     FramePasses passes(scene, view, options, g, plan, f, bricks, fine);
     stats.hostKeptBytes =
         passes.draw(batches, options.hostKeptBefore, stats) - options.hostKeptBefore;
     stats.samples = passes.count().samples;
     stats.octreeLeaps = passes.count().leaps;
+    stats.samplesRaising = passes.count().raises;
     stats.occlusionReason = "not on the CPU raycaster";
     stats.totalMs = msSince(frameStart);
     // A projection's parts stay raw: they combine by their mode (render/Composite.h).

@@ -11,6 +11,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace bc::render {
@@ -62,17 +63,29 @@ OccupancyTrees::OccupancyTrees(const brickstore::BrickStore& store, std::uint32_
             std::fill_n(mLeafFull.begin() + std::ptrdiff_t(b * leafCount), leafCount, 1);
         }
     }
+    mLeafUpper.resize(mLeafRange.size());
+    mLeafLower.resize(mLeafRange.size());
+    for (std::uint64_t b = 0; b < mBricks; ++b)
+        for (std::uint64_t i = b * leafCount; i < (b + 1) * leafCount; ++i) {
+            const auto& r = mStored[b] ? mLeafRange[i] : mBrickRange[b];
+            const bool bounded = mLeafFull[i] == 0;
+            constexpr float kInf = std::numeric_limits<float>::infinity();
+            mLeafUpper[i] = bounded ? interpolatedUpper(r[0], r[1]) : kInf;
+            mLeafLower[i] = bounded ? interpolatedLower(r[0], r[1]) : -kInf;
+        }
     mNonEmpty.assign(mBricks * leafCount, 1);
     mRoot.assign(mBricks, 1);
+    mWhole.assign(mBricks, 1);
     mWords.assign(mBricks * mWordsPerBrick, ~0u);
     mBoxes.assign(mBricks, SampledBox{{0, 0, 0}, {mLeaves - 1, mLeaves - 1, mLeaves - 1}});
 }
 
 std::uint64_t OccupancyTrees::bytes() const {
     auto of = [](const auto& v) { return std::uint64_t(v.capacity() * sizeof(v[0])); };
-    std::uint64_t n = of(mStored) + of(mBrickRange) + of(mLeafRange) + of(mLeafEntries) +
-                      of(mLeafFull) + of(mNonEmpty) + of(mRoot) + of(mWords) + of(mBoxes) +
-                      of(mChanged) + of(mVisible);
+    std::uint64_t n = of(mStored) + of(mBrickRange) + of(mLeafRange) + of(mLeafUpper) +
+                      of(mLeafLower) + of(mLeafEntries) + of(mLeafFull) + of(mNonEmpty) +
+                      of(mRoot) + of(mWhole) + of(mWords) + of(mBoxes) + of(mChanged) +
+                      of(mVisible);
     for (const auto& f : mFaults)
         n += f.capacity();
     return n + sizeof(*this);
@@ -179,6 +192,7 @@ void OccupancyTrees::rebuildBrick(std::uint64_t brick, const std::vector<std::ui
     };
     mRoot[brick] = nonEmpty[0][0] > 0;
     std::vector<std::uint8_t> whole{std::uint8_t(drawnWhole(0, 0))};
+    mWhole[brick] = whole[0];
     std::uint32_t* words = &mWords[brick * mWordsPerBrick];
     std::fill_n(words, mWordsPerBrick, 0u);
     for (std::uint32_t l = 1; l <= mDepth; ++l) {

@@ -42,6 +42,18 @@ inline std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domai
     return {std::uint32_t(i), std::uint32_t(j)};
 }
 
+/// Bounds on the values trilinear interpolation in float can give from voxels of [lo, hi]
+/// (detail::fetch, the SIMD march's lerps, the GPU's): the range widened for rounding. Each of
+/// the three nested lerps a (1 - t) + b t errs by at most about 3 ulp of max(|a|, |b|); the
+/// margin, 2e-6 of the largest magnitude, is over three times the sum. What the projections'
+/// running skip compares with a ray's maximum or minimum, so that skipping stays exact.
+inline float interpolatedUpper(float lo, float hi) {
+    return hi + 2e-6f * std::max(std::abs(lo), std::abs(hi));
+}
+inline float interpolatedLower(float lo, float hi) {
+    return lo - 2e-6f * std::max(std::abs(lo), std::abs(hi));
+}
+
 struct OccupancyConfig {
     /// A non-empty node whose ratio of non-empty leaves reaches this is drawn whole (its
     /// empty leaves are sampled, not leapt). 1 draws only full nodes whole; 0 draws every
@@ -113,6 +125,15 @@ class OccupancyTrees {
     /// non-empty under the last update (its value range meets a visible table entry, or its
     /// leaf table is corrupt); false for a brick that is not stored.
     bool leafNonEmpty(std::uint64_t brick, std::uint32_t leaf) const;
+    /// Whether brick `brick`'s root is drawn whole under the last update: every sample of the
+    /// brick is taken, its octree leaps over nothing.
+    bool drawnWhole(std::uint64_t brick) const { return mWhole[brick] != 0; }
+    /// Per brick and leaf (brick * leafCount + leaf, leaves numbered as leafNonEmpty's), bounds
+    /// on every value a sample inside the leaf can take (interpolatedUpper(), interpolatedLower()
+    /// of its range; a brick that is not stored, its one value's; a corrupt leaf table, no bound:
+    /// +-infinity). Independent of the transfer function.
+    const std::vector<float>& leafUpper() const { return mLeafUpper; }
+    const std::vector<float>& leafLower() const { return mLeafLower; }
     /// Host memory this object holds (its tables and bits).
     std::uint64_t bytes() const;
     /// Leaf tables that failed their checksum, one line each naming the brick.
@@ -126,10 +147,12 @@ class OccupancyTrees {
     std::vector<std::uint8_t> mStored; ///< per brick: 1 when stored (has leaves)
     std::vector<std::array<float, 2>> mBrickRange;
     std::vector<std::array<float, 2>> mLeafRange;           ///< per brick * leafCount
+    std::vector<float> mLeafUpper, mLeafLower;              ///< leafUpper(), leafLower()
     std::vector<std::array<std::uint32_t, 2>> mLeafEntries; ///< table entries [i, j] read
     std::vector<std::uint8_t> mLeafFull;                    ///< corrupt leaf table: always occupied
     std::vector<std::uint8_t> mNonEmpty;                    ///< per leaf, of the last update
     std::vector<std::uint8_t> mRoot;                        ///< per brick: any leaf non-empty
+    std::vector<std::uint8_t> mWhole;                       ///< per brick: drawnWhole()
     std::vector<std::uint32_t> mWords;
     std::vector<SampledBox> mBoxes;
     std::vector<std::uint64_t> mChanged;

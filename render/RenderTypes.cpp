@@ -134,6 +134,7 @@ void addSlice(FrameStats& frame, const FrameStats& slice) {
     f.bricksUnreached += s.bricksUnreached;
     f.hostKeptBytes += s.hostKeptBytes;
     f.octreeLeaps += s.octreeLeaps;
+    f.samplesRaising += s.samplesRaising;
     f.octreeBricksRebuilt += s.octreeBricksRebuilt;
     f.octreeRebuildMs += s.octreeRebuildMs;
     f.cellBricksBuilt += s.cellBricksBuilt;

@@ -232,7 +232,11 @@ struct FrameStats {
     /// CPU raycaster: bytes of the bricks it pinned that it left at the back of the host
     /// cache's eviction order (RenderOptions::hostKeptBefore); the others went to the front.
     std::uint64_t hostKeptBytes = 0;
-    std::uint64_t octreeLeaps = 0;         ///< empty octree nodes leapt by rays
+    std::uint64_t octreeLeaps = 0; ///< empty octree nodes leapt by rays
+    /// CPU raycaster, maximum and minimum projections: samples that raised a ray's maximum or
+    /// lowered its minimum (the samples that made the image; `samples` over this is the march's
+    /// overhead).
+    std::uint64_t samplesRaising = 0;
     std::uint64_t octreeBricksRebuilt = 0; ///< octrees rebuilt for this frame's TF (0: reused)
     double octreeRebuildMs = 0.0;
     /// CPU raycaster, RenderOptions::cellVoxels: drawn bricks whose cells below the leaves this

@@ -256,6 +256,7 @@ struct LaneRays {
     VF wx, wy, wz;         ///< the ray's world direction (shading)
     VI base;               ///< the brick's first voxel, in voxels from the packet's
     VI wordBase, fineBase; ///< the brick's first octree word in f.occ, its map in f.fine (0: none)
+    VI leafBase;           ///< the brick's first leaf in f.leafBound (a running skip)
 };
 
 /// Where each lane's sample at t lies: its leaf (ax, ay, az) and whether that is sampled; for a
@@ -348,6 +349,18 @@ HWY_INLINE VF exitOfEmptyCells(const Frame& f, const LaneRays& r, const SampleCe
                    lo(c.cz, r.lz, r.dz, r.iz));
 }
 
+/// Per lane, the first sample at or after parameter tExit (BrickRay::sampleAt()), at least
+/// one past k and at most `end`.
+HWY_INLINE VI sampleAfterExit(const Frame& f, const LaneRays& r, VF tExit, VI k, VI end) {
+    const DF df;
+    const DI di;
+    const VF after = hn::Ceil(
+        hn::Sub(hn::Mul(hn::Sub(tExit, r.t0), hn::Set(df, 1.0f / f.stepMm)), hn::Set(df, 0.5f)));
+    const VF to = hn::Max(hn::Min(after, hn::ConvertTo(df, end)),
+                          hn::ConvertTo(df, hn::Add(k, hn::Set(di, 1))));
+    return hn::ConvertTo(di, to);
+}
+
 /// The samples k of the lanes `empty` (their samples in empty space) moved on to their first
 /// sample past the empty node or cube that holds it (the scalar walk's sampleAfterNode() and
 /// sampleAfterCube(), to within an ulp at the exit, render/OCCUPANCY.md), at least one on and
@@ -362,11 +375,7 @@ HWY_INLINE VI leapEmpty(const Frame& f, const LaneRays& r, const SampleCells& c,
     const hn::Mask<DI> cube = hn::And(c.mapped, empty);
     if (!hn::AllFalse(di, cube))
         tExit = hn::IfThenElse(hn::RebindMask(df, cube), exitOfEmptyCells(f, r, c), tExit);
-    const VF after = hn::Ceil(
-        hn::Sub(hn::Mul(hn::Sub(tExit, r.t0), hn::Set(df, 1.0f / f.stepMm)), hn::Set(df, 0.5f)));
-    const VF to = hn::Max(hn::Min(after, hn::ConvertTo(df, end)),
-                          hn::ConvertTo(df, hn::Add(k, hn::Set(di, 1))));
-    return hn::IfThenElse(empty, hn::ConvertTo(di, to), k);
+    return hn::IfThenElse(empty, sampleAfterExit(f, r, tExit, k, end), k);
 }
 
 } // namespace HWY_NAMESPACE

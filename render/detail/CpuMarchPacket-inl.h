@@ -35,19 +35,22 @@ namespace bc::render::detail {
 namespace HWY_NAMESPACE {
 
 /// The rays in a packet's lanes, one per lane (structure of arrays): where each is in its
-/// brick, which ray it is, and its transmittance (its colour sums are its RayState's). A lane
-/// without samples to take has k = end.
+/// brick, which ray it is, its transmittance (its colour sums are its RayState's) and a
+/// projection's value and count. A lane without samples to take has k = end.
 struct Lanes {
     static constexpr std::size_t kMax = hn::MaxLanes(DF());
     HWY_ALIGN std::int32_t k[kMax], end[kMax];
-    HWY_ALIGN std::int32_t base[kMax];  ///< the brick's first voxel, in voxels from the packet's
-    HWY_ALIGN std::int32_t words[kMax]; ///< the brick's first octree word in f.occ
-    HWY_ALIGN std::int32_t fine[kMax];  ///< the brick's distance map in f.fine (0: none)
+    HWY_ALIGN std::int32_t base[kMax];   ///< the brick's first voxel, in voxels from the packet's
+    HWY_ALIGN std::int32_t words[kMax];  ///< the brick's first octree word in f.occ
+    HWY_ALIGN std::int32_t fine[kMax];   ///< the brick's distance map in f.fine (0: none)
+    HWY_ALIGN std::int32_t leaves[kMax]; ///< the brick's first leaf in f.leafBound
     HWY_ALIGN float t0[kMax], lx[kMax], ly[kMax], lz[kMax], dx[kMax], dy[kMax], dz[kMax];
     HWY_ALIGN float ix[kMax], iy[kMax], iz[kMax]; ///< 1 / (dx, dy, dz)
     HWY_ALIGN float wx[kMax], wy[kMax], wz[kMax]; ///< the rays' world directions (shading)
     HWY_ALIGN std::int32_t ray[kMax]; ///< the lane's ray: its index in the packet's list
     HWY_ALIGN float t[kMax];
+    HWY_ALIGN float v[kMax];        ///< Accum::v
+    HWY_ALIGN std::int32_t n[kMax]; ///< Accum::n
 };
 
 /// The lanes of a packet for voxels of type T, each a ray of the list `rays` in turn: a lane
@@ -64,28 +67,37 @@ template <class T> class PacketLanes {
     void idle(int j) {
         mRay[j] = nullptr;
         L.k[j] = L.end[j] = 0;
-        L.base[j] = L.words[j] = L.fine[j] = 0;
+        L.base[j] = L.words[j] = L.fine[j] = L.leaves[j] = 0;
         L.t0[j] = L.lx[j] = L.ly[j] = L.lz[j] = L.dx[j] = L.dy[j] = L.dz[j] = 0.0f;
         L.ix[j] = L.iy[j] = L.iz[j] = L.wx[j] = L.wy[j] = L.wz[j] = 0.0f;
         L.ray[j] = 0;
         L.t[j] = 1.0f;
+        L.v[j] = 0.0f;
+        L.n[j] = 0;
     }
 
     /// Lane j's ray on to its next sampled brick with samples to take (compositing the
-    /// bricks of one value on the way, narrowing to the box of sampled leaves); false when the
-    /// ray has no more in this pass.
+    /// bricks of one value on the way, leaving out those a running skip passes over, narrowing
+    /// to the box of sampled leaves); false when the ray has no more in this pass.
     bool seek(int j) {
         RayWalk& w = mWalk[j];
         RayState& s = *mRay[j]->state;
         // The colour sums are the state's (flush() adds the queued samples to them); the
-        // transmittance is the lane's.
-        Accum acc{s.acc.r, s.acc.g, s.acc.b, L.t[j]};
+        // transmittance and a projection's value are the lane's.
+        Accum acc{s.acc.r, s.acc.g, s.acc.b, L.t[j], L.v[j], std::uint32_t(L.n[j])};
+        const bool composite = f.mode == BlendMode::Composite;
         bool found = false;
         while (!found && w.next(f, s, *mRay[j]->resume)) {
             const BrickRef& b = f.bricks[w.index];
+            if (f.running && !passes(f, b.bound, acc)) {
+                ++mN.leaps;
+                continue;
+            }
             if (b.slot == Slot::Constant) {
                 settle(s, acc); // its queued samples first: each ray's sums in sample order
-                if (!marchConstant(f, b.constant, w.k, w.kEnd, acc, mN)) break;
+                if (!(composite ? marchConstant(f, b.constant, w.k, w.kEnd, acc, mN)
+                                : marchConstantMode(f, b.constant, w.k, w.kEnd, acc, mN)))
+                    break;
                 continue;
             }
             int first = w.k, last = w.kEnd;
@@ -111,6 +123,8 @@ template <class T> class PacketLanes {
         }
         s.acc = acc;
         L.t[j] = acc.t;
+        L.v[j] = acc.v;
+        L.n[j] = std::int32_t(acc.n);
         return found;
     }
 
@@ -125,6 +139,7 @@ template <class T> class PacketLanes {
         L.base[j] = std::int32_t(offset);
         L.words[j] = w.index * f.occWords;
         L.fine[j] = std::int32_t(b.fine);
+        L.leaves[j] = w.index * f.leafCount;
         L.t0[j] = w.t0;
         L.lx[j] = local.x;
         L.ly[j] = local.y;
@@ -154,16 +169,23 @@ template <class T> class PacketLanes {
     bool marchAlone(const T* voxels, const RayWalk& w, int k, int kEnd, Accum& acc) {
         const std::uint32_t* words = f.occ ? f.occ + std::size_t(w.index) * f.occWords : nullptr;
         const std::uint32_t map = f.fine ? f.bricks[w.index].fine : 0;
-        return marchBrick(f, voxels, words,
-                          map ? reinterpret_cast<const std::uint8_t*>(f.fine + map) : nullptr,
-                          w.local(f), w.dv, w.d, w.t0, k, kEnd, acc, mN);
+        const auto* cells = map ? reinterpret_cast<const std::uint8_t*>(f.fine + map) : nullptr;
+        if (f.mode != BlendMode::Composite)
+            return marchBrickMode(f, voxels, words, cells, w.local(f), w.dv, w.d, w.t0, w.first, k,
+                                  kEnd, acc, mN);
+        return marchBrick(f, voxels, words, cells, w.local(f), w.dv, w.d, w.t0, k, kEnd, acc, mN);
     }
 
     /// Lane j, whose ray has no samples left to take (or that has no ray): its ray's next
     /// brick, or else the next ray of the queue that has one (finishing the rays it leaves).
     void refill(int j) {
         if (mRay[j] && !mStopped[j] && seek(j)) return;
-        if (mRay[j]) mRay[j]->state->acc.t = L.t[j]; // its sums are the state's already
+        if (mRay[j]) { // its sums are the state's already
+            Accum& acc = mRay[j]->state->acc;
+            acc.t = L.t[j];
+            acc.v = L.v[j];
+            acc.n = std::uint32_t(L.n[j]);
+        }
         mStopped[j] = false;
         while (mNext < mCount) {
             const std::size_t i = mNext++;
@@ -183,10 +205,50 @@ template <class T> class PacketLanes {
             mRay[j] = &ray;
             L.ray[j] = std::int32_t(i);
             L.t[j] = ray.state->acc.t;
+            L.v[j] = ray.state->acc.v;
+            L.n[j] = std::int32_t(ray.state->acc.n);
             if (seek(j)) return;
-            ray.state->acc.t = L.t[j];
+            // seek() left the state's acc whole
         }
         idle(j);
+    }
+
+    /// The lanes' rays as vectors, for a round of steps.
+    HWY_INLINE LaneRays loadRays() const {
+        const DF df;
+        const DI di;
+        const VF apron = hn::Set(df, float(f.apron) - 0.5f);
+        LaneRays r;
+        r.t0 = hn::Load(df, L.t0);
+        r.lx = hn::Load(df, L.lx);
+        r.ly = hn::Load(df, L.ly);
+        r.lz = hn::Load(df, L.lz);
+        r.dx = hn::Load(df, L.dx);
+        r.dy = hn::Load(df, L.dy);
+        r.dz = hn::Load(df, L.dz);
+        r.ix = hn::Load(df, L.ix);
+        r.iy = hn::Load(df, L.iy);
+        r.iz = hn::Load(df, L.iz);
+        r.rx = hn::Add(r.lx, apron);
+        r.ry = hn::Add(r.ly, apron);
+        r.rz = hn::Add(r.lz, apron);
+        r.wx = hn::Load(df, L.wx);
+        r.wy = hn::Load(df, L.wy);
+        r.wz = hn::Load(df, L.wz);
+        r.base = hn::Load(di, L.base);
+        r.wordBase = hn::Load(di, L.words);
+        r.fineBase = hn::Load(di, L.fine);
+        r.leafBase = hn::Load(di, L.leaves);
+        return r;
+    }
+
+    /// How many lanes out of samples call for refills: those out of rays for good, and a
+    /// quarter of the others (at least one).
+    std::size_t refillThreshold() const {
+        std::size_t gone = 0;
+        for (int j = 0; j < mLanes; ++j)
+            gone += mRay[j] ? 0 : 1;
+        return gone + std::max<std::size_t>(1, (mLanes - gone) / 4);
     }
 
     /// The queued samples' colours added to their rays' sums (ColourQueue::flush()).
@@ -226,7 +288,7 @@ template <class T> class Packet : PacketLanes<T> {
   private:
     using Base = PacketLanes<T>;
     using Base::f, Base::mLanes, Base::mN, Base::L, Base::mRay, Base::mStopped;
-    using Base::flush, Base::idle, Base::kMax, Base::refill;
+    using Base::flush, Base::idle, Base::kMax, Base::refill, Base::loadRays, Base::refillThreshold;
     using Base::mRays, Base::mVoxels, Base::mLaneVoxels, Base::mQueue;
     using MI = hn::Mask<DI>;
 
@@ -267,34 +329,6 @@ template <class T> class Packet : PacketLanes<T> {
         }
     }
 
-    /// The lanes' rays as vectors, for a round of steps.
-    HWY_INLINE LaneRays loadRays() const {
-        const DF df;
-        const DI di;
-        const VF apron = hn::Set(df, float(f.apron) - 0.5f);
-        LaneRays r;
-        r.t0 = hn::Load(df, L.t0);
-        r.lx = hn::Load(df, L.lx);
-        r.ly = hn::Load(df, L.ly);
-        r.lz = hn::Load(df, L.lz);
-        r.dx = hn::Load(df, L.dx);
-        r.dy = hn::Load(df, L.dy);
-        r.dz = hn::Load(df, L.dz);
-        r.ix = hn::Load(df, L.ix);
-        r.iy = hn::Load(df, L.iy);
-        r.iz = hn::Load(df, L.iz);
-        r.rx = hn::Add(r.lx, apron);
-        r.ry = hn::Add(r.ly, apron);
-        r.rz = hn::Add(r.lz, apron);
-        r.wx = hn::Load(df, L.wx);
-        r.wy = hn::Load(df, L.wy);
-        r.wz = hn::Load(df, L.wz);
-        r.base = hn::Load(di, L.base);
-        r.wordBase = hn::Load(di, L.words);
-        r.fineBase = hn::Load(di, L.fine);
-        return r;
-    }
-
     /// The lanes' progress as vectors, no ray stopped yet, for a round of steps.
     HWY_INLINE Progress loadProgress() const {
         const DI di;
@@ -305,15 +339,6 @@ template <class T> class Packet : PacketLanes<T> {
         p.stopped = hn::FirstN(di, 0);
         p.active = hn::Lt(p.k, p.end);
         return p;
-    }
-
-    /// How many lanes out of samples call for refills: those out of rays for good, and a
-    /// quarter of the others (at least one).
-    std::size_t refillThreshold() const {
-        std::size_t gone = 0;
-        for (int j = 0; j < mLanes; ++j)
-            gone += mRay[j] ? 0 : 1;
-        return gone + std::max<std::size_t>(1, (mLanes - gone) / 4);
     }
 
     /// One step of the active lanes: those whose sample lies in empty space leap over it (the

@@ -94,7 +94,8 @@ template <class T> struct SamplesV {
     VI o, sy, sz, e;
     VF fx, fy, fz, w;
     CellRows c;
-    VF a; ///< classify()'s alpha per lane
+    VF value; ///< the trilinear value per lane (detail::fetch's, in the fused lanes)
+    VF a;     ///< classify()'s alpha per lane
 
     /// `base`: per lane, where its brick's voxels start, in voxels from `voxels` (0 when
     /// every lane samples the brick at `voxels`).
@@ -104,9 +105,16 @@ template <class T> struct SamplesV {
         : f(frame), v(voxels) {
         locate(qx, qy, qz, base);
         cellRows(v, o, sy, sz, quads && sizeof(T) <= 2, c);
-        classifyValue(lerpV(lerpV(lerpV(c.r00.lo, c.r00.hi, fx), lerpV(c.r10.lo, c.r10.hi, fx), fy),
-                            lerpV(lerpV(c.r01.lo, c.r01.hi, fx), lerpV(c.r11.lo, c.r11.hi, fx), fy),
-                            fz));
+        interpolate();
+        classifyValue(value);
+    }
+    /// The values alone (the projections'): no classification, so no colour nor alpha.
+    struct ValueOnly {};
+    SamplesV(const Frame& frame, const T* voxels, VF qx, VF qy, VF qz, VI base, ValueOnly)
+        : f(frame), v(voxels) {
+        locate(qx, qy, qz, base);
+        cellRows(v, o, sy, sz, false, c);
+        interpolate();
     }
     VF channel(int ch) const { return tfChannel(f, e, w, ch); }
     /// classify()'s colour, shaded for ray directions (dx, dy, dz) where f.shading.
@@ -143,6 +151,11 @@ template <class T> struct SamplesV {
         sy = hn::Set(di, f.edge);
         sz = hn::Set(di, f.edge * f.edge);
         o = hn::Add(hn::Add(hn::Add(hn::Mul(z0, sz), hn::Mul(y0, sy)), x0), base);
+    }
+    /// The trilinear value of the cell rows, in fetch()'s order.
+    HWY_INLINE void interpolate() {
+        value = lerpV(lerpV(lerpV(c.r00.lo, c.r00.hi, fx), lerpV(c.r10.lo, c.r10.hi, fx), fy),
+                      lerpV(lerpV(c.r01.lo, c.r01.hi, fx), lerpV(c.r11.lo, c.r11.hi, fx), fy), fz);
     }
     /// classify() per lane of the trilinear values: the entry (e), its weight (w), the alpha.
     HWY_INLINE void classifyValue(VF value) {

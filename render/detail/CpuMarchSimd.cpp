@@ -44,6 +44,7 @@
 #include "render/detail/CpuMarchBrick-inl.h"   // one ray in one brick; lanes' empty-space leaps
 #include "render/detail/CpuMarchBegin-inl.h"   // the walks of a vector of fresh rays
 #include "render/detail/CpuMarchPacket-inl.h"  // lanes of rays: steps and refills
+#include "render/detail/CpuMarchModes-inl.h"   // the same for the other modes than composite
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
@@ -75,15 +76,20 @@ bool MarchBrick(brickstore::VoxelType type, const Frame& f, const void* voxels,
 void MarchPacket(brickstore::VoxelType type, const Frame& f, const PacketRay* rays,
                  std::size_t count, RayCount& n) {
     const int lanes = int(hn::Lanes(DF()));
+    const bool composite = f.mode == BlendMode::Composite;
     switch (type) {
     case brickstore::VoxelType::U8:
-        return Packet<std::uint8_t>(f, rays, count, lanes, n).run();
+        return composite ? Packet<std::uint8_t>(f, rays, count, lanes, n).run()
+                         : ModePacket<std::uint8_t>(f, rays, count, lanes, n).run();
     case brickstore::VoxelType::U16:
-        return Packet<std::uint16_t>(f, rays, count, lanes, n).run();
+        return composite ? Packet<std::uint16_t>(f, rays, count, lanes, n).run()
+                         : ModePacket<std::uint16_t>(f, rays, count, lanes, n).run();
     case brickstore::VoxelType::I16:
-        return Packet<std::int16_t>(f, rays, count, lanes, n).run();
+        return composite ? Packet<std::int16_t>(f, rays, count, lanes, n).run()
+                         : ModePacket<std::int16_t>(f, rays, count, lanes, n).run();
     case brickstore::VoxelType::F32:
-        return Packet<float>(f, rays, count, lanes, n).run();
+        return composite ? Packet<float>(f, rays, count, lanes, n).run()
+                         : ModePacket<float>(f, rays, count, lanes, n).run();
     }
 }
 

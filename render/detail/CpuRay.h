@@ -29,6 +29,9 @@ struct BrickRef {
     Slot slot = Slot::Absent;
     /// Its distance map's first word in Frame::fine (FineOccupancy::offsetOf; 0: none).
     std::uint32_t fine = 0;
+    /// Under Frame::running: a bound on every sample value in the brick, from above for a
+    /// maximum, from below for a minimum (interpolatedUpper(), interpolatedLower()).
+    float bound = 0.0f;
 };
 
 /// Everything a ray needs, in float, as the shader's uniforms.
@@ -76,6 +79,13 @@ struct Frame {
     BlendMode mode = BlendMode::Composite;
     ClipF clip;    ///< RenderOptions::clip: samples outside are not taken
     float iso = 0; ///< RenderOptions::isoValue
+    /// A maximum or minimum under skipping: a ray leaves out the bricks, and with `leafBound`
+    /// the octree leaves, whose samples cannot pass its value so far (passes()): BrickRef::bound,
+    /// and per leaf OccupancyTrees::leafUpper() or leafLower() (brick i's leaves from
+    /// i * leafCount, numbered as the octree's).
+    bool running = false;
+    const float* leafBound = nullptr;
+    int leafCount = 0;
 };
 
 struct Rgba {
@@ -139,14 +149,20 @@ struct Accum {
 /// Takes a sample's value into a projecting ray; false once nothing can change its colour
 /// (under early termination: a maximum at or past the table's last entry, a minimum at or
 /// before its first, where classify() clamps, so any further value gives the same colour).
-inline bool project(const Frame& f, Accum& acc, float value) {
+inline bool project(const Frame& f, Accum& acc, float value, std::uint64_t& raises) {
     switch (f.mode) {
     case BlendMode::Maximum:
-        if (acc.n == 0 || value > acc.v) acc.v = value;
+        if (acc.n == 0 || value > acc.v) {
+            acc.v = value;
+            ++raises;
+        }
         ++acc.n;
         return !(f.ertT >= 0.0f && acc.v * f.tfScale + f.tfOffset >= float(f.entries - 1));
     case BlendMode::Minimum:
-        if (acc.n == 0 || value < acc.v) acc.v = value;
+        if (acc.n == 0 || value < acc.v) {
+            acc.v = value;
+            ++raises;
+        }
         ++acc.n;
         return !(f.ertT >= 0.0f && acc.v * f.tfScale + f.tfOffset <= 0.0f);
     default: // Average
@@ -154,6 +170,14 @@ inline bool project(const Frame& f, Accum& acc, float value) {
         ++acc.n;
         return true;
     }
+}
+
+/// Under Frame::running: whether samples whose values `bound` bounds (BrickRef::bound, a
+/// leaf's) could pass the ray's maximum or minimum so far; where they cannot, leaving them out
+/// changes neither the value nor whether the ray has one (it has).
+inline bool passes(const Frame& f, float bound, const Accum& acc) {
+    if (acc.n == 0) return true;
+    return f.mode == BlendMode::Maximum ? bound > acc.v : bound < acc.v;
 }
 
 inline void composite(Accum& acc, const Rgba& c) {
@@ -190,6 +214,7 @@ inline float exitParameter(glm::vec3 p0, glm::vec3 dv, glm::vec3 lo, float size)
 
 struct RayCount {
     std::uint64_t samples = 0, leaps = 0;
+    std::uint64_t raises = 0; ///< projections: samples that raised a maximum or lowered a minimum
 };
 
 /// Narrows samples [k, kEnd) of a brick to those inside the box of its sampled leaves; false
@@ -383,7 +408,7 @@ bool marchBrickMode(const Frame& f, const T* v, const std::uint32_t* words, cons
     const glm::vec3 rel = local + (float(f.apron) - 0.5f);
     return walkBrick(f, words, map, local, dv, t0, k, kEnd, n, [&](int j, float t) {
         const float value = detail::fetch(v, f.edge, rel + dv * t);
-        if (f.mode != BlendMode::Isosurface) return project(f, acc, value);
+        if (f.mode != BlendMode::Isosurface) return project(f, acc, value, n.raises);
         if (value < f.iso) return true;
         const float hit = isoHit(f, t0, first, j, t,
                                  [&](float u) { return detail::fetch(v, f.edge, rel + dv * u); });
@@ -409,7 +434,7 @@ inline bool marchConstantMode(const Frame& f, float value, int& k, int kEnd, Acc
     }
     for (; k < kEnd; ++k) {
         ++n.samples;
-        if (!project(f, acc, value)) return false;
+        if (!project(f, acc, value, n.raises)) return false;
     }
     return true;
 }

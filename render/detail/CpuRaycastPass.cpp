@@ -87,6 +87,10 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayR
     Accum& acc = s.acc;
     while (w.next(f, s, r)) {
         const BrickRef& b = f.bricks[w.index];
+        if (f.running && !passes(f, b.bound, acc)) { // no sample of it can pass the ray's value
+            ++n.leaps;
+            continue;
+        }
         if (b.slot == Slot::Sampled) {
             if (!marchSampled<T>(f, w, b, acc, front, n)) return;
         } else if (f.pre) {
@@ -166,7 +170,7 @@ template <class T>
 void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
                  const PixelRect& rect, RayStates& rays, std::vector<Front>& fronts,
                  RayCount& total) {
-    std::atomic<std::uint64_t> samples{0}, leaps{0};
+    std::atomic<std::uint64_t> samples{0}, leaps{0}, raises{0};
     const PassRays ray(f, lattice, region, rays);
     tbb::parallel_for(Tile(rect.y, rect.y + rect.height, 8, rect.x, rect.x + rect.width, 8),
                       [&](const Tile& r) {
@@ -177,9 +181,11 @@ void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
                               marchTileRays<T>(f, ray, r, fronts, n);
                           samples += n.samples;
                           leaps += n.leaps;
+                          raises += n.raises;
                       });
     total.samples += samples;
     total.leaps += leaps;
+    total.raises += raises;
 }
 
 } // namespace

@@ -9,7 +9,11 @@
 #include "render/ReferenceRenderer.h"
 #include "render/detail/CpuRay.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <utility>
+#include <vector>
 
 namespace bc::render {
 namespace {
@@ -165,6 +169,39 @@ std::vector<test::ScanPreset> modeScans() {
             {"hydrogen", "smoke"},   {"headsq", "mr"}};
 }
 
+// The running skip leaves out a leaf or brick whose bound (its value range widened for float
+// rounding) cannot pass a ray's maximum or minimum. The rounding is real: interpolating a cell
+// of eight equal values of 0.1 can give a float above 0.1; the bounds hold every interpolated
+// value.
+TEST(RunningSkip, TheBoundsHoldEveryInterpolatedValueOfTheirRange) {
+    std::uint32_t state = 12345u;
+    auto uniform = [&state] { // xorshift32 in [0, 1)
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        return float(state >> 8) * (1.0f / 16777216.0f);
+    };
+    bool roundedAbove = false;
+    for (const auto& [lo, hi] : std::vector<std::pair<float, float>>{
+             {0.0f, 4095.0f}, {-1024.0f, 3071.0f}, {-3.0e4f, 5.0f}, {0.02f, 0.1f}, {7.0f, 7.0f}}) {
+        const float upper = interpolatedUpper(lo, hi), lower = interpolatedLower(lo, hi);
+        EXPECT_LE(upper - hi, 1e-5f * std::max(std::abs(lo), std::abs(hi)) + 1e-30f);
+        for (int i = 0; i < 200000; ++i) {
+            float v[8];
+            const bool flat = i % 2 == 0; // all eight at the top or bottom, else random
+            for (float& x : v)
+                x = flat ? (i % 4 == 0 ? hi : lo) : lo + (hi - lo) * uniform();
+            const glm::vec3 q(0.5f + uniform(), 0.5f + uniform(), 0.5f + uniform());
+            const float value = detail::fetch(v, 2, q - glm::vec3(0.5f)); // a 2^3 brick
+            roundedAbove = roundedAbove || value > hi;
+            ASSERT_LE(value, upper) << lo << ".." << hi;
+            ASSERT_GE(value, lower) << lo << ".." << hi;
+        }
+    }
+    EXPECT_TRUE(roundedAbove)
+        << "interpolation never rounded past its corners: the margin is untested";
+}
+
 class ModesOnScans : public ::testing::TestWithParam<test::ScanPreset> {};
 
 TEST_P(ModesOnScans, TheCpuRaycasterDrawsTheReferencesImageAndSkippingChangesNoPixel) {
@@ -204,6 +241,19 @@ TEST_P(ModesOnScans, TheCpuRaycasterDrawsTheReferencesImageAndSkippingChangesNoP
         }
         if (m.mode != BlendMode::Average) {
             EXPECT_LE(fast.samples, slow.samples) << "skipping took more samples";
+        }
+        if (m.mode == BlendMode::Maximum || m.mode == BlendMode::Minimum) {
+            EXPECT_GT(fast.samplesRaising, 0u);
+            EXPECT_LE(fast.samplesRaising, fast.samples);
+        }
+        // The packets of rays, one ray's samples a vector at a time and the scalar march: the
+        // same image, to the bit.
+        for (const bool alongRay : {false, true}) {
+            RenderOptions other = o;
+            other.simd = alongRay;
+            other.packets = false;
+            EXPECT_EQ(compareImages(test::cpuFrame(*t, tf, camera, other), cpu).maxAbs, 0.0)
+                << (alongRay ? "SIMD along one ray" : "scalar march");
         }
         // Along an orbit and after jumps (close up, from below, far), at 48^2: skipping and
         // early termination on and off, the same image.

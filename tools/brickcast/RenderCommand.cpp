@@ -153,6 +153,7 @@ nlohmann::json statsJson(const render::FrameStats& s, const std::string& rendere
             {"mode", render::toString(o.mode)},
             {"samples", s.samples},
             {"samplesPerPixel", double(s.samples) / pixels},
+            {"samplesRaising", s.samplesRaising},
             {"bricksTotal", s.bricksTotal},
             {"bricksCulled", s.bricksCulled},
             {"bricksSkipped", s.bricksSkipped},
