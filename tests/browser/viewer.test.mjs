@@ -236,6 +236,9 @@ async function drag(page, dx, dy, steps = 10) {
   await page.mouse.up();
 }
 
+/** Waits two animation frames: what the page coalesces to one send per animation frame has been sent. */
+const sendsFlushed = (page) => page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+
 /** A viewer (open()'s) on the phantom, its first refined frame shown. */
 async function phantomViewer(open) {
   const v = await open();
@@ -437,6 +440,124 @@ test('MIP, an isosurface and a crop box with a clip plane chosen in the page eac
     const sent = await page.evaluate(() => window.brickcast.modeAndClip());
     assert.equal(sent.mode, 4);
     assert.ok(sent.crop && sent.planes.length === 1, `the cut was not sent: ${JSON.stringify(sent)}`);
+    await assertHealthy(v);
+  });
+});
+
+test('the crop box is drawn over the view, and dragging a face handle moves that face, not the camera', { timeout: 60000 }, async () => {
+  await withDaemon({}, async ({ open }) => {
+    const v = await phantomViewer(open);
+    const { page } = v;
+    const info = await page.evaluate(() => window.brickcast.volumes.find((x) => x.name === 'phantom'));
+    const extent = info.dims.map((d, a) => d * info.spacingMm[a]);
+    const centre = extent.map((e) => e / 2);
+    // Looking down -z (+x right, +y up), orthographic, twice the x extent tall: pxPerMm px per mm
+    // about the view's centre.
+    const orthoHeight = 2 * Math.max(extent[0], extent[1]);
+    const pxPerMm = VIEW / orthoHeight;
+    const id = await page.evaluate((cam) => window.brickcast.setCamera(cam),
+      { eye: [centre[0], centre[1], centre[2] + 3 * extent[2]], target: centre, up: [0, 1, 0], orthographic: true, orthoHeight });
+    await waitForFrame(page, id);
+    assert.equal(await page.locator('#cut-overlay').isHidden(), true, 'the overlay shows with nothing cut');
+
+    await page.check('#crop');
+    await page.waitForFunction(() => !!window.brickcast.modeAndClip()?.crop, null, { timeout: FRAME_TIMEOUT });
+    const drawn = await page.evaluate(() => window.brickcast.cutOverlay());
+    assert.equal(drawn?.edges, 12, `the crop box's edges are not drawn: ${JSON.stringify(drawn)}`);
+    assert.equal(drawn.handles.length, 6);
+    const view = await page.locator('#view').boundingBox();
+    const handleAt = async (name) => {
+      const b = await page.locator(`#cut-overlay [data-handle="${name}"]`).boundingBox();
+      assert.ok(b, `no ${name} handle on the page`);
+      return { x: b.x + b.width / 2 - view.x, y: b.y + b.height / 2 - view.y };
+    };
+    // The x high face's centre (extent x, centre y) and the y high face's, where the server's rays put them.
+    const xHigh = await handleAt('x-high');
+    const yHigh = await handleAt('y-high');
+    const want = (dx, dy) => ({ x: VIEW / 2 + dx * pxPerMm, y: VIEW / 2 - dy * pxPerMm });
+    for (const [what, got, w] of [['x-high', xHigh, want(extent[0] / 2, 0)], ['y-high', yHigh, want(0, extent[1] / 2)]]) {
+      assert.ok(Math.hypot(got.x - w.x, got.y - w.y) < 1, `the ${what} handle is at (${got.x}, ${got.y}), not (${w.x}, ${w.y})`);
+    }
+
+    // 32 px to the left (and 10 down, across the axis: no effect) is 32 / pxPerMm mm down x.
+    const before = await page.evaluate(() => ({ frameId: window.brickcast.lastFrame.frameId, cameraId: window.brickcast.camera().cameraId }));
+    await page.mouse.move(view.x + xHigh.x, view.y + xHigh.y);
+    await page.mouse.down();
+    for (let i = 1; i <= 4; ++i) await page.mouse.move(view.x + xHigh.x - 8 * i, view.y + xHigh.y + 2.5 * i);
+    await page.mouse.up();
+    const high = 1 - 32 / pxPerMm / extent[0];
+    await sendsFlushed(page);
+    const after = await page.evaluate(() => ({ sent: window.brickcast.modeAndClip(), cameraId: window.brickcast.camera().cameraId,
+      slider: Number(document.getElementById('crop-x-high').value), label: document.getElementById('crop-x-value').textContent }));
+    assert.equal(after.cameraId, before.cameraId, 'dragging a handle moved the camera');
+    assert.ok(Math.abs(after.sent.crop.max[0] - high * extent[0]) < 1e-6, `the x high face is at ${after.sent.crop.max[0]} mm, not ${high * extent[0]}`);
+    assert.ok(Math.abs(after.slider - high) <= 0.0005, `the x high slider is at ${after.slider}, not ${high}`);
+    assert.deepEqual(after.sent.crop.min, [0, 0, 0]);
+    assert.deepEqual(after.sent.crop.max.slice(1), extent.slice(1), 'the drag moved another face');
+    assert.match(after.label, new RegExp(`^0–${Math.round(high * extent[0] * 10) / 10} mm$`));
+    await page.waitForFunction((f) => window.brickcast.lastFrame.frameId > f, before.frameId, { timeout: FRAME_TIMEOUT });
+    const moved = await handleAt('x-high');
+    assert.ok(Math.abs(moved.x - (xHigh.x - 32)) < 1 && Math.abs(moved.y - xHigh.y) < 1, `the handle did not follow: (${moved.x}, ${moved.y})`);
+
+    // Away from the handles the view still orbits; the overlay follows the camera of the frame shown.
+    await page.mouse.move(view.x + 30, view.y + 30);
+    await page.mouse.down();
+    for (let i = 1; i <= 4; ++i) await page.mouse.move(view.x + 30 + 10 * i, view.y + 30);
+    await page.mouse.up();
+    const orbit = await page.evaluate(() => window.brickcast.camera().cameraId);
+    assert.ok(orbit > before.cameraId, 'a drag away from the handles did not orbit');
+    await waitForFrame(page, orbit);
+    const turned = await handleAt('x-high');
+    assert.ok(Math.hypot(turned.x - moved.x, turned.y - moved.y) > 1, 'the overlay did not follow the camera');
+
+    await page.uncheck('#crop');
+    await page.waitForFunction(() => window.brickcast.modeAndClip()?.crop === null, null, { timeout: FRAME_TIMEOUT });
+    assert.equal(await page.locator('#cut-overlay').isHidden(), true, 'the overlay stays after cropping is off');
+    await assertHealthy(v);
+  });
+});
+
+test('in the isosurface mode the iso value is a line on the histogram, dragged to change it', { timeout: 60000 }, async () => {
+  await withDaemon({}, async ({ open }) => {
+    const v = await phantomViewer(open);
+    const { page } = v;
+    assert.equal(await page.evaluate(() => window.brickcast.isoMarker()), null, 'the iso line shows in composite');
+    await page.selectOption('#mode', '4');
+    await page.waitForFunction(() => window.brickcast.modeAndClip()?.mode === 4 && window.brickcast.isoMarker() !== null, null, { timeout: FRAME_TIMEOUT });
+    const info = await page.evaluate(() => window.brickcast.volumes.find((x) => x.name === 'phantom'));
+    const start = await page.evaluate(() => ({ marker: window.brickcast.isoMarker(), frameId: window.brickcast.lastFrame.frameId,
+      sent: window.brickcast.modeAndClip().isoValue }));
+    assert.equal(start.marker.value, start.sent, 'the line is not at the iso value sent');
+    const tf = await page.locator('#tf').boundingBox();
+    // The plot spans the canvas less 8 px each side: 40 px is 40 / (its width - 16) of the value range.
+    const y = tf.y + tf.height / 3;
+    await page.mouse.move(tf.x + start.marker.x, y);
+    await page.mouse.down();
+    for (let i = 1; i <= 4; ++i) await page.mouse.move(tf.x + start.marker.x + 10 * i, y);
+    await page.mouse.up();
+    const plotWidth = (await page.evaluate(() => document.getElementById('tf').clientWidth)) - 16;
+    const want = start.sent + (40 / plotWidth) * (info.valueMax - info.valueMin);
+    await sendsFlushed(page);
+    const after = await page.evaluate(() => ({ sent: window.brickcast.modeAndClip().isoValue, marker: window.brickcast.isoMarker(),
+      input: Number(document.getElementById('iso').value), slider: Number(document.getElementById('iso-range').value) }));
+    const step = Number(await page.getAttribute('#iso-range', 'step'));
+    assert.ok(Math.abs(after.sent - want) <= step, `the iso value is ${after.sent} after the drag, not ${want}`);
+    assert.equal(after.marker.value, after.sent, 'the line is not at the iso value sent');
+    assert.ok(Math.abs(after.marker.x - start.marker.x - 40) < 1, `the line moved ${after.marker.x - start.marker.x} px, not 40`);
+    assert.equal(after.input, after.sent, 'the iso number is not the value sent');
+    assert.equal(after.slider, after.sent, 'the iso slider is not at the value sent');
+    await page.waitForFunction((f) => window.brickcast.lastFrame.frameId > f, start.frameId, { timeout: FRAME_TIMEOUT });
+
+    // The slider moves the line.
+    const slid = await page.evaluate((value) => {
+      const range = document.getElementById('iso-range');
+      range.value = String(value);
+      range.dispatchEvent(new Event('input', { bubbles: true }));
+      return { slider: Number(range.value), marker: window.brickcast.isoMarker() };
+    }, info.valueMin + (info.valueMax - info.valueMin) / 4);
+    assert.equal(slid.marker.value, slid.slider, 'the line did not follow the slider');
+    await page.selectOption('#mode', '1');
+    assert.equal(await page.evaluate(() => window.brickcast.isoMarker()), null, 'the iso line stays in MIP');
     await assertHealthy(v);
   });
 });

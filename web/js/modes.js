@@ -1,6 +1,7 @@
 // The "Mode and cut" controls' arithmetic, no DOM: the SetModeAndClip the controls say, from
 // fractions of the open volume's extent (its box is [0, dims[a] × spacingMm[a]] mm on each
-// axis a) and the iso value's range (the volume's [valueMin, valueMax]).
+// axis a) and the iso value's range and step (the volume's [valueMin, valueMax]). The cut
+// overlay's geometry is in cutgeometry.js.
 
 import { Mode } from './protocol.js';
 
@@ -104,6 +105,19 @@ export function modeAndClipOf(volume, cut) {
     crop: cut.cropped ? cropBoxMm(volume, cut.low, cut.high) : null,
     planes: cut.clip ? [clipPlaneOf(volume, cut.axis, cut.position)] : [],
   };
+}
+
+/**
+ * An iso value as the slider holds it: on its step from the volume's valueMin (isoRangeOf),
+ * within [valueMin, valueMax]; what a drag on the histogram's marker sets.
+ */
+export function snapIso(volume, v) {
+  const r = isoRangeOf(volume);
+  const c = clampIso(volume, v);
+  if (r.step === 'any') return c;
+  const k = Math.min(Math.round((c - r.min) / r.step), Math.floor((r.max - r.min) / r.step + 1e-9));
+  // toPrecision: no 0.30000000000000004 from the multiplication.
+  return Number((r.min + k * r.step).toPrecision(12));
 }
 
 /** Millimetres as the controls show them: at most one decimal (64, 112.5). */

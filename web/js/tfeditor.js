@@ -1,7 +1,9 @@
 // The transfer-function editor: the volume's histogram (log scale) behind the opacity curve,
 // draggable opacity points with a colour input each, presets from /presets.json, and the
 // shading switch. It reports every change through onChange(tf) with tf in SetTransferFunction
-// form; the page decides when to send (coalesced to one per animation frame).
+// form; the page decides when to send (coalesced to one per animation frame). In the
+// isosurface mode it also shows the iso value as a line on the histogram, dragged sideways to
+// change it (reported through onIso(value)).
 
 import { Placement } from './protocol.js';
 import { capture } from './controls.js';
@@ -11,6 +13,8 @@ const HIT_RADIUS = 9; // CSS pixels
 const POINT_RADIUS = 5;
 const COLOUR_BAR = 10; // CSS pixels at the bottom: the function's colour
 const PAD = 8;
+const ISO_COLOUR = '#f0b64a';
+const ISO_LABEL_Y = 16; // CSS pixels below the plot's top: under the axis's end labels
 
 /**
  * Opacity is drawn on a square-root axis: presets use opacities of 0.01..0.1 per voxel, which
@@ -23,9 +27,14 @@ const hexOf = (rgb) => '#' + rgb.slice(0, 3).map((v) => Math.round(Math.min(1, M
 const rgbOf = (hex) => [1, 3, 5].map((i) => parseInt(hex.slice(i, i + 2), 16) / 255);
 
 export class TfEditor {
-  /** An editor over the given elements: canvas, colour-input strip, preset select, shading checkbox, readout (value/opacity inputs of the selection) and hint line. */
-  constructor({ canvas, strip, presetSelect, shading, valueInput, alphaInput, hint, onChange }) {
-    Object.assign(this, { canvas, strip, presetSelect, shading, valueInput, alphaInput, hint, onChange });
+  /**
+   * An editor over the given elements: canvas, colour-input strip, preset select, shading
+   * checkbox, readout (value/opacity inputs of the selection) and hint line. onChange(tf) on
+   * every edit of the function; onIso(value) while the iso line is dragged (the value under
+   * the pointer, within the volume's values), which the page answers with setIso.
+   */
+  constructor({ canvas, strip, presetSelect, shading, valueInput, alphaInput, hint, onChange, onIso = () => {} }) {
+    Object.assign(this, { canvas, strip, presetSelect, shading, valueInput, alphaInput, hint, onChange, onIso });
     this.ctx = canvas.getContext('2d');
     this.presets = [];
     this.volume = null; // {valueMin, valueMax}
@@ -35,7 +44,8 @@ export class TfEditor {
     this.givenPoints = null; // kind 1 points as given (any placement), before the first edit
     this.points = []; // [{value, rgba}] sorted by value: what is drawn and edited
     this.selected = null;
-    this.drag = null;
+    this.drag = null; // {id} dragging the selected point, {id, isoGrab} the iso line (grab: pointer x - line x)
+    this.iso = null; // the iso value shown as a line, or null (not in the isosurface mode)
     this.bind();
     new ResizeObserver(() => this.draw()).observe(canvas);
   }
@@ -75,6 +85,19 @@ export class TfEditor {
     this.histogram = hist;
     this.histogramProblem = problem;
     this.replace();
+  }
+
+  /** Shows the iso value as a line on the histogram; null hides it. */
+  setIso(value) {
+    const v = Number.isFinite(value) ? value : null;
+    if (v === this.iso) return;
+    this.iso = v;
+    this.draw();
+  }
+
+  /** Where the iso line is: {value, x} with x in CSS pixels from the canvas's left, or null while it is hidden. */
+  isoMarker() {
+    return this.iso === null || !this.volume ? null : { value: this.iso, x: this.xOf(this.iso) };
   }
 
   /** The transfer function in SetTransferFunction form, as the editor holds it (null before any preset or points). */
@@ -192,6 +215,10 @@ export class TfEditor {
     return unitToAlpha(Math.min(1, Math.max(0, (g.y1 - y) / (g.y1 - g.y0))));
   }
 
+  onIsoLine(x) {
+    return this.iso !== null && !!this.volume && Math.abs(x - this.xOf(this.iso)) <= HIT_RADIUS;
+  }
+
   hit(x, y) {
     let best = null, bestD = HIT_RADIUS;
     for (const p of this.points) {
@@ -205,10 +232,19 @@ export class TfEditor {
     const c = this.canvas;
     const at = (e) => { const r = c.getBoundingClientRect(); return [e.clientX - r.left, e.clientY - r.top]; };
     c.addEventListener('pointerdown', (e) => {
-      if (!this.editable() || e.button !== 0) return;
-      c.focus({ preventScroll: true });
+      if (!this.volume || e.button !== 0) return;
       const [x, y] = at(e);
-      this.select(this.hit(x, y));
+      const point = this.editable() ? this.hit(x, y) : null;
+      // A point on the line wins: points are small, the line is the plot's height.
+      if (!point && this.onIsoLine(x)) {
+        c.focus({ preventScroll: true });
+        capture(c, e.pointerId);
+        this.drag = { id: e.pointerId, isoGrab: x - this.xOf(this.iso) };
+        return;
+      }
+      if (!this.editable()) return;
+      c.focus({ preventScroll: true });
+      this.select(point);
       if (this.selected) {
         capture(c, e.pointerId);
         this.drag = { id: e.pointerId };
@@ -217,7 +253,11 @@ export class TfEditor {
     c.addEventListener('pointermove', (e) => {
       const [x, y] = at(e);
       if (!this.drag || this.drag.id !== e.pointerId) {
-        c.style.cursor = this.editable() && this.hit(x, y) ? 'grab' : 'crosshair';
+        c.style.cursor = this.editable() && this.hit(x, y) ? 'grab' : this.onIsoLine(x) ? 'ew-resize' : 'crosshair';
+        return;
+      }
+      if (this.drag.isoGrab !== undefined) {
+        this.onIso(this.valueOf(x - this.drag.isoGrab));
         return;
       }
       this.selected.value = this.valueOf(x);
@@ -236,6 +276,7 @@ export class TfEditor {
         this.colourInputOf(onPoint)?.click();
         return;
       }
+      if (this.onIsoLine(x)) return; // a double-click while taking the iso line adds no point
       const value = this.valueOf(x);
       const rgb = evaluate(this.points, value).slice(0, 3);
       const p = { value, rgba: [...rgb, this.alphaOf(y)] };
@@ -360,6 +401,7 @@ export class TfEditor {
     ctx.fillText(formatValue(lo), g.x0, g.y0);
     ctx.textAlign = 'right';
     ctx.fillText(formatValue(hi), g.x1, g.y0);
+    this.drawIso(g);
     this.hint.textContent = this.placeProblem || (this.histogram ? '' : this.histogramProblem || 'waiting for the histogram…');
   }
 
@@ -397,6 +439,29 @@ export class TfEditor {
       const top = g.y1 - heights[x] * (g.y1 - g.y0);
       ctx.fillRect(g.x0 + x, top, 1, g.y1 - top);
     }
+  }
+
+  /** The iso value: a line across the plot, labelled with its value on the side with more room. */
+  drawIso(g) {
+    if (this.iso === null) return;
+    const ctx = this.ctx;
+    const x = this.xOf(this.iso);
+    ctx.strokeStyle = ISO_COLOUR;
+    ctx.lineWidth = 1.5;
+    ctx.beginPath();
+    ctx.moveTo(x, g.y0);
+    ctx.lineTo(x, g.y1);
+    ctx.stroke();
+    const text = `iso ${formatValue(this.iso)}`;
+    const left = x > (g.x0 + g.x1) / 2;
+    const width = ctx.measureText(text).width;
+    const tx = left ? x - 4 - width : x + 4;
+    ctx.fillStyle = 'rgba(21, 23, 26, 0.8)';
+    ctx.fillRect(tx - 2, g.y0 + ISO_LABEL_Y - 1, width + 4, 14);
+    ctx.fillStyle = ISO_COLOUR;
+    ctx.textAlign = 'left';
+    ctx.textBaseline = 'top';
+    ctx.fillText(text, tx, g.y0 + ISO_LABEL_Y);
   }
 
   drawFunction(g) {

@@ -11,8 +11,9 @@ import { Trackball } from './trackball.js';
 import { attachControls } from './controls.js';
 import { TfEditor } from './tfeditor.js';
 import {
-  CLIP_AXES, clampIso, clipLabel, cropLabels, defaultCut, isoRangeOf, modeAndClipOf, orderCropRange,
+  CLIP_AXES, clampIso, clipLabel, cropLabels, defaultCut, isoRangeOf, modeAndClipOf, orderCropRange, snapIso,
 } from './modes.js';
+import { CutOverlay } from './cutoverlay.js';
 import {
   FrameStats, autoRendererOf, formatBytes, frameDetailLabel, frameSize, isInteractiveSizeOf, residencyLine, volumeLabel,
 } from './frames.js';
@@ -44,6 +45,7 @@ const els = {
   isoRange: $('iso-range'), crop: $('crop'), clip: $('clip'), clipAxis: $('clip-axis'),
   clipPosition: $('clip-position'), clipPositionValue: $('clip-position-value'),
   cropAxes: ['x', 'y', 'z'].map((a) => ({ low: $(`crop-${a}-low`), high: $(`crop-${a}-high`), value: $(`crop-${a}-value`) })),
+  cutOverlay: $('cut-overlay'),
 };
 
 const conn = new Connection(socketUrl(location.href));
@@ -57,6 +59,7 @@ const state = {
   nextCameraId: 1,
   minCameraId: 0, // frames answering cameras before the current volume's first are stale
   inputTimes: new Map(), // cameraId -> performance.now() of the input that made it
+  sentCameras: new Map(), // cameraId -> the SetCamera sent: the cut overlay projects with the shown frame's
   lastCamera: null,
   lastTf: null,
   lastOptions: null,
@@ -81,6 +84,7 @@ const state = {
   deviceSize: { width: 0, height: 0 },
   lastDrawnCameraId: 0,
   lastFrame: null,
+  shownView: null, // {camera, width, height}: the camera and size of the frame on the canvas (the cut overlay's projection)
   lastBitmap: null, // the last frame drawn, decoded, at its own size (lastFrameImage())
   residency: '',
   autoRenderer: null, // {renderer, reason}: what the server's auto draws with (its Stats)
@@ -156,8 +160,10 @@ function sendCamera(cam, inputTime = performance.now()) {
   if (!trySend(Type.SetCamera, msg)) return 0;
   state.nextCameraId = cameraId >= 0xffffffff ? 1 : cameraId + 1;
   state.inputTimes.set(cameraId, inputTime);
-  // Only recent ids can still be answered: keep the map small.
+  state.sentCameras.set(cameraId, msg);
+  // Only recent ids can still be answered: keep the maps small.
   if (state.inputTimes.size > 256) state.inputTimes.delete(state.inputTimes.keys().next().value);
+  if (state.sentCameras.size > 256) state.sentCameras.delete(state.sentCameras.keys().next().value);
   state.lastCamera = msg;
   return cameraId;
 }
@@ -402,7 +408,10 @@ function onVolumeOpened(info) {
   // Reopening the same volume (a reconnect) keeps the user's view and edits.
   const same = sameGeometry(state.volume, info) && state.trackball;
   state.volume = info;
-  if (!same) state.trackball = new Trackball(info);
+  if (!same) {
+    state.trackball = new Trackball(info);
+    state.shownView = null; // until the new volume's first frame
+  }
   els.volume.value = info.name;
   els.placeholder.hidden = true;
   tfEditor.setVolume(info, same);
@@ -450,8 +459,10 @@ function closeVolume() {
   ctx.fillRect(0, 0, els.view.width, els.view.height);
   state.lastBitmap?.close();
   state.lastBitmap = null;
+  state.shownView = null;
   tfEditor.setHistogram(null, '');
   showModeControls();
+  drawCutOverlay();
 }
 
 function requestHistogram() {
@@ -501,6 +512,12 @@ const tfEditor = new TfEditor({
   canvas: $('tf'), strip: $('tf-colours'), presetSelect: $('preset'), shading: $('shading'),
   valueInput: $('tf-value'), alphaInput: $('tf-alpha'), hint: $('tf-hint'),
   onChange: (tf) => scheduleTransferFunction(tf),
+  // The iso line dragged on the histogram: as the iso slider (its step, coalesced sends).
+  onIso: (value) => {
+    if (!state.volume || state.cut.mode !== Mode.Isosurface || els.modeAndCut.disabled) return;
+    state.cut.isoValue = snapIso(state.volume, value);
+    cutChanged();
+  },
 });
 
 fetch(new URL('presets.json', location.href))
@@ -584,6 +601,7 @@ let lastEntry = null;
 new ResizeObserver(([entry]) => {
   lastEntry = entry;
   measure(entry);
+  drawCutOverlay();
 }).observe(els.view);
 
 // A window moved to a screen of another pixel ratio keeps its CSS size: no resize event then.
@@ -636,6 +654,7 @@ function showModeControls() {
     if (why || title) el.title = why || title;
     else el.removeAttribute('title');
   }
+  drawCutOverlay();
 }
 
 /** Shows state.cut in the controls: the iso value only in the isosurface mode, the sliders of a cut only while it is on. */
@@ -669,6 +688,8 @@ function showCut() {
   els.clipPosition.value = String(c.position);
   els.clipAxis.disabled = els.clipPosition.disabled = !c.clip;
   els.clipPositionValue.textContent = v ? clipLabel(v, c.axis, c.position) : '';
+  tfEditor.setIso(iso && v ? c.isoValue : null);
+  drawCutOverlay();
 }
 
 function cutChanged() {
@@ -719,6 +740,31 @@ function setModeAndClip(partial) {
   showCut();
   scheduleModeAndClip.cancel();
   return sendModeAndClip(true);
+}
+
+// ---- cut overlay -------------------------------------------------------------------------
+
+// A handle dragged on the view moves its face or the plane as its slider does.
+const cutOverlay = new CutOverlay({
+  svg: els.cutOverlay, canvas: els.view,
+  canDrag: () => !els.modeAndCut.disabled,
+  onDrag: ({ name, axis, side, fraction }) => {
+    const c = state.cut;
+    if (name === 'clip') {
+      c.position = fraction;
+    } else {
+      // The face dragged stops short of the opposite one, as its slider does.
+      const r = orderCropRange(side === 'low' ? fraction : c.low[axis], side === 'high' ? fraction : c.high[axis], side);
+      c.low[axis] = r.low;
+      c.high[axis] = r.high;
+    }
+    cutChanged();
+  },
+});
+
+/** The cuts over the view, projected with the camera and size of the frame shown; hidden where the server draws none. */
+function drawCutOverlay() {
+  cutOverlay.update(state.modesSupported ? state.shownView : null, state.volume, state.cut);
 }
 
 showCut();
@@ -827,7 +873,11 @@ function draw(f, bitmap) {
     canvasWidth: c.width, canvasHeight: c.height,
   };
   state.lastFrameHeader = f;
+  const camera = state.sentCameras.get(f.cameraId);
+  // The frame's own size: its aspect is the one its rays were cast for.
+  if (camera) state.shownView = { camera, width: f.width, height: f.height };
   drawOverlay();
+  drawCutOverlay();
 }
 
 // fps falls to 0 when frames stop: refresh the overlay even when nothing is drawn.
@@ -928,6 +978,14 @@ window.brickcast = {
    * take SetModeAndClip (or is not connected). Throws on a value out of range.
    */
   setModeAndClip: (partial) => setModeAndClip(partial),
+  /**
+   * The cut overlay as drawn: {handles: [{name ('x-low' .. 'z-high', 'clip'), x, y (CSS px from
+   * the view's top left), mm (the handle's position on its axis)}], edges (the crop box's
+   * segments drawn)}, or null while it is hidden.
+   */
+  cutOverlay: () => cutOverlay.drawn(),
+  /** The iso value's line on the histogram: {value, x (CSS px from the #tf canvas's left)}, or null while it is hidden. */
+  isoMarker: () => tfEditor.isoMarker(),
 };
 
 conn.connect();

@@ -3,7 +3,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
   CLIP_AXES, CROP_STEP, extentMm, orderCropRange, cropBoxMm, clipPlaneOf, isoRangeOf, clampIso, defaultCut, modeAndClipOf,
-  formatMm, cropLabels, clipLabel,
+  formatMm, cropLabels, clipLabel, snapIso,
 } from '../js/modes.js';
 import { Mode, decode, encodeSetModeAndClip } from '../js/protocol.js';
 
@@ -120,4 +120,17 @@ test('labels: the crop box and what the plane keeps, in mm', () => {
   assert.equal(clipLabel(cthead, '+x', 0.25), 'x ≥ 64 mm');
   assert.equal(clipLabel(cthead, '-z', 0.5), 'z ≤ 113 mm');
   assert.equal(clipLabel(cthead, '+y', 0), 'y ≥ 0 mm');
+});
+
+test('an iso value from the histogram\'s marker lands on the slider\'s step, within the values', () => {
+  assert.equal(snapIso(cthead, 1234.4), 1234);
+  assert.equal(snapIso(cthead, 1234.5), 1235);
+  assert.equal(snapIso(cthead, 5000), 4095);
+  assert.equal(snapIso(cthead, -7), 0);
+  assert.equal(snapIso({ valueMin: 0, valueMax: 1 }, 0.12345), 0.123);
+  // Steps count from valueMin, as an <input type=range> counts them; the last one fits under valueMax.
+  const odd = { valueMin: -0.0137, valueMax: 1 };
+  assert.equal(snapIso(odd, 0.5), 0.5003);
+  assert.equal(snapIso(odd, 1), 0.9993);
+  assert.equal(snapIso({ valueMin: 7, valueMax: 7 }, 3), 7);
 });
