@@ -25,6 +25,9 @@ namespace bc::server {
 struct FrameDrawing {
     RenderSlot::Job job;
     const render::RendererKind* kind = nullptr;
+    /// What the interactive budget keys its rates by: the renderer's name, and the mode when
+    /// it is not composite ("cpu mip").
+    std::string drawing;
     render::RenderOptions options; ///< the whole frame's (region: whole)
     render::View view;
     std::uint64_t costPerPixel = 0;      ///< estimated samples of one ray (the longest)

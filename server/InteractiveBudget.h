@@ -22,7 +22,9 @@
 //
 // The model: per (volume, renderer, level), the ms per drawn pixel of the rays alone (a frame's
 // drawing time less the time it waited for bricks to load, which is transient for a level that
-// fits, and the octree and cell maps built for a new transfer function). A frame that ran slower
+// fits, and the octree and cell maps built for a new transfer function). The daemon names the
+// renderer with its mode where that is not composite ("cpu mip"): a mode's rays cost what
+// another's do not, and a switch of mode must not inherit the other's rate. A frame that ran slower
 // than predicted is believed at once; a faster one moves the rate half way, so one fast frame
 // does not buy a larger image that then runs late. Whatever changes a level's rate changes the
 // other levels' by the same factor (the load or the caches changed, not what a level costs

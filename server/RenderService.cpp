@@ -270,10 +270,14 @@ void RenderService::prepare(FrameDrawing& d) {
     // the level asked for without one).
     // The session's target (SetFrameBudget), else the server's (frames.interactive_ms).
     std::optional<InteractiveChoice> budgeted;
+    // The budget learns a rate per mode (a maximum's ray costs what a composite one does not).
+    d.drawing = std::string(d.kind->name);
+    if (s.modeAndClip.mode != protocol::BlendMode::Composite)
+        d.drawing += std::string(" ") + render::toString(render::BlendMode(s.modeAndClip.mode));
     const double targetMs =
         s.budget.interactiveMs > 0 ? double(s.budget.interactiveMs) : double(mConfig.interactiveMs);
     if (!d.job.refined && targetMs > 0)
-        budgeted = mBudget->choose(s.volume->name, d.kind->name, o.width, o.height,
+        budgeted = mBudget->choose(s.volume->name, d.drawing, o.width, o.height,
                                    interactiveLevels(*s.volume, o), d.sharers, targetMs);
     d.budgeted = budgeted.has_value();
     if (!d.job.refined) d.divisor = budgeted ? budgeted->divisor : InteractiveBudget::kFirstDivisor;
@@ -495,7 +499,7 @@ protocol::Frame RenderService::finish(RenderSlot& slot, FrameDrawing& d, FrameRe
     protocol::Frame frame;
     frame.header.renderMs = float(msSince(d.start));
     if (d.budgeted)
-        mBudget->record(s.volume->name, d.kind->name, stats.level,
+        mBudget->record(s.volume->name, d.drawing, stats.level,
                         std::uint64_t(d.options.width) * d.options.height, d.drawMs,
                         stats.uploadMs + stats.octreeRebuildMs + stats.cellBuildMs);
     // A refined frame may have its own codec (lossless at rest, JPEG while moving), at that

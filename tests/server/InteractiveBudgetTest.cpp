@@ -462,6 +462,37 @@ TEST(FrameBudget, AtRestALargeFramesFirstPassComesWithItsEstimate) {
     EXPECT_EQ(counter(s.c.stats(), "refinement_checks_total"), 1.0);
 }
 
+// The bound at rest holds in the other modes as in composite: a maximum, and an isosurface of
+// a cropped volume, refine until their estimate meets it, each pass at a finer step.
+TEST(FrameBudget, AtRestEveryModeRefinesUntilTheEstimateMeetsTheBound) {
+    for (const auto mode : {protocol::BlendMode::Maximum, protocol::BlendMode::Isosurface}) {
+        SCOPED_TRACE(int(mode));
+        BoundedSession s(64, 40);
+        protocol::SetModeAndClip m;
+        m.mode = mode;
+        if (mode == protocol::BlendMode::Isosurface) {
+            m.isoValue = 0.5 * (s.v.valueMin + s.v.valueMax);
+            m.cropped = true;
+            for (int a = 0; a < 3; ++a)
+                m.cropMax[a] = s.v.dims[a] * s.v.spacingMm[a] * (a == 0 ? 0.6 : 1.0);
+        }
+        s.c.setModeAndClip(m);
+        const std::vector<client::ReceivedFrame> refined = s.refinedAtRest(40);
+        ASSERT_GE(refined.size(), 2u);
+        for (std::size_t i = 1; i < refined.size(); ++i) {
+            EXPECT_GT(refined[i].header.estimatedPsnrDb, 0) << "pass " << i;
+            EXPECT_GT(refined[i].header.samples, refined[i - 1].header.samples) << "a finer step";
+        }
+        EXPECT_GE(refined.back().header.estimatedPsnrDb, 40);
+        const std::vector<std::uint8_t>& rgba = refined.back().rgba;
+        bool shown = false;
+        for (std::size_t p = 3; p < rgba.size(); p += 4)
+            shown = shown || rgba[p] > 0;
+        EXPECT_TRUE(shown) << "the view shows something";
+        ASSERT_TRUE(test::renderIdle(s.c));
+    }
+}
+
 TEST(FrameBudget, WithoutABoundOneRefinedFrameAndACameraThatMovesStopsTheRefinement) {
     const test::TempDir dir;
     test::TestDaemon daemon(test::generatedConfig(dir, {{"phantom", 48}}));

@@ -183,8 +183,8 @@ struct ServerDelta {
 
 void printReport(const LoadtestOptions& o, const std::vector<FrameRow>& rows, double wallS,
                  const ServerDelta& d, std::uint32_t failures) {
-    std::printf("\n## brickcast loadtest: %u clients on %s (%s, %s), %.1f s\n\n", o.clients,
-                o.volume.c_str(), o.renderer.c_str(), o.size.c_str(), wallS);
+    std::printf("\n## brickcast loadtest: %u clients on %s (%s, %s, %s), %.1f s\n\n", o.clients,
+                o.volume.c_str(), o.renderer.c_str(), o.mode.c_str(), o.size.c_str(), wallS);
     std::printf(
         "| Path | Clients | Frames | Frames/s (all its clients) | Latency p50 ms | p99 ms | "
         "Render p50 ms | Bytes/frame | From the frame cache "
