@@ -25,10 +25,10 @@ double psnrRgb8(std::span<const std::uint8_t> a, std::span<const std::uint8_t> b
     return -10.0 * std::log10(mse);
 }
 
-double estimatedPsnrDb(std::span<const std::uint8_t> finer, std::span<const std::uint8_t> coarser) {
+double estimatedPsnrDb(std::span<const std::uint8_t> finer, std::span<const std::uint8_t> coarser,
+                       double gainDb) {
     const double between = psnrRgb8(finer, coarser);
-    return std::isinf(between) ? kMaxEstimateDb
-                               : std::min(between + 20.0 * std::log10(2.0), kMaxEstimateDb);
+    return std::isinf(between) ? kMaxEstimateDb : std::min(between + gainDb, kMaxEstimateDb);
 }
 
 std::uint32_t checkStride(std::uint32_t width, std::uint32_t height) {

@@ -37,10 +37,18 @@ inline constexpr std::uint64_t kCheckPixels = 128 * 128;
 /// @throw std::invalid_argument when the sizes differ or are not whole pixels.
 double psnrRgb8(std::span<const std::uint8_t> a, std::span<const std::uint8_t> b);
 
+/// What a halving of the step is taken to gain beyond the difference it makes (the 6.02 dB
+/// above): composite and the projections. Not the isosurface: a surface thinner than the step
+/// is missed between samples until a step resolves it, so its error falls slower than the
+/// halvings' differences say (the pancreas at 512^2, 40 dB asked: estimated 42 dB with the
+/// gain, 38.5 dB measured against the true image, docs/benchmarks/modes.md).
+inline constexpr double kHalvingGainDb = 6.020599913279624; ///< 20 log10(2): a factor of 2
+
 /// The estimated PSNR against the converged image of refinement pass `finer`, given the pass
-/// before it at twice its step, `coarser`: psnrRgb8(finer, coarser) + 6.02 dB, at most
+/// before it at twice its step, `coarser`: psnrRgb8(finer, coarser) + `gainDb`, at most
 /// kMaxEstimateDb.
-double estimatedPsnrDb(std::span<const std::uint8_t> finer, std::span<const std::uint8_t> coarser);
+double estimatedPsnrDb(std::span<const std::uint8_t> finer, std::span<const std::uint8_t> coarser,
+                       double gainDb = kHalvingGainDb);
 
 /// The stride of the lattice a first pass of width x height is checked against: the largest
 /// whose lattice (PixelLattice) holds kCheckPixels pixels or more; 1 when the frame is too

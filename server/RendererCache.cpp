@@ -33,12 +33,15 @@ std::uint64_t slotBytesOf(const brickstore::BrickStore& store) {
 std::uint32_t afterPass(SessionRenderers& session, FrameDrawing& d, double boundDb) {
     // Each pass after the first is estimated against the one before, and another follows at
     // half the step until the estimate meets the bound.
+    const double gainDb =
+        d.options.mode == render::BlendMode::Isosurface ? 0.0 : render::kHalvingGainDb;
     if (!d.check.empty())
         d.estimatedPsnrDb = render::estimatedPsnrDb(
-            render::latticeOf(d.rgba8, d.options.width, d.options.height, d.checkStride), d.check);
+            render::latticeOf(d.rgba8, d.options.width, d.options.height, d.checkStride), d.check,
+            gainDb);
     else if (d.job.pass > 0 && session.lastPassIndex + 1 == d.job.pass &&
              session.lastPass.size() == d.rgba8.size())
-        d.estimatedPsnrDb = render::estimatedPsnrDb(d.rgba8, session.lastPass);
+        d.estimatedPsnrDb = render::estimatedPsnrDb(d.rgba8, session.lastPass, gainDb);
     session.lastPass = d.rgba8;
     session.lastPassIndex = d.job.pass;
     return render::refineFurther(d.estimatedPsnrDb, boundDb, d.options.stepVoxels) ? d.job.pass + 1

@@ -623,7 +623,9 @@ def bc_sweep(args, ctx, store, scan, tf, view, size, shade, conv_png):
         out.append({"step": step, "preintegrated": preint,
                     "medianMs": statistics.median(stats["frameMs"][args.warmup:]),
                     "firstMs": stats["frameMs"][0], "timesMs": stats["frameMs"][args.warmup:],
-                    "samplesPerPixel": stats["samplesPerPixel"], "png": png, "sameStepRef": same,
+                    "samplesPerPixel": stats["samplesPerPixel"], "samples": stats["samples"],
+                    "samplesRaising": stats.get("samplesRaising", 0), "png": png,
+                    "sameStepRef": same,
                     **errors(np, vtk, png, conv_png, same)})
     return out
 
@@ -840,6 +842,17 @@ def format_tables(results, args):
             fmt(e["medianMs"], ".1f") if e else "n/a",
             err_text(e) if e else "n/a",
             fmt(p["ratioEqualError"], ".2f") + "x" if e else "n/a"))
+    if args.blend in ("mip", "minip"):
+        word = "raised its maximum" if args.blend == "mip" else "lowered its minimum"
+        lines += ["", f"brickcast's samples at the same step: taken, and those that {word} "
+                  "(the samples that made the image); taken / raising is the march's overhead.",
+                  "", "| scan | TF | view | size | samples taken | raising | taken / raising |",
+                  "|---|---|---|---:|---:|---:|---:|"]
+        for p in results["pairs"]:
+            s = p["bcSameStep"]
+            lines.append("| {} | {} | {} | {} | {} | {} | {} |".format(
+                p["scan"], p["tf"], p["view"], p["size"], s["samples"], s["samplesRaising"],
+                fmt(s["samples"] / s["samplesRaising"], ".1f") if s["samplesRaising"] else "n/a"))
     lines += ["", "Converged references (max abs RGBA difference between successive halvings; "
               f"tolerance {args.conv_tol * 255:.2f}/255):", "",
               "| scan | TF | view | size | converged | step (image at) | differences /255 "
