@@ -40,18 +40,15 @@ template <class T> class ModePacket : PacketLanes<T> {
     using PacketLanes<T>::PacketLanes;
 
     void run() {
-        for (int j = 0; j < int(kMax); ++j)
-            idle(j);
-        for (int j = 0; j < mLanes; ++j)
-            refill(j);
+        start();
         march();
     }
 
   private:
     using Base = PacketLanes<T>;
-    using Base::f, Base::mLanes, Base::mN, Base::L, Base::mRay, Base::mStopped, Base::mWalk;
-    using Base::idle, Base::kMax, Base::refill, Base::loadRays, Base::refillThreshold;
-    using Base::mVoxels, Base::mLaneVoxels;
+    using Base::f, Base::mN, Base::L, Base::mWalk, Base::mVoxels, Base::mLaneVoxels;
+    using Base::forLanes, Base::rel, Base::dir, Base::world, Base::compositeLane, Base::refillLanes;
+    using Base::kMax, Base::start, Base::loadRays, Base::refillThreshold;
     using MI = hn::Mask<DI>;
 
     /// The lanes in a round of steps: their samples [k, end), their rays' value and count
@@ -177,20 +174,11 @@ template <class T> class ModePacket : PacketLanes<T> {
         HWY_ALIGN float ts[kMax], vs[kMax];
         hn::Store(t, df, ts);
         hn::Store(value, df, vs);
-        std::uint8_t bits[(kMax + 7) / 8 + 8] = {};
-        hn::StoreMaskBits(df, odd, bits);
-        for (std::size_t j = 0; j < kMax; ++j) {
-            if (((bits[j >> 3] >> (j & 7)) & 1) == 0) continue;
-            vs[j] = detail::fetch(mLaneVoxels[j], f.edge, rel(int(j)) + dir(int(j)) * ts[j]);
-        }
+        forLanes(df, odd, [&](int j) {
+            vs[j] = detail::fetch(mLaneVoxels[j], f.edge, rel(j) + dir(j) * ts[j]);
+        });
         return hn::Load(df, vs);
     }
-
-    /// Lane j's ray's start relative to its stored brick's first voxel, and its step.
-    glm::vec3 rel(int j) const {
-        return glm::vec3(L.lx[j], L.ly[j], L.lz[j]) + (float(f.apron) - 0.5f);
-    }
-    glm::vec3 dir(int j) const { return glm::vec3(L.dx[j], L.dy[j], L.dz[j]); }
 
     /// The lanes `hit` (samples k at t at or above the iso value): each ray's surface refined
     /// and shaded by the scalar code (isoHit(), isoColour()), composited, and the ray stopped.
@@ -202,25 +190,14 @@ template <class T> class ModePacket : PacketLanes<T> {
         HWY_ALIGN std::int32_t ks[kMax];
         hn::Store(t, df, ts);
         hn::Store(k, di, ks);
-        std::uint8_t bits[(kMax + 7) / 8 + 8] = {};
-        hn::StoreMaskBits(df, hit, bits);
-        for (std::size_t j = 0; j < kMax; ++j) {
-            if (((bits[j >> 3] >> (j & 7)) & 1) == 0) continue;
+        forLanes(df, hit, [&](int j) {
             const T* v = mLaneVoxels[j];
-            const glm::vec3 from = rel(int(j)), dv = dir(int(j));
+            const glm::vec3 from = rel(j), dv = dir(j);
             const float at = isoHit(f, L.t0[j], mWalk[j].first, ks[j], ts[j], [&](float u) {
                 return detail::fetch(v, f.edge, from + dv * u);
             });
-            const Rgba c = isoColour(f, Sample<T>(v, f.edge, from + dv * at).diffs(),
-                                     glm::vec3(L.wx[j], L.wy[j], L.wz[j]));
-            Accum& sums = mRay[j]->state->acc;
-            Accum acc{sums.r, sums.g, sums.b, L.t[j]};
-            composite(acc, c);
-            sums.r = acc.r;
-            sums.g = acc.g;
-            sums.b = acc.b;
-            L.t[j] = acc.t;
-        }
+            compositeLane(j, isoColour(f, Sample<T>(v, f.edge, from + dv * at).diffs(), world(j)));
+        });
         p.stopped = hn::Or(p.stopped, hn::RebindMask(di, hit));
     }
 
@@ -230,14 +207,7 @@ template <class T> class ModePacket : PacketLanes<T> {
         hn::Store(p.k, di, L.k);
         hn::Store(p.v, DF(), L.v);
         hn::Store(p.n, di, L.n);
-        std::uint8_t doneBits[(kMax + 7) / 8 + 8] = {}, stopBits[(kMax + 7) / 8 + 8] = {};
-        hn::StoreMaskBits(di, hn::Not(p.active), doneBits);
-        hn::StoreMaskBits(di, p.stopped, stopBits);
-        for (int j = 0; j < mLanes; ++j) {
-            if (((doneBits[j >> 3] >> (j & 7)) & 1) == 0) continue;
-            mStopped[j] = ((stopBits[j >> 3] >> (j & 7)) & 1) != 0;
-            refill(j);
-        }
+        refillLanes(hn::Not(p.active), p.stopped);
     }
 };
 

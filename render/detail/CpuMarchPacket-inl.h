@@ -63,6 +63,55 @@ template <class T> class PacketLanes {
         : f(f), mRays(rays), mCount(count), mLanes(lanes), mN(n) {}
 
   protected:
+    /// Every lane idle, then the first mLanes given their rays: the packet ready to march.
+    void start() {
+        for (int j = 0; j < int(kMax); ++j)
+            idle(j);
+        for (int j = 0; j < mLanes; ++j)
+            refill(j);
+    }
+
+    /// each(j) for every lane j set in mask `m` of d, in order.
+    template <class D, class M, class Each> static void forLanes(D d, M m, const Each& each) {
+        std::uint8_t bits[(kMax + 7) / 8 + 8] = {};
+        hn::StoreMaskBits(d, m, bits);
+        for (std::size_t j = 0; j < kMax; ++j)
+            if (((bits[j >> 3] >> (j & 7)) & 1) != 0) each(int(j));
+    }
+
+    /// Lane j's ray's start relative to its stored brick's first voxel, its step in voxels, and
+    /// its world direction (shading).
+    glm::vec3 rel(int j) const {
+        return glm::vec3(L.lx[j], L.ly[j], L.lz[j]) + (float(f.apron) - 0.5f);
+    }
+    glm::vec3 dir(int j) const { return glm::vec3(L.dx[j], L.dy[j], L.dz[j]); }
+    glm::vec3 world(int j) const { return glm::vec3(L.wx[j], L.wy[j], L.wz[j]); }
+
+    /// composite() of c into lane j's ray: its sums are its state's, its transmittance the lane's.
+    void compositeLane(int j, const Rgba& c) {
+        Accum& sums = mRay[j]->state->acc;
+        Accum acc{sums.r, sums.g, sums.b, L.t[j]};
+        composite(acc, c);
+        sums.r = acc.r;
+        sums.g = acc.g;
+        sums.b = acc.b;
+        L.t[j] = acc.t;
+    }
+
+    /// After a round of steps: the lanes of `done` (of the first mLanes) refilled, those also in
+    /// `stopped` leaving their rays (opaque, or the mode ended them).
+    void refillLanes(hn::Mask<DI> done, hn::Mask<DI> stopped) {
+        const DI di;
+        std::uint8_t doneBits[(kMax + 7) / 8 + 8] = {}, stopBits[(kMax + 7) / 8 + 8] = {};
+        hn::StoreMaskBits(di, done, doneBits);
+        hn::StoreMaskBits(di, stopped, stopBits);
+        for (int j = 0; j < mLanes; ++j) {
+            if (((doneBits[j >> 3] >> (j & 7)) & 1) == 0) continue;
+            mStopped[j] = ((stopBits[j >> 3] >> (j & 7)) & 1) != 0;
+            refill(j);
+        }
+    }
+
     /// Lane j without a ray: no samples, nothing to composite.
     void idle(int j) {
         mRay[j] = nullptr;
@@ -278,17 +327,15 @@ template <class T> class Packet : PacketLanes<T> {
     using PacketLanes<T>::PacketLanes;
 
     void run() {
-        for (int j = 0; j < int(kMax); ++j)
-            idle(j);
-        for (int j = 0; j < mLanes; ++j)
-            refill(j);
+        start();
         march();
     }
 
   private:
     using Base = PacketLanes<T>;
     using Base::f, Base::mLanes, Base::mN, Base::L, Base::mRay, Base::mStopped;
-    using Base::flush, Base::idle, Base::kMax, Base::refill, Base::loadRays, Base::refillThreshold;
+    using Base::flush, Base::kMax, Base::start, Base::loadRays, Base::refillThreshold;
+    using Base::forLanes, Base::rel, Base::dir, Base::world, Base::compositeLane, Base::refillLanes;
     using Base::mRays, Base::mVoxels, Base::mLaneVoxels, Base::mQueue;
     using MI = hn::Mask<DI>;
 
@@ -416,14 +463,7 @@ template <class T> class Packet : PacketLanes<T> {
         const DI di;
         hn::Store(p.tr, DF(), L.t);
         hn::Store(p.k, di, L.k);
-        std::uint8_t doneBits[(kMax + 7) / 8 + 8] = {}, stopBits[(kMax + 7) / 8 + 8] = {};
-        hn::StoreMaskBits(di, hn::Not(p.active), doneBits);
-        hn::StoreMaskBits(di, p.stopped, stopBits);
-        for (int j = 0; j < mLanes; ++j) {
-            if (((doneBits[j >> 3] >> (j & 7)) & 1) == 0) continue;
-            mStopped[j] = ((stopBits[j >> 3] >> (j & 7)) & 1) != 0;
-            refill(j);
-        }
+        refillLanes(hn::Not(p.active), p.stopped);
     }
 
     /// The colour sums of the lanes' rays, as vectors (0 in a lane without a ray).
@@ -464,23 +504,11 @@ template <class T> class Packet : PacketLanes<T> {
         HWY_ALIGN float ts[kMax];
         hn::Store(t, df, ts);
         hn::Store(tr, df, L.t);
-        std::uint8_t bits[(kMax + 7) / 8 + 8] = {};
-        hn::StoreMaskBits(df, odd, bits);
-        for (std::size_t j = 0; j < kMax; ++j) {
-            if (((bits[j >> 3] >> (j & 7)) & 1) == 0) continue;
-            const glm::vec3 rel = glm::vec3(L.lx[j], L.ly[j], L.lz[j]) + (float(f.apron) - 0.5f);
-            const glm::vec3 dv(L.dx[j], L.dy[j], L.dz[j]);
-            const Rgba c = colourOf(f, Sample<T>(mLaneVoxels[j], f.edge, rel + dv * ts[j]),
-                                    glm::vec3(L.wx[j], L.wy[j], L.wz[j]));
-            if (c.a <= 0.0f) continue;
-            Accum& sums = mRay[j]->state->acc;
-            Accum acc{sums.r, sums.g, sums.b, L.t[j]};
-            composite(acc, c);
-            sums.r = acc.r;
-            sums.g = acc.g;
-            sums.b = acc.b;
-            L.t[j] = acc.t;
-        }
+        forLanes(df, odd, [&](int j) {
+            const Rgba c =
+                colourOf(f, Sample<T>(mLaneVoxels[j], f.edge, rel(j) + dir(j) * ts[j]), world(j));
+            if (!(c.a <= 0.0f)) compositeLane(j, c); // as composite() would, NaN too
+        });
         return hn::Load(df, L.t);
     }
 
