@@ -312,21 +312,20 @@ class MpiDaemon : public ::testing::Test {
 #ifdef BC_MPIEXEC
         const std::string config = writeConfig(
             "c.toml", "[[volume]]\nname = \"p\"\ngenerate = \"phantom\"\ndims = [96, 96, 96]\n");
-        const std::string onePort = dir.file("one.port"), port = dir.file("ranks.port");
-        Job one = startJob(
-            dir,
-            {"-np", "1", BC_BRICKCASTD_EXE, "--config", config, "--port-file", onePort, "--quiet"},
-            onePort, 120);
+        auto launch = [&](const char* ranks, const std::string& portFile) {
+            return startJob(dir,
+                            {"-np", ranks, BC_BRICKCASTD_EXE, "--config", config, "--port-file",
+                             portFile, "--quiet"},
+                            portFile, 120);
+        };
+        Job one = launch("1", dir.file("one.port"));
         JobGuard oneGuard{one};
         if (!one.started) {
             ADD_FAILURE() << one.text();
             return out;
         }
         Frames want = fly(one.client);
-        Job job = startJob(
-            dir,
-            {"-np", "2", BC_BRICKCASTD_EXE, "--config", config, "--port-file", port, "--quiet"},
-            port, 120);
+        Job job = launch("2", dir.file("ranks.port"));
         JobGuard guard{job};
         if (!job.started) {
             ADD_FAILURE() << job.text();
