@@ -40,8 +40,8 @@ double psnrRgb8(std::span<const std::uint8_t> a, std::span<const std::uint8_t> b
 /// What a halving of the step is taken to gain beyond the difference it makes (the 6.02 dB
 /// above): composite and the projections. Not the isosurface: a surface thinner than the step
 /// is missed between samples until a step resolves it, so its error falls slower than the
-/// halvings' differences say (the pancreas at 512^2, 40 dB asked: estimated 42 dB with the
-/// gain, 38.5 dB measured against the true image, docs/benchmarks/modes.md).
+/// halvings' differences say (the measurement that showed it: docs/benchmarks/modes.md, "each
+/// mode under load").
 inline constexpr double kHalvingGainDb = 6.020599913279624; ///< 20 log10(2): a factor of 2
 
 /// The estimated PSNR against the converged image of refinement pass `finer`, given the pass
