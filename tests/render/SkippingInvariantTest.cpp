@@ -1,8 +1,8 @@
 // The skipping invariant: the image with any combination of accelerations equals the image
-// with none within max abs 2/255, over a 72-frame orbit (early termination off on both sides:
-// it keeps its own bound) and over 50 random camera jumps (early termination on on both sides,
+// with none within max abs 2/255, over a 36-frame orbit (early termination off on both sides:
+// it keeps its own bound) and over 30 random camera jumps (early termination on on both sides,
 // as sessions draw), on every real dataset and preset. Small images (64^2) keep llvmpipe fast
-// enough for CI.
+// enough for CI; so do the frame counts (10 degrees between orbit frames).
 #include "RenderTestSupport.h"
 
 #include <random>
@@ -21,7 +21,7 @@ struct Case {
     /// so the images must still agree (the 64^2 orbit checks frustums with it off); it keeps
     /// the 128^2 orbits, and the dense close-up ones of the large scans, affordable in CI.
     bool ert = true;
-    int orbitFrames = 72; ///< frames of the frustum orbit (the 64^2 invariant always has 72)
+    int orbitFrames = 36; ///< frames of the frustum orbit (the 64^2 invariant always has 36)
 };
 
 // Test names and failure messages show the case, not its bytes.
@@ -109,20 +109,20 @@ std::string caseName(const ::testing::TestParamInfo<Case>& info) {
 
 class SkippingInvariant : public ::testing::TestWithParam<Case> {};
 
-TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOverA72FrameOrbit) {
+TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOverA36FrameOrbit) {
     const Case c = GetParam();
     auto t = caseStore(c);
     if (!t) return test::missingData("scan " + c.scan);
     const auto tf = TransferFunction::preset(c.preset, t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     std::vector<Camera> path;
-    for (int f = 0; f < 72; ++f)
-        path.push_back(Camera::orbit(box, 5.0 * f, 20.0 + 10.0 * std::sin(f * 0.1)));
+    for (int f = 0; f < 36; ++f)
+        path.push_back(Camera::orbit(box, 10.0 * f, 20.0 + 10.0 * std::sin(f * 0.2)));
     const auto samples = checkPath(*t, tf, path, c.scan + " " + c.preset + " orbit");
     EXPECT_LE(samples[2], samples[1]) << "octrees sampled more than bricks alone";
 }
 
-TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver50RandomJumps) {
+TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver30RandomJumps) {
     const Case c = GetParam();
     auto t = caseStore(c);
     if (!t) return test::missingData("scan " + c.scan);
@@ -131,7 +131,7 @@ TEST_P(SkippingInvariant, EveryTechniqueMatchesPlainOver50RandomJumps) {
     std::mt19937 rng(20261201);
     std::uniform_real_distribution<double> az(0, 360), el(-80, 80), dist(0.35, 1.6);
     std::vector<Camera> path;
-    for (int f = 0; f < 50; ++f) // distances below ~0.5 put the eye inside the volume
+    for (int f = 0; f < 30; ++f) // distances below ~0.5 put the eye inside the volume
         path.push_back(Camera::orbit(box, az(rng), el(rng), dist(rng)));
     // Early termination on both sides, as a session draws: the orbit above checks every sample
     // behind the surfaces with it off, the jumps check the accelerations with it on.
@@ -190,6 +190,8 @@ namespace {
 // the box-minus-view pieces carry most of it.
 class FrustumInvariant : public ::testing::TestWithParam<Case> {};
 
+constexpr int kFrustumJumps = 12; ///< random jumps after the frustum orbit
+
 TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt128) {
     const Case c = GetParam();
     auto t = caseStore(c);
@@ -203,9 +205,9 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
     std::uint64_t sPlain = 0, sOctree = 0, sFrustums = 0;
     int used = 0;
     double worst = 0.0;
-    const int frames = c.orbitFrames + 20;
+    const int frames = c.orbitFrames + kFrustumJumps;
     for (int f = 0; f < frames; ++f) {
-        // the orbit, then 20 random jumps
+        // the orbit, then the random jumps
         const Camera camera =
             f < c.orbitFrames ? Camera::orbit(box, 360.0 * f / c.orbitFrames, 20.0, c.orbitDistance)
                               : Camera::orbit(box, az(rng), el(rng), dist(rng));
@@ -238,8 +240,8 @@ TEST_P(FrustumInvariant, FrustumsOnTopOfOctreesMatchPlainOverAnOrbitAndJumpsAt12
 
 INSTANTIATE_TEST_SUITE_P(RealScans, FrustumInvariant,
                          ::testing::Values(Case{"cthead", "ct-skin"}, Case{"CT_AVM", "vessels"},
-                                           Case{"frog", "mr", 0.42, true, 36},
-                                           Case{"pancreas", "ct-bone", 0.28, true, 36},
+                                           Case{"frog", "mr", 0.42, true, 24},
+                                           Case{"pancreas", "ct-bone", 0.28, true, 24},
                                            Case{"Iguana", "ct-bone"}, Case{"gaffer_smoke", "smoke"},
                                            Case{"hydrogen", "smoke"}, Case{"headsq", "mr"}),
                          caseName);
