@@ -89,8 +89,7 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.simd = o.simd;
     f.packets = f.simd && o.packets && !o.preintegrate;
     f.jitter = o.jitter;
-    f.running =
-        o.skip != SkipMode::None && (o.mode == BlendMode::Maximum || o.mode == BlendMode::Minimum);
+    f.running = runsSkip(o);
     f.segment = o.stepVoxels;
     f.gradScale = glm::vec3(0.5 / span * g.minSpacing() / g.spacing);
     return f;

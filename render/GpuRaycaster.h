@@ -103,6 +103,11 @@ class GpuRaycaster final : public Renderer, public GpuResidency {
     /// classification's than the buffer holds (only the changed bricks' words when the buffer
     /// holds the classification they were updated from).
     void uploadOccupancy(const FrameClassification& classified);
+    /// Under a running skip (runsSkip()), the bounds it compares on the GPU: per brick of
+    /// `level` its stored range's, then per octree leaf of each its own, widened as the CPU
+    /// raycaster's and mapped to pool texels; the shader's uRunning off otherwise.
+    void uploadRunningBounds(const brickstore::BrickStore& store, std::uint32_t level,
+                             const FrameClassification& classified, const RenderOptions& options);
     /// The distance maps (FineOccupancy) of the plan's sampled bricks but `deferred` (indices
     /// into plan.drawn), built from their voxels (pinned one by one) where not yet; the pool's
     /// new slots appended to the GPU's copy, each brick's offset in the per-brick table.

@@ -170,6 +170,7 @@ Image GpuRaycaster::render(const Scene& scene, const View& view, const RenderOpt
     if (guided)
         deferred = deferredBricks(mGpu->guide, plan, sceneId, g.brickCount(), *mPool, levelFirst);
     uploadCells(scene, p.classified, options, plan, deferred, g.brickCount(), stats);
+    uploadRunningBounds(store, level, p.classified, options);
     if (!slice) mGpu->guide.reset(); // this frame's findings replace it (none if it throws)
     if (deferred.empty() || !drawGuided(plan, deferred, levelFirst, cache, pages, pass, stats)) {
         if (!deferred.empty()) { // requests overflowed the pool: draw the frame in batches
@@ -356,6 +357,13 @@ void GpuRaycaster::Gpu::bindForDraw(GLuint poolTexture) {
         occupancyId = 0;
     }
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, occupancy.get());
+    if (!runningBounds) { // binding 6 too (the running skip's bounds)
+        runningBounds = gl::createBuffer();
+        glNamedBufferStorage(runningBounds.get(), 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
+        runningFloats = 1;
+        runningKey = 0;
+    }
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, runningBounds.get());
     if (occlusion) {
         glBindImageTexture(0, occlusion->firstHitTexture(), 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32F);
         glBindTextureUnit(3, occlusion->startTexture());

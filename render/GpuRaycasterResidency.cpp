@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstring>
 
 #include <tbb/blocked_range.h>
@@ -154,6 +155,63 @@ void GpuRaycaster::uploadOccupancy(const FrameClassification& classified) {
     }
     gl::glCheck("uploading octree occupancy");
     mGpu->occupancyId = c.occupancyId();
+}
+
+void GpuRaycaster::uploadRunningBounds(const brickstore::BrickStore& store, std::uint32_t level,
+                                       const FrameClassification& classified,
+                                       const RenderOptions& options) {
+    const GLuint program = mGpu->program;
+    const bool running = runsSkip(options) && !options.hardwareFilter;
+    detail::uniform1i(program, "uRunning", running);
+    if (!running) return;
+    const bool maximum = options.mode == BlendMode::Maximum;
+    const OccupancyTrees* occupancy = classified.occupancy;
+    const bool leaves = occupancy && occupancy->depth() > 0;
+    const auto& layout = store.layout();
+    const auto& l = layout.levels().at(level);
+    const std::uint64_t bricks = l.brickCount(), leafCount = leaves ? layout.leafCount() : 0;
+    detail::uniform1i(program, "uLeafBounds", leaves);
+    const TexelMapping m = mPool->texelMapping();
+    std::uint64_t key = 1469598103934665603ull; // what the bounds depend on
+    for (const double x : {double(store.instance()), double(level), double(maximum),
+                           double(leafCount), m.scale, m.offset}) {
+        std::uint64_t bits;
+        std::memcpy(&bits, &x, sizeof bits);
+        key = (key ^ bits) * 1099511628211ull;
+    }
+    if (mGpu->runningKey == key && mGpu->runningBounds) return;
+    // A bound in stored units (widened for the CPU's float interpolation) to pool texels: the
+    // texel a voxel becomes and the shader's interpolation of it round again, so widen by a
+    // further 1e-5 of the magnitude (over 50 ulp; a 16-bit texel's unit is 1.5e-5).
+    const auto texel = [&](float native) {
+        if (!std::isfinite(native)) return native;
+        const double t = (double(native) - m.offset) / m.scale;
+        const double margin = 1e-5 * std::max(1.0, std::abs(t));
+        return float(maximum ? t + margin : t - margin);
+    };
+    std::vector<float> bounds(std::max<std::uint64_t>(bricks * (1 + leafCount), 1));
+    for (std::uint64_t b = 0; b < bricks; ++b) {
+        const brickstore::ValueRange r = store.record(layout.keyOf(l.firstBrick + b)).range;
+        bounds[b] =
+            texel(maximum ? interpolatedUpper(r.min, r.max) : interpolatedLower(r.min, r.max));
+    }
+    if (leaves) {
+        const std::vector<float>& leaf = maximum ? occupancy->leafUpper() : occupancy->leafLower();
+        for (std::uint64_t i = 0; i < bricks * leafCount; ++i)
+            bounds[bricks + i] = texel(leaf[i]);
+    }
+    if (mGpu->runningFloats != bounds.size()) {
+        mGpu->runningBounds = gl::createBuffer();
+        glNamedBufferStorage(mGpu->runningBounds.get(), GLsizeiptr(bounds.size() * 4),
+                             bounds.data(), GL_DYNAMIC_STORAGE_BIT);
+        mGpu->runningFloats = bounds.size();
+    } else {
+        glNamedBufferSubData(mGpu->runningBounds.get(), 0, GLsizeiptr(bounds.size() * 4),
+                             bounds.data());
+    }
+    gl::glCheck("uploading the running skip's bounds");
+    mGpu->runningKey = key;
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, mGpu->runningBounds.get());
 }
 
 void GpuRaycaster::uploadCells(const Scene& scene, const FrameClassification& classified,

@@ -94,6 +94,10 @@ struct RenderOptions {
     bool earlyTermination = true;
     double ertThreshold = 0.99; ///< stop a ray once its opacity reaches this
     SkipMode skip = SkipMode::All;
+    /// Under skipping, a maximum or minimum also leaves out the bricks and octree leaves whose
+    /// values cannot pass the ray's value so far (render/MODES.md). The same image either way;
+    /// false keeps only the skipping by the transfer function.
+    bool runningSkip = true;
     BlendMode mode = BlendMode::Composite;
     /// BlendMode::Isosurface: the value whose surface is drawn, in the volume's units (the
     /// transfer function's domain); it must lie within the volume's values.
@@ -175,6 +179,14 @@ struct RenderOptions {
     PixelRect drawn() const { return region.whole() ? PixelRect{0, 0, width, height} : region; }
     PixelLattice lattice() const { return {stride}; }
 };
+
+/// Whether a frame of `o` skips by the ray's value so far (RenderOptions::runningSkip): a
+/// maximum or minimum under skipping. The GPU raycaster also needs its own filtering in the
+/// shader (not RenderOptions::hardwareFilter, whose rounding the bounds do not cover).
+inline bool runsSkip(const RenderOptions& o) {
+    return o.runningSkip && o.skip != SkipMode::None &&
+           (o.mode == BlendMode::Maximum || o.mode == BlendMode::Minimum);
+}
 
 /// Where pixel (x, y) of the frame (y from the top) starts its samples under
 /// RenderOptions::jitter, in steps past the box entry, in [0, 1): the R2 low-discrepancy

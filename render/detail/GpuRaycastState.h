@@ -49,6 +49,10 @@ struct GpuRaycaster::Gpu {
     gl::Buffer pages, counters;
     gl::Buffer occupancy; ///< OccupancyTrees::words() of classification occupancyId
     std::uint64_t occupancyWords = 0, occupancyId = 0;
+    /// The running skip's bounds in pool texels: per brick of the level, then per leaf of
+    /// each (GpuRaycaster::uploadRunningBounds), for the frame of key runningKey (0: none yet).
+    gl::Buffer runningBounds;
+    std::uint64_t runningKey = 0, runningFloats = 0;
     /// The distance maps: a copy of the FineOccupancy pool of (cellsId, cellsVoxels), the
     /// slots flagged in cellsUploaded copied; and per brick of the level its map's word offset.
     gl::Buffer cells, cellBase;

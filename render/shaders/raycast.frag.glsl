@@ -55,6 +55,11 @@ uniform float uLeaf;          // leaf edge in voxels
 // from pass to pass in place of a colour; the renderer maps it through the table at the end.
 uniform int uMode;
 uniform float uIso;
+// A maximum's or minimum's running skip (render/MODES.md): per brick of the level a bound on
+// its sample values in texels (from above for a maximum, below for a minimum), then with
+// uLeafBounds per octree leaf of each brick (brick * leaves + leaf, after the bricks').
+layout(std430, binding = 6) readonly buffer RunningBounds { float runBound[]; };
+uniform bool uRunning, uLeafBounds;
 // RenderOptions::clip: the crop box and the planes (normal, offset: kept where
 // dot(normal, x) + offset >= 0), world mm.
 uniform bool uCropped;
@@ -121,6 +126,12 @@ bool project(inout vec4 acc, float v) {
     float u = acc.r * uTfScale + uTfOffset;
     if (uErt <= 1.0 && (uMode == 1 ? u >= float(uTfEntries - 1) : u <= 0.0)) { acc.b = 1.0; return false; }
     return true;
+}
+
+// Whether samples whose values `bound` bounds could change a maximum or minimum so far: not
+// when all are at or below the maximum (at or above the minimum) and the ray has a value.
+bool passes(float bound, vec4 acc) {
+    return acc.g == 0.0 || (uMode == 1 ? bound > acc.r : bound < acc.r);
 }
 
 // Whether the ray is done: opaque enough (composite), hit (isosurface), finished (projections).
@@ -263,6 +274,12 @@ void main() {
         int kEnd = min(total, int(ceil((tOut - t0) / uStepMm - 0.5)));
         int brickIndex = (cell.z * uGrid.y + cell.y) * uGrid.x + cell.x;
         ivec2 e = page[brickIndex];
+#if BC_MODES
+        if (uRunning && e.x != -1 && kEnd > k && !passes(runBound[brickIndex], acc)) {
+            ++leaps; // none of its samples can change the value: not even a deferred one's
+            e.x = -1;
+        }
+#endif
         if (e.x == -3 && kEnd > k) { // deferred: wait for it, drawing nothing beyond
             feedback[uBrickCount + brickIndex] = 1u;
             suspendAt = k;
@@ -311,6 +328,21 @@ void main() {
                         checkedLeaf = leaf;
                     }
                 }
+#if BC_MODES
+                if (uRunning && uLeafBounds && acc.g > 0.0) { // the leaf's bound, as the brick's
+                    ivec3 leaf = clamp(ivec3(floor((local + dv * t) / uLeaf)), ivec3(0),
+                                       ivec3(uLeafAxis - 1));
+                    int leaves = uLeafAxis * uLeafAxis * uLeafAxis;
+                    int i = brickIndex * leaves + (leaf.z * uLeafAxis + leaf.y) * uLeafAxis + leaf.x;
+                    if (!passes(runBound[uBrickCount + i], acc)) {
+                        float tExit = exitParameter(local, dv, vec3(leaf) * uLeaf, uLeaf);
+                        int kNext = int(ceil((tExit - t0) / uStepMm - 0.5));
+                        ++leaps;
+                        k = max(k, min(kNext, kEnd) - 1); // the loop's ++k reaches kNext
+                        continue;
+                    }
+                }
+#endif
                 tHit = min(tHit, t);
                 float value = fetch(q, slot);
                 ++taken;

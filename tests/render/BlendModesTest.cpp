@@ -245,6 +245,13 @@ TEST_P(ModesOnScans, TheCpuRaycasterDrawsTheReferencesImageAndSkippingChangesNoP
         if (m.mode == BlendMode::Maximum || m.mode == BlendMode::Minimum) {
             EXPECT_GT(fast.samplesRaising, 0u);
             EXPECT_LE(fast.samplesRaising, fast.samples);
+            RenderOptions still = o; // the running skip alone off
+            still.runningSkip = false;
+            FrameStats stillStats;
+            EXPECT_EQ(compareImages(test::cpuFrame(*t, tf, camera, still, &stillStats), cpu).maxAbs,
+                      0.0)
+                << "without the running skip";
+            EXPECT_LE(fast.samples, stillStats.samples) << "the running skip added samples";
         }
         // The packets of rays, one ray's samples a vector at a time and the scalar march: the
         // same image, to the bit.
@@ -279,7 +286,8 @@ INSTANTIATE_TEST_SUITE_P(RealScans, ModesOnScans, ::testing::ValuesIn(modeScans(
                          [](const auto& info) { return info.param.scan; });
 
 // The GPU raycaster (llvmpipe in CI, 64^2): each mode, whole and cut, is the reference's image
-// and skipping and early termination change no pixel.
+// and skipping and early termination change no pixel, nor does the running skip of a maximum
+// or minimum, which leaves samples out.
 class ModesGl : public ::testing::TestWithParam<test::ScanPreset> {};
 
 TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChangesNoPixel) {
@@ -298,6 +306,7 @@ TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChan
     cut.planes[0] = {{0.3, 1.0, -0.2}, -0.5 * box.size().y};
     ReferenceRenderer reference;
     GpuRaycaster gpu, plainGpu;
+    std::uint64_t withRunning = 0, withoutRunning = 0; // samples of the maxima and minima
     for (const ModeCase& m : kModes)
         for (const bool cropped : {false, true}) {
             SCOPED_TRACE(std::string(m.name) + (cropped ? " cut" : " whole"));
@@ -307,9 +316,9 @@ TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChan
             o.mode = m.mode;
             o.isoValue = m.mode == BlendMode::Isosurface ? isoOf(tf) : 0.0;
             if (cropped) o.clip = cut;
-            FrameStats stats;
+            FrameStats stats, fastStats;
             const Image ref = reference.render(*t->store, *t->cache, tf, camera, o, stats);
-            const Image fast = test::gpuFrame(*t, gpu, tf, camera, o);
+            const Image fast = test::gpuFrame(*t, gpu, tf, camera, o, &fastStats);
             const ImageComparison c = compareImages(fast, ref);
             test::printComparison(
                 GetParam().scan + " " + m.name + (cropped ? " cut" : "") + " gpu vs reference", c);
@@ -319,7 +328,37 @@ TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChan
             plain.earlyTermination = false;
             EXPECT_EQ(compareImages(test::gpuFrame(*t, plainGpu, tf, camera, plain), fast).maxAbs,
                       0.0);
+            if (m.mode != BlendMode::Maximum && m.mode != BlendMode::Minimum) continue;
+            // The running skip alone off: the same image, and it left samples out.
+            RenderOptions still = o;
+            still.runningSkip = false;
+            FrameStats stillStats;
+            EXPECT_EQ(
+                compareImages(test::gpuFrame(*t, plainGpu, tf, camera, still, &stillStats), fast)
+                    .maxAbs,
+                0.0)
+                << "without the running skip";
+            EXPECT_LE(fastStats.samples, stillStats.samples) << "the running skip added samples";
+            withRunning += fastStats.samples;
+            withoutRunning += stillStats.samples;
+            // Along an orbit and after jumps (close up, from below), at 48^2: the running skip
+            // on and every skipping off, the same image.
+            for (const Camera& other :
+                 {Camera::orbit(box, 95.0, 10.0), Camera::orbit(box, 200.0, -60.0, 0.5)}) {
+                RenderOptions small = o, none = plain;
+                small.width = small.height = none.width = none.height = 48;
+                EXPECT_EQ(compareImages(test::gpuFrame(*t, gpu, tf, other, small),
+                                        test::gpuFrame(*t, plainGpu, tf, other, none))
+                              .maxAbs,
+                          0.0)
+                    << "another view";
+            }
+            std::printf("[modes] %s %s%s gpu: %llu samples with the running skip, %llu without\n",
+                        GetParam().scan.c_str(), m.name, cropped ? " cut" : "",
+                        (unsigned long long)fastStats.samples,
+                        (unsigned long long)stillStats.samples);
         }
+    EXPECT_LT(withRunning, withoutRunning) << "the running skip skipped nothing";
 }
 
 INSTANTIATE_TEST_SUITE_P(RealScans, ModesGl,
