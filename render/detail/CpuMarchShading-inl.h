@@ -11,7 +11,7 @@
 #include "render/detail/CpuMarchSimd.h"
 
 #include <algorithm>
-#include <cmath>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 
@@ -140,7 +140,10 @@ template <class T> struct SamplesV {
         allFused = hn::AllTrue(df, fused);
         // Addresses from positions clamped into the fused range, which leaves a fused lane's
         // own (Max first: it returns 1 for a NaN position).
-        const VF top = hn::Set(df, std::nextafter(float(f.edge - 2), 0.0f));
+        // The float below edge - 2 (std::nextafter towards 0, without its call each step: the
+        // edge is positive, so one bit pattern less).
+        const VF top =
+            hn::Set(df, std::bit_cast<float>(std::bit_cast<std::uint32_t>(float(f.edge - 2)) - 1u));
         auto inside = [&](VF q) { return hn::Min(hn::Max(q, one), top); };
         const VF cx = allFused ? qx : inside(qx), cy = allFused ? qy : inside(qy),
                  cz = allFused ? qz : inside(qz);

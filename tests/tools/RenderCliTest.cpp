@@ -167,6 +167,11 @@ TEST_F(RenderCli, ModesCropsAndClipsAreDrawnAndBadOnesNamed) {
     EXPECT_LE(compareImages(readPng(cpu), readPng(ref)).maxAbs, 1.0 / 255.0 + 1e-6);
     std::ifstream f(stats);
     EXPECT_EQ(nlohmann::json::parse(f).at("mode"), "mip");
+    const std::string still = dir.file("still.png"); // the running skip off: the same image
+    auto c =
+        brickcast("render " + store + " -o " + still + view + " --renderer cpu --no-running-skip");
+    ASSERT_EQ(c.exitCode, 0) << c.text;
+    EXPECT_EQ(compareImages(readPng(still), readPng(cpu)).maxAbs, 0.0);
     auto iso = brickcast("render " + store + " -o " + cpu + " --size 32,32 --mode iso --iso 900");
     EXPECT_EQ(iso.exitCode, 0) << iso.text;
     const std::string out = dir.file("x.png");

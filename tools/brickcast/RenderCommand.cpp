@@ -58,8 +58,8 @@ struct RenderCliOptions {
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32, cells = render::RenderOptions{}.cellVoxels;
     bool ortho = false, noShading = false, noSimd = false, noPackets = false, noRayGuided = false,
-         jitter = false, preintegrate = false, reference = false, interactive = false, mpi = false,
-         mpiBarrier = false;
+         noRunningSkip = false, jitter = false, preintegrate = false, reference = false,
+         interactive = false, mpi = false, mpiBarrier = false;
     double mpiTimeoutS = 60.0;
     std::uint64_t gpuBudgetMb = 512, hostBudgetMb = 1024; // the latter: "auto" in addRenderCommand
     std::int32_t level = 0;
@@ -129,6 +129,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
     r.shading = !o.noShading;
     r.simd = !o.noSimd;
     r.packets = !o.noPackets;
+    r.runningSkip = !o.noRunningSkip;
     r.rayGuided = !o.noRayGuided;
     r.jitter = o.jitter;
     r.preintegrate = o.preintegrate;
@@ -667,6 +668,9 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_flag("--no-packets", o->noPackets,
                   "CPU raycaster: SIMD across one ray's samples instead of across rays (same "
                   "image)");
+    cmd->add_flag("--no-running-skip", o->noRunningSkip,
+                  "mip and minip: keep every brick and leaf whose values could not pass the "
+                  "ray's value so far (the raycasters; same image)");
     cmd->add_flag("--no-ray-guided", o->noRayGuided,
                   "Load every planned brick: the GPU raycaster uploads those the last frame "
                   "found hidden, the CPU raycaster those no ray still marching can enter (same "
