@@ -285,14 +285,15 @@ TEST_P(ModesOnScans, TheCpuRaycasterDrawsTheReferencesImageAndSkippingChangesNoP
 INSTANTIATE_TEST_SUITE_P(RealScans, ModesOnScans, ::testing::ValuesIn(modeScans()),
                          [](const auto& info) { return info.param.scan; });
 
-// The GPU raycaster (llvmpipe in CI, 64^2): each mode, whole and cut, is the reference's image
-// and skipping and early termination change no pixel, nor does the running skip of a maximum
-// or minimum, which leaves samples out.
+// The GPU raycaster (llvmpipe in CI, 64^2), on every shared scan: each mode, whole and cut, is
+// the reference's image, and skipping and early termination change no pixel, nor does the
+// running skip of a maximum or minimum, which leaves samples out.
 class ModesGl : public ::testing::TestWithParam<test::ScanPreset> {};
 
 TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChangesNoPixel) {
-    const auto t = test::ingestRealScan(GetParam().scan);
-    if (!t) return test::missingData("scan " + GetParam().scan);
+    const test::ScanPreset& scan = GetParam();
+    const auto t = test::ingestRealScan(scan.scan);
+    if (!t) return test::missingData("scan " + scan.scan);
     test::glContext();
     const Box box = LevelGeometry::of(*t->store, 0).box;
     const Camera camera = Camera::orbit(box, 35.0, 25.0);
@@ -310,7 +311,7 @@ TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChan
     for (const ModeCase& m : kModes)
         for (const bool cropped : {false, true}) {
             SCOPED_TRACE(std::string(m.name) + (cropped ? " cut" : " whole"));
-            const TransferFunction tf = modeFunction(m, GetParam().preset, t->stats);
+            const TransferFunction tf = modeFunction(m, scan.preset, t->stats);
             RenderOptions o;
             o.width = o.height = 64;
             o.mode = m.mode;
@@ -321,7 +322,7 @@ TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChan
             const Image fast = test::gpuFrame(*t, gpu, tf, camera, o, &fastStats);
             const ImageComparison c = compareImages(fast, ref);
             test::printComparison(
-                GetParam().scan + " " + m.name + (cropped ? " cut" : "") + " gpu vs reference", c);
+                scan.scan + " " + m.name + (cropped ? " cut" : "") + " gpu vs reference", c);
             EXPECT_GE(c.psnrDb, 50.0);
             RenderOptions plain = o;
             plain.skip = SkipMode::None;
@@ -354,17 +355,14 @@ TEST_P(ModesGl, TheGpuRaycasterDrawsTheReferencesImageWholeAndCutAndSkippingChan
                     << "another view";
             }
             std::printf("[modes] %s %s%s gpu: %llu samples with the running skip, %llu without\n",
-                        GetParam().scan.c_str(), m.name, cropped ? " cut" : "",
+                        scan.scan.c_str(), m.name, cropped ? " cut" : "",
                         (unsigned long long)fastStats.samples,
                         (unsigned long long)stillStats.samples);
         }
     EXPECT_LT(withRunning, withoutRunning) << "the running skip skipped nothing";
 }
 
-INSTANTIATE_TEST_SUITE_P(RealScans, ModesGl,
-                         ::testing::Values(test::ScanPreset{"cthead", "ct-bone"},
-                                           test::ScanPreset{"CT_AVM", "vessels"},
-                                           test::ScanPreset{"headsq", "mr"}),
+INSTANTIATE_TEST_SUITE_P(RealScans, ModesGl, ::testing::ValuesIn(modeScans()),
                          [](const auto& info) { return info.param.scan; });
 
 TEST(ModesBadInput, AnIsoValueOutsideTheVolumeOrNotFiniteIsRefusedNamingIso) {
