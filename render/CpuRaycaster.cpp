@@ -110,8 +110,7 @@ std::vector<BrickRef> brickRefs(const brickstore::BrickStore& store, const Brick
             ref.constant = b.constantValue;
             if (!f.running) continue;
             const brickstore::ValueRange r = store.record(b.key).range;
-            ref.bound = f.mode == BlendMode::Maximum ? interpolatedUpper(r.min, r.max)
-                                                     : interpolatedLower(r.min, r.max);
+            ref.bound = interpolatedBound(f.mode == BlendMode::Maximum, r.min, r.max);
         }
     return bricks;
 }
@@ -198,8 +197,7 @@ FineOccupancy* useOccupancy(Frame& f, const FrameClassification& classified,
             f.boxes = occupancy->sampledBoxes().data();
         }
         if (f.running) {
-            f.leafBound = f.mode == BlendMode::Maximum ? occupancy->leafUpper().data()
-                                                       : occupancy->leafLower().data();
+            f.leafBound = occupancy->leafBounds(f.mode == BlendMode::Maximum).data();
             f.leafCount = f.leafAxis * f.leafAxis * f.leafAxis;
         }
     }

@@ -164,11 +164,8 @@ std::uint64_t GpuRaycaster::sceneKey(const brickstore::BrickStore& store, std::u
                                      const RenderOptions& options) const {
     // What the first hits depend on: the volume, the level, which values are visible, the
     // skipping that decides "occupied", and the sample lattice.
-    std::uint64_t h = 1469598103934665603ull;
-    auto mix = [&](const void* data, std::size_t bytes) {
-        for (std::size_t i = 0; i < bytes; ++i)
-            h = (h ^ static_cast<const unsigned char*>(data)[i]) * 1099511628211ull;
-    };
+    detail::KeyHash key;
+    const auto mix = [&key](const void* data, std::size_t bytes) { key.mix(data, bytes); };
     const std::uint64_t instance = store.instance();
     mix(&instance, sizeof instance);
     mix(&level, sizeof level);
@@ -193,7 +190,7 @@ std::uint64_t GpuRaycaster::sceneKey(const brickstore::BrickStore& store, std::u
         mix(options.clip.planes[i].normal.data(), sizeof(double) * 3);
         mix(&options.clip.planes[i].offset, sizeof(double));
     }
-    return h;
+    return key.h;
 }
 
 bool GpuRaycaster::prepareOcclusion(const LevelGeometry& g, const ViewBasis& view,

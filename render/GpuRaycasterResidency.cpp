@@ -172,14 +172,14 @@ void GpuRaycaster::uploadRunningBounds(const brickstore::BrickStore& store, std:
     const std::uint64_t bricks = l.brickCount(), leafCount = leaves ? layout.leafCount() : 0;
     detail::uniform1i(program, "uLeafBounds", leaves);
     const TexelMapping m = mPool->texelMapping();
-    std::uint64_t key = 1469598103934665603ull; // what the bounds depend on
-    for (const double x : {double(store.instance()), double(level), double(maximum),
-                           double(leafCount), m.scale, m.offset}) {
-        std::uint64_t bits;
-        std::memcpy(&bits, &x, sizeof bits);
-        key = (key ^ bits) * 1099511628211ull;
-    }
-    if (mGpu->runningKey == key && mGpu->runningBounds) return;
+    detail::KeyHash key; // what the bounds depend on
+    key.mix(store.instance());
+    key.mix(level);
+    key.mix(maximum);
+    key.mix(leafCount);
+    key.mix(m.scale);
+    key.mix(m.offset);
+    if (mGpu->runningKey == key.h && mGpu->runningBounds) return;
     // A bound in stored units (widened for the CPU's float interpolation) to pool texels: the
     // texel a voxel becomes and the shader's interpolation of it round again, so widen by a
     // further 1e-5 of the magnitude (over 50 ulp; a 16-bit texel's unit is 1.5e-5).
@@ -192,11 +192,10 @@ void GpuRaycaster::uploadRunningBounds(const brickstore::BrickStore& store, std:
     std::vector<float> bounds(std::max<std::uint64_t>(bricks * (1 + leafCount), 1));
     for (std::uint64_t b = 0; b < bricks; ++b) {
         const brickstore::ValueRange r = store.record(layout.keyOf(l.firstBrick + b)).range;
-        bounds[b] =
-            texel(maximum ? interpolatedUpper(r.min, r.max) : interpolatedLower(r.min, r.max));
+        bounds[b] = texel(interpolatedBound(maximum, r.min, r.max));
     }
     if (leaves) {
-        const std::vector<float>& leaf = maximum ? occupancy->leafUpper() : occupancy->leafLower();
+        const std::vector<float>& leaf = occupancy->leafBounds(maximum);
         for (std::uint64_t i = 0; i < bricks * leafCount; ++i)
             bounds[bricks + i] = texel(leaf[i]);
     }
@@ -210,7 +209,7 @@ void GpuRaycaster::uploadRunningBounds(const brickstore::BrickStore& store, std:
                              bounds.data());
     }
     gl::glCheck("uploading the running skip's bounds");
-    mGpu->runningKey = key;
+    mGpu->runningKey = key.h;
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, mGpu->runningBounds.get());
 }
 

@@ -53,6 +53,10 @@ inline float interpolatedUpper(float lo, float hi) {
 inline float interpolatedLower(float lo, float hi) {
     return lo - 2e-6f * std::max(std::abs(lo), std::abs(hi));
 }
+/// interpolatedUpper() for a maximum's running skip (`upper`), interpolatedLower() for a minimum's.
+inline float interpolatedBound(bool upper, float lo, float hi) {
+    return upper ? interpolatedUpper(lo, hi) : interpolatedLower(lo, hi);
+}
 
 struct OccupancyConfig {
     /// A non-empty node whose ratio of non-empty leaves reaches this is drawn whole (its
@@ -129,11 +133,12 @@ class OccupancyTrees {
     /// brick is taken, its octree leaps over nothing.
     bool drawnWhole(std::uint64_t brick) const { return mWhole[brick] != 0; }
     /// Per brick and leaf (brick * leafCount + leaf, leaves numbered as leafNonEmpty's), bounds
-    /// on every value a sample inside the leaf can take (interpolatedUpper(), interpolatedLower()
-    /// of its range; a brick that is not stored, its one value's; a corrupt leaf table, no bound:
-    /// +-infinity). Independent of the transfer function.
-    const std::vector<float>& leafUpper() const { return mLeafUpper; }
-    const std::vector<float>& leafLower() const { return mLeafLower; }
+    /// on every value a sample inside the leaf can take: from above with `upper`, else from
+    /// below (interpolatedBound() of its range; a brick that is not stored, its one value's; a
+    /// corrupt leaf table, no bound: +-infinity). Independent of the transfer function.
+    const std::vector<float>& leafBounds(bool upper) const {
+        return upper ? mLeafUpper : mLeafLower;
+    }
     /// Host memory this object holds (its tables and bits).
     std::uint64_t bytes() const;
     /// Leaf tables that failed their checksum, one line each naming the brick.
@@ -147,7 +152,7 @@ class OccupancyTrees {
     std::vector<std::uint8_t> mStored; ///< per brick: 1 when stored (has leaves)
     std::vector<std::array<float, 2>> mBrickRange;
     std::vector<std::array<float, 2>> mLeafRange;           ///< per brick * leafCount
-    std::vector<float> mLeafUpper, mLeafLower;              ///< leafUpper(), leafLower()
+    std::vector<float> mLeafUpper, mLeafLower;              ///< leafBounds(true), (false)
     std::vector<std::array<std::uint32_t, 2>> mLeafEntries; ///< table entries [i, j] read
     std::vector<std::uint8_t> mLeafFull;                    ///< corrupt leaf table: always occupied
     std::vector<std::uint8_t> mNonEmpty;                    ///< per leaf, of the last update

@@ -81,7 +81,7 @@ struct Frame {
     float iso = 0; ///< RenderOptions::isoValue
     /// A maximum or minimum under skipping: a ray leaves out the bricks, and with `leafBound`
     /// the octree leaves, whose samples cannot pass its value so far (passes()): BrickRef::bound,
-    /// and per leaf OccupancyTrees::leafUpper() or leafLower() (brick i's leaves from
+    /// and per leaf OccupancyTrees::leafBounds() (brick i's leaves from
     /// i * leafCount, numbered as the octree's).
     bool running = false;
     const float* leafBound = nullptr;

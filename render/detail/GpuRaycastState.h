@@ -9,6 +9,7 @@
 #include "render/detail/RayGuide.h"
 
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -35,6 +36,17 @@ inline bool compositeUncut(const RenderOptions& options) {
 struct BatchPins {
     BrickPool& pool;
     ~BatchPins() { pool.unpinAll(); }
+};
+
+/// FNV-1a over the bytes mixed in: the keys under which the raycaster keeps what a frame put
+/// on the GPU (the first hits' scene, the running skip's bounds).
+struct KeyHash {
+    std::uint64_t h = 1469598103934665603ull;
+    void mix(const void* data, std::size_t bytes) {
+        for (std::size_t i = 0; i < bytes; ++i)
+            h = (h ^ static_cast<const unsigned char*>(data)[i]) * 1099511628211ull;
+    }
+    template <class V> void mix(const V& value) { mix(&value, sizeof value); }
 };
 
 } // namespace detail
