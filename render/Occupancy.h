@@ -44,13 +44,18 @@ inline std::array<std::uint32_t, 2> entrySpan(double lo, double hi, double domai
 
 /// Bounds on the values trilinear interpolation in float can give from voxels of [lo, hi]
 /// (detail::fetch, the SIMD march's lerps, the GPU's): the range widened for rounding. Each of
-/// the three nested lerps a (1 - t) + b t errs by at most about 3 ulp of max(|a|, |b|); the
-/// margin, 2e-6 of the largest magnitude, is over three times the sum. What the projections'
-/// running skip compares with a ray's maximum or minimum, so that skipping stays exact.
+/// the three nested lerps a + t (b - a) errs by at most about 3 ulp of max(|a|, |b|); the
+/// margin, 2e-6 of the largest magnitude, is over three times the sum. Voxels of one value
+/// interpolate to it exactly (b - a is 0), so such a range is its own bound: a noisy scan's
+/// uniform air then holds a ray's minimum without a sample. What the projections' running skip
+/// compares with a ray's maximum or minimum, so that skipping stays exact. (The GPU raycaster
+/// widens these again for its texels and its own lerps.)
 inline float interpolatedUpper(float lo, float hi) {
+    if (lo == hi) return hi;
     return hi + 2e-6f * std::max(std::abs(lo), std::abs(hi));
 }
 inline float interpolatedLower(float lo, float hi) {
+    if (lo == hi) return lo;
     return lo - 2e-6f * std::max(std::abs(lo), std::abs(hi));
 }
 /// interpolatedUpper() for a maximum's running skip (`upper`), interpolatedLower() for a minimum's.

@@ -174,10 +174,9 @@ HWY_INLINE QuadF quadAt(const float* v, VI o) {
     return {{a.hi, b.lo}, {a.lo, b.hi}};
 }
 
-/// lerp1() of CpuSampling.h per lane: a (1 - t) + b t.
+/// lerp1() of CpuSampling.h per lane: a + t (b - a).
 HWY_INLINE VF lerpV(VF a, VF b, VF t) {
-    const VF one = hn::Set(DF(), 1.0f);
-    return hn::Add(hn::Mul(a, hn::Sub(one, t)), hn::Mul(b, t));
+    return hn::Add(a, hn::Mul(t, hn::Sub(b, a)));
 }
 
 /// Trilinear in fetch()'s order (x, then y, then z) of eight corner values dXYZ.

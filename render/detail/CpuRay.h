@@ -97,7 +97,7 @@ inline Rgba classify(const Frame& f, float value) {
     const int i = std::min(int(u), f.entries - 2);
     const float w = u - float(i);
     const float* e = f.tf + 4 * i;
-    auto mix = [w](float a, float b) { return a * (1.0f - w) + b * w; };
+    auto mix = [w](float a, float b) { return lerp1(a, b, w); };
     return {mix(e[0], e[4]), mix(e[1], e[5]), mix(e[2], e[6]), mix(e[3], e[7])};
 }
 

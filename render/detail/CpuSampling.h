@@ -22,7 +22,7 @@
 namespace bc::render::detail {
 
 inline float lerp1(float a, float b, float t) {
-    return a * (1.0f - t) + b * t;
+    return a + t * (b - a);
 }
 
 /// Trilinear at q, clamped to the brick (the shader's fetch() with full-precision weights).

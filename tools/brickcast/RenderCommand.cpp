@@ -536,7 +536,8 @@ void runRender(const RenderCliOptions& o) {
             };
             describe = [&o] {
                 return "CPU raycaster (float, " +
-                       (o.noSimd || o.mode != "composite"
+                       // The modes other than composite march in packets or else scalar.
+                       (o.noSimd || (o.mode != "composite" && (o.noPackets || o.preintegrate))
                             ? std::string("scalar")
                             : render::CpuRaycaster::simdTarget() +
                                   (o.noPackets || o.preintegrate ? " samples" : " packets")) +
