@@ -293,6 +293,8 @@ void main() {
             int base = brickIndex * uOccWords;
             uint map = uCells ? cellBase[brickIndex] : 0u;
             ivec3 checkedLeaf = ivec3(-1);           // the last leaf found to be sampled
+            ivec3 boundLeaf = ivec3(-1);             // the leaf whose running bound is read
+            float leafBound = 0.0;
             for (; k < kEnd; ++k) {
                 float t = t0 + (float(k) + 0.5) * uStepMm;
                 vec3 q = rel + dv * t;
@@ -332,9 +334,13 @@ void main() {
                 if (uRunning && uLeafBounds && acc.g > 0.0) { // the leaf's bound, as the brick's
                     ivec3 leaf = clamp(ivec3(floor((local + dv * t) / uLeaf)), ivec3(0),
                                        ivec3(uLeafAxis - 1));
-                    int leaves = uLeafAxis * uLeafAxis * uLeafAxis;
-                    int i = brickIndex * leaves + (leaf.z * uLeafAxis + leaf.y) * uLeafAxis + leaf.x;
-                    if (!passes(runBound[uBrickCount + i], acc)) {
+                    if (leaf != boundLeaf) { // read once per leaf, compared at every sample
+                        int leaves = uLeafAxis * uLeafAxis * uLeafAxis;
+                        int i = brickIndex * leaves + (leaf.z * uLeafAxis + leaf.y) * uLeafAxis + leaf.x;
+                        leafBound = runBound[uBrickCount + i];
+                        boundLeaf = leaf;
+                    }
+                    if (!passes(leafBound, acc)) {
                         float tExit = exitParameter(local, dv, vec3(leaf) * uLeaf, uLeaf);
                         int kNext = int(ceil((tExit - t0) / uStepMm - 0.5));
                         ++leaps;
