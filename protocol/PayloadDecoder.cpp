@@ -1,5 +1,5 @@
 // decodePayload (Decoder.h): the payload readers of every message type. Structure (sizes,
-// declared lengths and counts against the bytes left, bools, reserved bytes) is checked while
+// declared lengths and counts against the bytes left, bools) is checked while
 // reading; values are then checked by the rules the encoder shares (detail/MessageRules.h).
 #include "protocol/Decoder.h"
 
@@ -39,7 +39,6 @@ class PayloadReader {
             v[i] = f64({f, i});
     }
     bool boolean(Field f);
-    void reserved(Field f, std::size_t bytes);
     std::string str(Field f);
     std::size_t count(Field f, std::size_t countBytes, std::size_t maxEntries,
                       std::size_t minEntryBytes);
@@ -67,13 +66,6 @@ bool PayloadReader::boolean(Field f) {
     const std::uint8_t v = u8(f);
     if (v > 1) mRules.fail(ErrorCode::OutOfRange, f, std::to_string(v) + " is not a bool (0 or 1)");
     return v == 1;
-}
-
-void PayloadReader::reserved(Field f, std::size_t bytes) {
-    for (std::size_t i = 0; i < bytes; ++i)
-        if (const std::uint8_t v = u8(f); v != 0)
-            mRules.fail(ErrorCode::OutOfRange, f,
-                        "reserved byte is " + std::to_string(v) + ", not 0");
 }
 
 std::string PayloadReader::str(Field f) {
