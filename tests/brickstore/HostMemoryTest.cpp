@@ -29,7 +29,8 @@ TEST(HostMemoryTest, CgroupLimitFilesParseToBytesOrNoLimit) {
 }
 
 TEST(HostMemoryTest, UsableIsTheLowerOfPhysicalAndTheLimit) {
-    HostMemory m{.physicalBytes = 8ull << 30};
+    HostMemory m;
+    m.physicalBytes = 8ull << 30;
     EXPECT_EQ(m.usableBytes(), 8ull << 30);
     m.cgroupLimitBytes = 2ull << 30;
     EXPECT_EQ(m.usableBytes(), 2ull << 30);
@@ -68,5 +69,7 @@ TEST(HostMemoryTest, ThisMachineReportsItsMemory) {
     const HostMemory m = bc::brickstore::hostMemory();
     EXPECT_GT(m.physicalBytes, 64ull << 20);
     EXPECT_GT(m.usableBytes(), 0u);
-    if (m.cgroupLimitBytes) EXPECT_FALSE(m.cgroupFile.empty());
+    if (m.cgroupLimitBytes) {
+        EXPECT_FALSE(m.cgroupFile.empty());
+    }
 }

@@ -623,7 +623,10 @@ TEST(DecoderRejects, ModesAndClipsOutOfRange) {
     expectRejected(tooMany, ErrorCode::OutOfRange, "SetModeAndClip.planes");
     expectRejected(patched<std::uint8_t>(sampleModeAndClip(), 58, 3), ErrorCode::BadPayload,
                    "SetModeAndClip.planes");
-    EXPECT_THROW(encode(SetModeAndClip{BlendMode::Isosurface, kNan}), ProtocolError);
+    SetModeAndClip nanIso;
+    nanIso.mode = BlendMode::Isosurface;
+    nanIso.isoValue = kNan;
+    EXPECT_THROW(encode(nanIso), ProtocolError);
 }
 
 // ---- SetCamera ----------------------------------------------------------------------------

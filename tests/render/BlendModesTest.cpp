@@ -182,11 +182,11 @@ TEST(RunningSkip, TheBoundsHoldEveryInterpolatedValueOfTheirRange) {
         return float(state >> 8) * (1.0f / 16777216.0f);
     };
     for (const auto& [lo, hi] : std::vector<std::pair<float, float>>{{0.0f, 4095.0f},
-                                                                    {-1024.0f, 3071.0f},
-                                                                    {-3.0e4f, 5.0f},
-                                                                    {0.02f, 0.1f},
-                                                                    {0.1f, 0.1f},
-                                                                    {7.0f, 7.0f}}) {
+                                                                     {-1024.0f, 3071.0f},
+                                                                     {-3.0e4f, 5.0f},
+                                                                     {0.02f, 0.1f},
+                                                                     {0.1f, 0.1f},
+                                                                     {7.0f, 7.0f}}) {
         const float upper = interpolatedUpper(lo, hi), lower = interpolatedLower(lo, hi);
         EXPECT_LE(upper - hi, 1e-5f * std::max(std::abs(lo), std::abs(hi)) + 1e-30f);
         for (int i = 0; i < 200000; ++i) {
@@ -196,11 +196,15 @@ TEST(RunningSkip, TheBoundsHoldEveryInterpolatedValueOfTheirRange) {
                 x = flat ? (i % 4 == 0 ? hi : lo) : lo + (hi - lo) * uniform();
             const glm::vec3 q(0.5f + uniform(), 0.5f + uniform(), 0.5f + uniform());
             const float value = detail::fetch(v, 2, q - glm::vec3(0.5f)); // a 2^3 brick
-            if (flat) ASSERT_EQ(value, v[0]) << "eight corners of " << v[0] << " at " << q.x;
+            if (flat) {
+                ASSERT_EQ(value, v[0]) << "eight corners of " << v[0] << " at " << q.x;
+            }
             ASSERT_LE(value, upper) << lo << ".." << hi;
             ASSERT_GE(value, lower) << lo << ".." << hi;
         }
-        if (lo == hi) EXPECT_TRUE(upper == hi && lower == lo) << "a range of one value " << lo;
+        if (lo == hi) {
+            EXPECT_TRUE(upper == hi && lower == lo) << "a range of one value " << lo;
+        }
     }
 }
 

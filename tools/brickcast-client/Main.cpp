@@ -155,7 +155,12 @@ int fly(const Options& o) {
     if ((*mode == protocol::BlendMode::Isosurface) != o.iso.has_value())
         throw std::invalid_argument(o.iso ? "--iso: only with --mode iso"
                                           : "--mode iso: needs --iso VALUE");
-    if (*mode != protocol::BlendMode::Composite) c.setModeAndClip({*mode, o.iso.value_or(0.0)});
+    if (*mode != protocol::BlendMode::Composite) {
+        protocol::SetModeAndClip m;
+        m.mode = *mode;
+        m.isoValue = o.iso.value_or(0.0);
+        c.setModeAndClip(m);
+    }
     std::string switchTo;
     int switchAt = -1;
     if (!o.tfSwitch.empty()) {

@@ -395,8 +395,12 @@ void runLoadtest(const LoadtestOptions& o) {
                 const auto v = c.openVolume(o.volume);
                 c.setRenderOptions(ro);
                 if (const auto mode = *protocol::blendModeNamed(o.mode);
-                    mode != protocol::BlendMode::Composite) // an iso surface at the middle value
-                    c.setModeAndClip({mode, 0.5 * (v.valueMin + v.valueMax)});
+                    mode != protocol::BlendMode::Composite) { // an iso surface at the middle value
+                    protocol::SetModeAndClip m;
+                    m.mode = mode;
+                    m.isoValue = 0.5 * (v.valueMin + v.valueMax);
+                    c.setModeAndClip(m);
+                }
                 if (o.interactiveMs > 0 || o.restPsnrDb > 0)
                     c.setFrameBudget({std::uint16_t(o.interactiveMs), std::uint8_t(o.restPsnrDb)});
                 const bool adaptive = ro.quality == protocol::Quality::Adaptive;
