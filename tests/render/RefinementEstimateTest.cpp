@@ -62,11 +62,14 @@ TEST(RefinementEstimate, TheCheckLatticeHoldsAtLeastItsPixelsAndPicksThemOut) {
     EXPECT_EQ(checkStride(255, 256), 1u); // too small for a sparse check
     EXPECT_EQ(checkStride(64, 64), 1u);
     EXPECT_EQ(checkStride(1920, 1080), 11u);
-    for (const auto [w, h] : {std::pair{512u, 512u}, {1920u, 1080u}, {300u, 4000u}, {16384u, 2u}}) {
+    for (const auto& [w, h] :
+         {std::pair{512u, 512u}, {1920u, 1080u}, {300u, 4000u}, {16384u, 2u}}) {
         const std::uint32_t s = checkStride(w, h);
         const PixelLattice l{s}, next{s + 1};
         EXPECT_GE(std::uint64_t(l.first(w)) * l.first(h), kCheckPixels) << w << "x" << h;
-        if (s > 1) EXPECT_LT(std::uint64_t(next.first(w)) * next.first(h), kCheckPixels);
+        if (s > 1) {
+            EXPECT_LT(std::uint64_t(next.first(w)) * next.first(h), kCheckPixels);
+        }
     }
     // A 5x3 frame whose pixel (x, y) holds x, y, x + y, 255, at stride 2: pixels (1, 1), (3, 1).
     std::vector<std::uint8_t> frame;
@@ -152,7 +155,9 @@ TEST_P(RefinementEstimateOnScans, EstimatesFollowTheMeasuredErrorAndTheBoundIsMe
         EXPECT_GE(estimate, std::min(measured, kMaxEstimateDb) - kPessimisticDb)
             << "stride " << stride;
         for (const double bound : {30.0, kBoundDb})
-            if (estimate >= bound) EXPECT_GE(measured, bound) << "stride " << stride;
+            if (estimate >= bound) {
+                EXPECT_GE(measured, bound) << "stride " << stride;
+            }
     }
 }
 

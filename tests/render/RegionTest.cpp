@@ -160,7 +160,7 @@ TEST(Region, AStrideDrawsEachLatticePixelAsInTheWholeFrame) {
             EXPECT_EQ(differing, 0) << "lattice pixels unlike the whole frame's";
             // In bands of rows (how the daemon draws it beside a sliced frame): the same.
             Image banded(sparse.width, sparse.height);
-            for (const auto [y0, y1] : {std::pair{0u, 10u}, {10u, 23u}, {23u, 47u}}) {
+            for (const auto& [y0, y1] : {std::pair{0u, 10u}, {10u, 23u}, {23u, 47u}}) {
                 o.region = {0, y0, o.width, y1 - y0};
                 const Image band = cpu.render(*t->store, cache, tf, camera, o, sparseStats);
                 const PixelRect at = *l.of(o.region);
@@ -174,7 +174,9 @@ TEST(Region, AStrideDrawsEachLatticePixelAsInTheWholeFrame) {
             EXPECT_GT(test::alphaSum(sparse), 0.05 * sparse.width * sparse.height);
             EXPECT_LT(double(sparseStats.samples) * stride * stride,
                       2.0 * double(wholeStats.samples)); // a ray in stride^2
-            if (c.budget == kFewBricks) EXPECT_GT(sparseStats.batches, 1u);
+            if (c.budget == kFewBricks) {
+                EXPECT_GT(sparseStats.batches, 1u);
+            }
         }
     // A stride is drawn of the whole volume (one part), of a region that holds a pixel of its
     // lattice, and by the CPU raycaster only.
