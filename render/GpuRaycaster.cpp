@@ -165,30 +165,26 @@ std::uint64_t GpuRaycaster::sceneKey(const brickstore::BrickStore& store, std::u
     // What the first hits depend on: the volume, the level, which values are visible, the
     // skipping that decides "occupied", and the sample lattice.
     detail::KeyHash key;
-    const auto mix = [&key](const void* data, std::size_t bytes) { key.mix(data, bytes); };
-    const std::uint64_t instance = store.instance();
-    mix(&instance, sizeof instance);
-    mix(&level, sizeof level);
-    for (std::uint32_t i = 0; i < table.entries; ++i) {
-        const bool visible = table.rgba[4 * std::size_t(i) + 3] > 0.0f;
-        mix(&visible, 1);
-    }
-    mix(&options.skip, sizeof options.skip);
-    mix(&options.parts, sizeof options.parts); // a part's rays enter only its bricks
-    mix(&options.part, sizeof options.part);
-    mix(&options.octree.ratioThreshold, sizeof(double));
-    mix(&options.octree.levelLimit, sizeof(std::uint32_t));
-    mix(&options.stepVoxels, sizeof(double));
+    key.mix(store.instance());
+    key.mix(level);
+    for (std::uint32_t i = 0; i < table.entries; ++i)
+        key.mix(table.rgba[4 * std::size_t(i) + 3] > 0.0f); // visible
+    key.mix(options.skip);
+    key.mix(options.parts); // a part's rays enter only its bricks
+    key.mix(options.part);
+    key.mix(options.octree.ratioThreshold);
+    key.mix(options.octree.levelLimit);
+    key.mix(options.stepVoxels);
     // What a ray samples and where it stops: its mode, and what the clip leaves.
-    mix(&options.mode, sizeof options.mode);
-    mix(&options.isoValue, sizeof(double));
-    mix(&options.clip.cropped, sizeof(bool));
-    mix(options.clip.cropMin.data(), sizeof(double) * 3);
-    mix(options.clip.cropMax.data(), sizeof(double) * 3);
-    mix(&options.clip.planeCount, sizeof(std::uint32_t));
+    key.mix(options.mode);
+    key.mix(options.isoValue);
+    key.mix(options.clip.cropped);
+    key.mix(options.clip.cropMin);
+    key.mix(options.clip.cropMax);
+    key.mix(options.clip.planeCount);
     for (std::uint32_t i = 0; i < options.clip.planeCount; ++i) {
-        mix(options.clip.planes[i].normal.data(), sizeof(double) * 3);
-        mix(&options.clip.planes[i].offset, sizeof(double));
+        key.mix(options.clip.planes[i].normal);
+        key.mix(options.clip.planes[i].offset);
     }
     return key.h;
 }
