@@ -151,13 +151,13 @@ template <class VolumeAt>
 void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_t y,
               const VolumeAt& volumeAt, RayProgress& s, std::uint64_t& samples,
               std::uint64_t& oracle) {
-    if (s.done) return;
     const LevelGeometry& g = c.geometry;
     const glm::dvec3 ov = ray.origin / g.spacing, dv = ray.direction / g.spacing;
     const Box voxelBox{glm::dvec3(0.0),
                        glm::dvec3(double(g.dims[0]), double(g.dims[1]), double(g.dims[2]))};
     auto [t0, t1] = intersectBox({ov, dv}, voxelBox);
     t0 = std::max(t0, 0.0);
+    double tIn = t0, tOut = t1; // the segment kept, for samplesEnds()
     const double step = c.options.stepVoxels * g.minSpacing();
     if (c.options.jitter) t0 += (double(rayJitter(x, y)) - 0.5) * step;
     const double count = std::ceil((t1 - t0) / step - 0.5);
@@ -170,9 +170,27 @@ void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_
         if (last < double(total)) total = last > 0 ? std::int64_t(last) : 0;
         if (from > 0.0) first = from < double(total) ? std::int64_t(from) : total;
         s.k = std::max(s.k, first);
+        tIn = std::max(tIn, ta);
+        tOut = std::min(tOut, tb);
+    }
+    const BlendMode mode = c.options.mode;
+    // The segment's ends, each in the pass that draws its point (before the lattice's end: the
+    // exit's brick may come in a later pass than the ray's last sample).
+    bool endTaken = false;
+    if (samplesEnds(mode) && first < total)
+        for (const double t : {tIn, tOut}) {
+            const glm::dvec3 p = ov + dv * t;
+            if (const auto* volume = volumeAt(p)) {
+                project(mode, volume->sample(p.x, p.y, p.z), s);
+                ++samples;
+                endTaken = true;
+            }
+        }
+    if (s.done) {
+        if (endTaken) resolveProjection(mode, c.table, s);
+        return;
     }
     std::array<double, 4>& acc = s.acc;
-    const BlendMode mode = c.options.mode;
     auto tOf = [&](std::int64_t k) { return t0 + (double(k) + 0.5) * step; };
     for (std::int64_t k = s.k; k < total; ++k) {
         const glm::dvec3 p = ov + dv * tOf(k);

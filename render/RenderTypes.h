@@ -38,6 +38,13 @@ const char* toString(BlendMode mode);
 inline bool isProjection(BlendMode mode) {
     return mode == BlendMode::Maximum || mode == BlendMode::Minimum || mode == BlendMode::Average;
 }
+/// Maximum or Minimum: besides its lattice, a ray samples the two ends of the segment it keeps
+/// (the box's or the cut's entry and exit; render/MODES.md), where the lattice leaves up to a
+/// step unseen. Only a ray with a sample of its lattice has them (one that crosses less than
+/// half a step of the volume draws nothing, as before).
+inline bool samplesEnds(BlendMode mode) {
+    return mode == BlendMode::Maximum || mode == BlendMode::Minimum;
+}
 
 /// Occlusion-frustum ray starts (render/OCCLUSION.md).
 struct OcclusionConfig {

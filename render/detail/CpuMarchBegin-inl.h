@@ -182,6 +182,49 @@ void beginFresh(const Frame& f, const PacketRay* rays, std::size_t count, RayWal
     unpackWalks(f, rays, count, invStep, out, walks, ok);
 }
 
+/// segmentEnds() for rays [0, count) of `rays`, a vector at a time: ok[i] says whether ray i
+/// has ends, in[i] and out[i] are them. A crop or clip goes to segmentEnds() ray by ray.
+void segmentEndsOf(const Frame& f, const PacketRay* rays, std::size_t count, glm::vec3* in,
+                   glm::vec3* out, bool* ok) {
+    if (f.clip.any) {
+        for (std::size_t i = 0; i < count; ++i)
+            ok[i] = segmentEnds(f, rays[i].sx, rays[i].sy, rays[i].shift, in[i], out[i]);
+        return;
+    }
+    const DF df;
+    constexpr std::size_t kMax = hn::MaxLanes(DF());
+    const std::size_t lanes = hn::Lanes(df);
+    for (std::size_t base = 0; base < count; base += lanes) {
+        const std::size_t n = std::min(lanes, count - base);
+        HWY_ALIGN float sx[kMax] = {}, sy[kMax] = {}, shift[kMax] = {};
+        for (std::size_t i = 0; i < n; ++i) {
+            sx[i] = rays[base + i].sx;
+            sy[i] = rays[base + i].sy;
+            shift[i] = rays[base + i].shift;
+        }
+        VF o[3], d[3];
+        rayBasis(f, hn::Load(df, sx), hn::Load(df, sy), o, d);
+        VF ov[3], dv[3], inv[3], t0, t1;
+        auto miss = clipToVolume(f, o, d, n, ov, dv, inv, t0, t1);
+        const VF lattice = hn::Add(t0, hn::Mul(hn::Load(df, shift), hn::Set(df, f.stepMm)));
+        const VF total = hn::Ceil(hn::Sub(
+            hn::Mul(hn::Sub(t1, lattice), hn::Set(df, 1.0f / f.stepMm)), hn::Set(df, 0.5f)));
+        miss = hn::Or(miss, hn::Not(hn::Gt(total, hn::Zero(df))));
+        HWY_ALIGN float a[3][kMax], b[3][kMax];
+        for (int axis = 0; axis < 3; ++axis) {
+            hn::Store(hn::Add(ov[axis], hn::Mul(dv[axis], t0)), df, a[axis]);
+            hn::Store(hn::Add(ov[axis], hn::Mul(dv[axis], t1)), df, b[axis]);
+        }
+        std::uint8_t missBits[(kMax + 7) / 8 + 8] = {};
+        hn::StoreMaskBits(df, miss, missBits);
+        for (std::size_t i = 0; i < n; ++i) {
+            ok[base + i] = ((missBits[i >> 3] >> (i & 7)) & 1) == 0;
+            in[base + i] = {a[0][i], a[1][i], a[2][i]};
+            out[base + i] = {b[0][i], b[1][i], b[2][i]};
+        }
+    }
+}
+
 } // namespace HWY_NAMESPACE
 } // namespace bc::render::detail
 HWY_AFTER_NAMESPACE();

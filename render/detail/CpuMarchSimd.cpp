@@ -93,6 +93,12 @@ void MarchPacket(brickstore::VoxelType type, const Frame& f, const PacketRay* ra
     }
 }
 
+/// segmentEndsSimd() on this target.
+void SegmentEnds(const Frame& f, const PacketRay* rays, std::size_t count, glm::vec3* in,
+                 glm::vec3* out, bool* ok) {
+    segmentEndsOf(f, rays, count, in, out, ok);
+}
+
 std::int64_t Target() {
     return HWY_TARGET;
 }
@@ -109,6 +115,7 @@ namespace bc::render::detail {
 
 HWY_EXPORT(MarchBrick);
 HWY_EXPORT(MarchPacket);
+HWY_EXPORT(SegmentEnds);
 HWY_EXPORT(Target);
 HWY_EXPORT(LaneCount);
 
@@ -122,6 +129,11 @@ bool marchBrickSimd(brickstore::VoxelType type, const Frame& f, const void* voxe
 void marchPacketSimd(brickstore::VoxelType type, const Frame& f, const PacketRay* rays,
                      std::size_t count, RayCount& n) {
     HWY_DYNAMIC_DISPATCH(MarchPacket)(type, f, rays, count, n);
+}
+
+void segmentEndsSimd(const Frame& f, const PacketRay* rays, std::size_t count, glm::vec3* in,
+                     glm::vec3* out, bool* ok) {
+    HWY_DYNAMIC_DISPATCH(SegmentEnds)(f, rays, count, in, out, ok);
 }
 
 std::string simdTargetName() {

@@ -41,6 +41,12 @@ struct PacketRay {
 void marchPacketSimd(brickstore::VoxelType type, const Frame& f, const PacketRay* rays,
                      std::size_t count, RayCount& n);
 
+/// segmentEnds() of CpuRay.h for the rays `rays[0, count)`, a vector of rays at a time (a
+/// crop or clip ray by ray): ok[i] says whether ray i has ends, in[i] and out[i] are them.
+/// Every march takes its ends from here, so they are the same whichever marched the lattice.
+void segmentEndsSimd(const Frame& f, const PacketRay* rays, std::size_t count, glm::vec3* in,
+                     glm::vec3* out, bool* ok);
+
 /// The instruction set marchBrickSimd() runs on this host ("AVX3", "AVX2", "SSE4", ...).
 std::string simdTargetName();
 /// Samples per vector there.

@@ -593,6 +593,128 @@ struct RayWalk {
     }
 };
 
+/// Where the ray of image-plane position (sx, sy) enters and leaves the segment it keeps (the
+/// volume's box, narrowed by the crop and clip planes), in voxels, as RayWalk::begin() sets it
+/// up; false when the ray has no sample of its lattice (`shift`: begin()'s) to draw.
+/// samplesEnds(): a maximum or minimum samples these two points besides its lattice. Scalar
+/// arithmetic throughout (glm's component-wise functions are calls here, at a ray's cost).
+inline bool segmentEnds(const Frame& f, float sx, float sy, float shift, glm::vec3& in,
+                        glm::vec3& out) {
+    glm::vec3 o = f.eye, d = f.forward;
+    for (int a = 0; a < 3; ++a) {
+        if (f.ortho)
+            o[a] += sx * f.right[a] + sy * f.up[a];
+        else
+            d[a] += sx * f.right[a] + sy * f.up[a];
+    }
+    if (!f.ortho) {
+        const float inv = 1.0f / std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+        d = glm::vec3(d.x * inv, d.y * inv, d.z * inv);
+    }
+    glm::vec3 ov, dv;
+    float t0 = 0.0f, t1 = 3.0e38f;
+    for (int a = 0; a < 3; ++a) {
+        ov[a] = o[a] * f.invSpacing[a];
+        dv[a] = d[a] * f.invSpacing[a];
+        if (dv[a] == 0.0f) {
+            if (ov[a] < 0.0f || ov[a] > f.dims[a]) return false;
+            continue;
+        }
+        const float inv = 1.0f / dv[a];
+        const float ta = -ov[a] * inv, tb = (f.dims[a] - ov[a]) * inv;
+        t0 = std::max(t0, std::min(ta, tb));
+        t1 = std::min(t1, std::max(ta, tb));
+    }
+    const float invStep = 1.0f / f.stepMm, lattice = t0 + shift * f.stepMm;
+    int total = int(std::ceil((t1 - lattice) * invStep - 0.5f));
+    if (total <= 0) return false;
+    float tIn = t0, tOut = t1;
+    if (f.clip.any) { // RayWalk::clipSamples()
+        float ta = -3.0e38f, tb = 3.0e38f;
+        f.clip.interval(o, d, ta, tb);
+        if (!(ta <= tb)) return false;
+        const float kb = std::ceil((tb - lattice) * invStep - 0.5f);
+        if (kb < float(total)) total = kb > 0.0f ? int(kb) : 0;
+        const float ka = std::ceil((ta - lattice) * invStep - 0.5f);
+        const int first = ka > 0.0f ? (ka < float(total) ? int(ka) : total) : 0;
+        if (first >= total) return false;
+        tIn = std::max(tIn, ta);
+        tOut = std::min(tOut, tb);
+    }
+    for (int a = 0; a < 3; ++a) {
+        in[a] = ov[a] + dv[a] * tIn;
+        out[a] = ov[a] + dv[a] * tOut;
+    }
+    return true;
+}
+
+/// What takeEnd() needs of the frame beyond Frame: reciprocals to locate a point (bricks, and
+/// octree leaves within one), and where the table is transparent for the mode: a value whose
+/// table position (classify()'s, clamped) is at or below `clearBelow` maps to alpha 0 and so
+/// cannot make a maximum visible, one at or above `clearAbove` a minimum.
+struct EndGrid {
+    float invBrick, invLeaf;
+    float clearBelow = -1.0f, clearAbove;
+    explicit EndGrid(const Frame& f)
+        : invBrick(1.0f / float(f.brick)), invLeaf(1.0f / f.leaf), clearAbove(float(f.entries)) {
+        int first = f.entries, last = -1; // the entries with alpha above 0
+        for (int e = 0; e < f.entries; ++e)
+            if (f.tf[4 * e + 3] > 0.0f) {
+                first = std::min(first, e);
+                last = e;
+            }
+        // Between entries e - 1 and e the lerp is exact (a + t (b - a)): at position e - 1 it
+        // is entry e - 1's alpha, 0.
+        clearBelow = float(first - 1);
+        clearAbove = last < 0 ? -1.0f : float(last + 1);
+    }
+    /// Whether samples whose values `bound` bounds (from above for a maximum, below for a
+    /// minimum) can change the ray's colour: not when they cannot pass its value so far, nor
+    /// when all map to transparency (then the ray's value is transparent too, or passes them).
+    [[gnu::always_inline]] bool matters(const Frame& f, float bound, const Accum& acc) const {
+        if (!passes(f, bound, acc)) return false;
+        const float u = std::clamp(bound * f.tfScale + f.tfOffset, 0.0f, float(f.entries - 1));
+        return f.mode == BlendMode::Maximum ? u > clearBelow : u < clearAbove;
+    }
+};
+
+/// Takes a segment's end at voxel position p into a projecting ray when the brick holding it
+/// is drawn in this pass (f.batch): sampled through its apron, or its one value. A brick the
+/// plan leaves out holds no value that could change the ray's colour (render/MODES.md), and a
+/// brick of another batch takes it in that batch's pass. Under Frame::running, not where the
+/// brick's or the leaf's bound says the sample cannot matter (EndGrid::matters()). A point on
+/// a face between two bricks or leaves may go to either: the apron gives it the same value in
+/// both, and each one's bounds cover it (as they cover the march's samples there).
+template <class T>
+void takeEnd(const Frame& f, const EndGrid& grid, glm::vec3 p, Accum& acc, RayCount& n) {
+    // p lies in the box [0, dims] but for rounding: truncation is the floor, clamped.
+    int cell[3];
+    for (int a = 0; a < 3; ++a)
+        cell[a] = std::min(std::max(int(p[a] * grid.invBrick), 0), f.grid[a] - 1);
+    const int index = (cell[2] * f.grid.y + cell[1]) * f.grid.x + cell[0];
+    const BrickRef& b = f.bricks[index];
+    if (b.slot == Slot::Absent || b.batch != f.batch) return;
+    if (f.running && !grid.matters(f, b.bound, acc)) return;
+    glm::vec3 local;
+    for (int a = 0; a < 3; ++a)
+        local[a] = p[a] - float(cell[a] * f.brick);
+    if (b.slot == Slot::Sampled && f.running && f.leafBound) {
+        glm::ivec3 leaf;
+        for (int a = 0; a < 3; ++a)
+            leaf[a] = std::min(std::max(int(local[a] * grid.invLeaf), 0), f.leafAxis - 1);
+        const int i = index * f.leafCount + (leaf.z * f.leafAxis + leaf.y) * f.leafAxis + leaf.x;
+        if (!grid.matters(f, f.leafBound[i], acc)) return;
+    }
+    float value = b.constant;
+    if (b.slot == Slot::Sampled) {
+        const float shift = float(f.apron) - 0.5f;
+        value = detail::fetch(static_cast<const T*>(b.voxels), f.edge,
+                              glm::vec3(local.x + shift, local.y + shift, local.z + shift));
+    }
+    ++n.samples;
+    project(f, acc, value, n.raises);
+}
+
 /// The pre-integrated march's link from one sample to the next: the segment end of the last
 /// sample whose value was read, and which sample that was (-1: none yet).
 struct Front {

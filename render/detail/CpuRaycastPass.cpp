@@ -10,6 +10,7 @@
 #include <atomic>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <type_traits>
 
 #include <glm/vec2.hpp>
@@ -114,16 +115,22 @@ class PassRays {
     std::size_t index(std::uint32_t x, std::uint32_t y) const {
         return std::size_t(y - mY0) * mW + (x - mX0);
     }
+    /// Ray (x, y), its state constructed when this is batch 0 (the first touch).
     PacketRay operator()(std::uint32_t x, std::uint32_t y) const {
+        const PacketRay p = at(x, y);
+        if (mF.batch == 0) std::construct_at(p.state);
+        return p;
+    }
+    /// Ray (x, y), its state as it is.
+    PacketRay at(std::uint32_t x, std::uint32_t y) const {
         PacketRay p;
-        const glm::vec2 at = planeOf(mF, mLattice, x, y);
-        p.sx = at.x;
-        p.sy = at.y;
+        const glm::vec2 plane = planeOf(mF, mLattice, x, y);
+        p.sx = plane.x;
+        p.sy = plane.y;
         p.shift = mF.jitter ? rayJitter(mLattice.pixel(x), mLattice.pixel(y)) - 0.5f : 0.0f;
         const std::size_t i = index(x, y);
         p.state = &mRays[i];
         p.resume = &mRays.resume(i);
-        if (mF.batch == 0) std::construct_at(p.state);
         return p;
     }
 
@@ -165,6 +172,33 @@ void marchTileRays(const Frame& f, const PassRays& ray, const Tile& r, std::vect
         }
 }
 
+/// The segment ends of tile `r`'s rays whose bricks this pass draws (samplesEnds(), takeEnd()),
+/// after the tile's march: the same for every march, so the scalar and SIMD ones stay equal.
+template <class T>
+void takeTileEnds(const Frame& f, const EndGrid& grid, const PassRays& ray, const Tile& r,
+                  RayCount& n) {
+    constexpr std::size_t kTile = 64; // the 8x8 tiles of marchPassOf(), or fewer at an edge
+    PacketRay rays[kTile];
+    glm::vec3 in[kTile], out[kTile];
+    bool ok[kTile];
+    std::size_t count = 0;
+    auto flush = [&] {
+        segmentEndsSimd(f, rays, count, in, out, ok);
+        for (std::size_t i = 0; i < count; ++i) {
+            if (!ok[i]) continue;
+            takeEnd<T>(f, grid, in[i], rays[i].state->acc, n);
+            takeEnd<T>(f, grid, out[i], rays[i].state->acc, n);
+        }
+        count = 0;
+    };
+    for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
+            rays[count++] = ray.at(x, y);
+            if (count == kTile) flush();
+        }
+    if (count > 0) flush();
+}
+
 /// marchPass() for voxels of type T, on every core (TBB over 8x8 tiles).
 template <class T>
 void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
@@ -172,6 +206,8 @@ void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
                  RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0}, raises{0};
     const PassRays ray(f, lattice, region, rays);
+    const std::optional<EndGrid> ends =
+        samplesEnds(f.mode) ? std::make_optional(EndGrid(f)) : std::nullopt;
     tbb::parallel_for(Tile(rect.y, rect.y + rect.height, 8, rect.x, rect.x + rect.width, 8),
                       [&](const Tile& r) {
                           RayCount n;
@@ -179,6 +215,7 @@ void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
                               marchTilePackets(voxelTypeOf<T>(), f, ray, r, n);
                           else
                               marchTileRays<T>(f, ray, r, fronts, n);
+                          if (ends) takeTileEnds<T>(f, *ends, ray, r, n);
                           samples += n.samples;
                           leaps += n.leaps;
                           raises += n.raises;

@@ -222,6 +222,7 @@ void main() {
         t0 = max(t0, min(ta, tb));
         t1 = min(t1, max(ta, tb));
     }
+    float tIn = t0, tOut = t1; // the segment kept (a maximum's or minimum's ends)
     // RenderOptions::jitter: samples from the entry + (k + rayJitter()) step (RenderTypes.cpp,
     // the same integers; y counted from the top as the CPU's pixels are).
     if (uJitter) {
@@ -243,6 +244,8 @@ void main() {
         float ka = ceil((ta - t0) / uStepMm - 0.5);
         if (ka > 0.0) kFirst = ka < float(total) ? int(ka) : total;
         if (kFirst >= total) { outColor = acc; return; }
+        tIn = max(tIn, ta);
+        tOut = min(tOut, tb);
     }
 #endif
 
@@ -403,6 +406,28 @@ void main() {
         tMax[a] = (float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * uBrick) - ov[a]) / dv[a];
         if (cell[a] < 0 || cell[a] >= uGrid[a]) break;
     }
+#if BC_MODES
+    // A maximum's or minimum's segment ends (render/MODES.md), in the passes whose bricks hold
+    // them: a brick drawn now gives its value (given again in a later pass, it changes
+    // nothing); a deferred one is asked for, the ray waiting after its last sample.
+    if ((uMode == 1 || uMode == 2) && !finished(acc)) {
+        for (int end = 0; end < 2; ++end) {
+            vec3 p = ov + dv * (end == 0 ? tIn : tOut);
+            ivec3 c = clamp(ivec3(floor(p / float(uBrick))), ivec3(0), uGrid - 1);
+            int b = (c.z * uGrid.y + c.y) * uGrid.x + c.x;
+            ivec2 e = page[b];
+            if (e.x == -1 || (uRunning && !passes(runBound[b], acc))) continue;
+            if (e.x == -3) {
+                if (suspendAt < 0) { feedback[uBrickCount + b] = 1u; suspendAt = total; }
+                continue;
+            }
+            ++taken;
+            if (e.x == -2) { project(acc, intBitsToFloat(e.y)); continue; }
+            if (uFeedback) feedback[b] = 1u;
+            project(acc, fetch(p - vec3(c * uBrick) + (float(uApron) - 0.5), slotOrigin(e.x)));
+        }
+    }
+#endif
     if (uWriteFirstHit && tHit < 1.0e37) {
         ivec2 px = ivec2(gl_FragCoord.xy);
         if (tHit < imageLoad(uFirstHit, px).r) imageStore(uFirstHit, px, vec4(tHit));
