@@ -261,7 +261,9 @@ class FramePasses {
     /// bricks kept, `keptBytes` (the earlier slices') included.
     std::uint64_t draw(Batches& b, std::uint64_t keptBytes, FrameStats& stats) {
         for (std::size_t batch = 0, first = 0; batch < b.ends.size(); first = b.ends[batch++]) {
-            if (b.guided && batch > 0 && mMarched.visible)
+            // A maximum's or minimum's segment end may lie in a brick that only a ray done
+            // with its lattice still needs (samplesEnds()): those frames load every brick.
+            if (b.guided && batch > 0 && mMarched.visible && !samplesEnds(mF.mode))
                 stats.bricksUnreached += detail::markUnreached(
                     mG, mPlan, first, b.ends[batch], mView, mF,
                     detail::MarchingRays(mRays, mLattice, mRegion, mMarched.rect), b.unreached);

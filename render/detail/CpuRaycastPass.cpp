@@ -105,11 +105,14 @@ void marchRay(const Frame& f, float sx, float sy, float shift, RayState& s, RayR
 }
 
 /// The rays of a pass (marchPass), numbered as the region's: a ray's image-plane position,
-/// sample shift and state, which batch 0 constructs.
+/// sample shift and state, which batch 0 constructs (unless `constructs` is false: another
+/// PassRays of the pass did already).
 class PassRays {
   public:
-    PassRays(const Frame& f, PixelLattice lattice, const PixelRect& region, RayStates& rays)
-        : mF(f), mLattice(lattice), mX0(region.x), mY0(region.y), mW(region.width), mRays(rays) {}
+    PassRays(const Frame& f, PixelLattice lattice, const PixelRect& region, RayStates& rays,
+             bool constructs = true)
+        : mF(f), mLattice(lattice), mX0(region.x), mY0(region.y), mW(region.width), mRays(rays),
+          mConstructs(constructs && f.batch == 0) {}
 
     /// Ray (x, y)'s index in the region's rays.
     std::size_t index(std::uint32_t x, std::uint32_t y) const {
@@ -118,7 +121,7 @@ class PassRays {
     /// Ray (x, y), its state constructed when this is batch 0 (the first touch).
     PacketRay operator()(std::uint32_t x, std::uint32_t y) const {
         const PacketRay p = at(x, y);
-        if (mF.batch == 0) std::construct_at(p.state);
+        if (mConstructs) std::construct_at(p.state);
         return p;
     }
     /// Ray (x, y), its state as it is.
@@ -139,6 +142,7 @@ class PassRays {
     const PixelLattice mLattice;
     const std::uint32_t mX0, mY0, mW;
     RayStates& mRays;
+    const bool mConstructs;
 };
 
 /// The rays of tile `r` in 4x4 blocks (partial at an edge), a vector of rays at a time.
@@ -173,7 +177,8 @@ void marchTileRays(const Frame& f, const PassRays& ray, const Tile& r, std::vect
 }
 
 /// The segment ends of tile `r`'s rays whose bricks this pass draws (samplesEnds(), takeEnd()),
-/// after the tile's march: the same for every march, so the scalar and SIMD ones stay equal.
+/// before the tile's march, so that they seed its running skip; the same for every march, so
+/// the scalar and SIMD ones stay equal. Constructs the states on batch 0 (`ray`'s operator()).
 template <class T>
 void takeTileEnds(const Frame& f, const EndGrid& grid, const PassRays& ray, const Tile& r,
                   RayCount& n) {
@@ -193,7 +198,7 @@ void takeTileEnds(const Frame& f, const EndGrid& grid, const PassRays& ray, cons
     };
     for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
         for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
-            rays[count++] = ray.at(x, y);
+            rays[count++] = ray(x, y);
             if (count == kTile) flush();
         }
     if (count > 0) flush();
@@ -205,17 +210,18 @@ void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
                  const PixelRect& rect, RayStates& rays, std::vector<Front>& fronts,
                  RayCount& total) {
     std::atomic<std::uint64_t> samples{0}, leaps{0}, raises{0};
-    const PassRays ray(f, lattice, region, rays);
     const std::optional<EndGrid> ends =
         samplesEnds(f.mode) ? std::make_optional(EndGrid(f)) : std::nullopt;
+    const PassRays first(f, lattice, region, rays);
+    const PassRays ray(f, lattice, region, rays, !ends); // after the ends, which construct
     tbb::parallel_for(Tile(rect.y, rect.y + rect.height, 8, rect.x, rect.x + rect.width, 8),
                       [&](const Tile& r) {
                           RayCount n;
+                          if (ends) takeTileEnds<T>(f, *ends, first, r, n);
                           if (f.packets)
                               marchTilePackets(voxelTypeOf<T>(), f, ray, r, n);
                           else
                               marchTileRays<T>(f, ray, r, fronts, n);
-                          if (ends) takeTileEnds<T>(f, *ends, ray, r, n);
                           samples += n.samples;
                           leaps += n.leaps;
                           raises += n.raises;
