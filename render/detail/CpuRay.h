@@ -450,6 +450,22 @@ inline bool marchConstant(const Frame& f, float value, int& k, int kEnd, Accum& 
     return true;
 }
 
+/// Narrows a ray's samples [first, total) (sample k at t0 + (k + 1/2) step, `invStep` = 1 /
+/// step) to those `clip` keeps along o + t d, and gives the parameters it keeps, [ta, tb];
+/// false when no sample is left.
+inline bool clipLattice(const ClipF& clip, glm::vec3 o, glm::vec3 d, float t0, float invStep,
+                        int& first, int& total, float& ta, float& tb) {
+    ta = -3.0e38f;
+    tb = 3.0e38f;
+    clip.interval(o, d, ta, tb);
+    if (!(ta <= tb)) return false;
+    const float kb = std::ceil((tb - t0) * invStep - 0.5f);
+    if (kb < float(total)) total = kb > 0.0f ? int(kb) : 0;
+    const float ka = std::ceil((ta - t0) * invStep - 0.5f);
+    if (ka > 0.0f) first = ka < float(total) ? int(ka) : total;
+    return first < total;
+}
+
 enum class RayPhase : std::uint8_t { Fresh, Waiting, Done };
 
 /// A ray between batches: its colour so far and its phase. Every pass reads and writes it, so
@@ -543,14 +559,8 @@ struct RayWalk {
 
     /// Narrows the samples to those the clip keeps: [first, total); false when none is.
     bool clipSamples(const Frame& f, glm::vec3 o) {
-        float ta = -3.0e38f, tb = 3.0e38f;
-        f.clip.interval(o, d, ta, tb);
-        if (!(ta <= tb)) return false;
-        const float kb = std::ceil((tb - t0) * invStep - 0.5f);
-        if (kb < float(total)) total = kb > 0.0f ? int(kb) : 0;
-        const float ka = std::ceil((ta - t0) * invStep - 0.5f);
-        if (ka > 0.0f) first = ka < float(total) ? int(ka) : total;
-        return first < total;
+        float ta, tb;
+        return clipLattice(f.clip, o, d, t0, invStep, first, total, ta, tb);
     }
 
     /// On to the next brick of this batch, sampled or of one value, with samples [k, kEnd) of
@@ -629,15 +639,10 @@ inline bool segmentEnds(const Frame& f, float sx, float sy, float shift, glm::ve
     int total = int(std::ceil((t1 - lattice) * invStep - 0.5f));
     if (total <= 0) return false;
     float tIn = t0, tOut = t1;
-    if (f.clip.any) { // RayWalk::clipSamples()
-        float ta = -3.0e38f, tb = 3.0e38f;
-        f.clip.interval(o, d, ta, tb);
-        if (!(ta <= tb)) return false;
-        const float kb = std::ceil((tb - lattice) * invStep - 0.5f);
-        if (kb < float(total)) total = kb > 0.0f ? int(kb) : 0;
-        const float ka = std::ceil((ta - lattice) * invStep - 0.5f);
-        const int first = ka > 0.0f ? (ka < float(total) ? int(ka) : total) : 0;
-        if (first >= total) return false;
+    if (f.clip.any) { // as RayWalk::clipSamples()
+        int first = 0;
+        float ta, tb;
+        if (!clipLattice(f.clip, o, d, lattice, invStep, first, total, ta, tb)) return false;
         tIn = std::max(tIn, ta);
         tOut = std::min(tOut, tb);
     }
