@@ -253,6 +253,9 @@ void check(Rules& r, const SetModeAndClip& m) {
         if (!m.cropped && (m.cropMin[a] != 0 || m.cropMax[a] != 0))
             r.fail(ErrorCode::OutOfRange, "cropMin", "must be 0 when cropped is 0");
     }
+    if (r.ok() && m.cap && m.mode != BlendMode::Composite && m.mode != BlendMode::Isosurface)
+        r.fail(ErrorCode::OutOfRange, "cutFlags",
+               "cap: the mode draws no surface to cap (composite and isosurface only)");
     r.count("planes", m.planes.size(), kMaxClipPlanes);
     for (std::size_t i = 0; i < m.planes.size() && r.ok(); ++i) {
         r.item("planes", std::ptrdiff_t(i));

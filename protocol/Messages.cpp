@@ -175,6 +175,9 @@ void write(ByteWriter& w, const SetModeAndClip& m) {
             w.f64(v);
         w.f64(p.offset);
     }
+    // cutFlags, written only when not 0: uncapped messages keep the layout servers before
+    // capping read.
+    if (m.cap) w.u8(kCutCap);
 }
 
 void write(ByteWriter&, const AuthOk&) {}

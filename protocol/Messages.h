@@ -193,6 +193,8 @@ struct SetModeAndClip {
     bool cropped = false;
     std::array<double, 3> cropMin{}, cropMax{}; ///< all 0 unless cropped
     std::vector<ClipPlane> planes;              ///< at most kMaxClipPlanes
+    /// cutFlags bit 0 (kCutCap): draw the faces the cuts make (composite and isosurface only).
+    bool cap = false;
     bool operator==(const SetModeAndClip&) const = default;
 };
 

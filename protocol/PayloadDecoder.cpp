@@ -306,6 +306,12 @@ Message readSetModeAndClip(PayloadReader& r) {
         r.f64s("normal", m.planes[i].normal);
         m.planes[i].offset = r.f64("offset");
     }
+    r.rules().item(nullptr);
+    if (r.rules().ok() && r.remaining() > 0) { // cutFlags, optional: absent means 0
+        const std::uint8_t flags = r.u8("cutFlags");
+        r.rules().bits("cutFlags", flags, kCutCap);
+        m.cap = (flags & kCutCap) != 0;
+    }
     return m;
 }
 

@@ -87,6 +87,12 @@ enum Capability : std::uint32_t {
     kCapContinuous = 1u << 3,
     kCapFrameBudget = 1u << 4,   ///< takes SetFrameBudget (servers since 2026-12-06)
     kCapModesAndClips = 1u << 5, ///< takes SetModeAndClip (servers since 2026-12-07)
+    kCapCapping = 1u << 6,       ///< takes SetModeAndClip's cutFlags (servers since 2026-12-08)
+};
+
+/// SetModeAndClip.cutFlags bits (the byte is optional; absent means 0).
+enum CutFlag : std::uint8_t {
+    kCutCap = 1u << 0, ///< draw the faces the cuts make (composite and isosurface only)
 };
 
 /// RenderOptions.flags bits.

@@ -38,9 +38,11 @@ void Clip::validate() const {
     }
 }
 
-std::array<double, 2> Clip::interval(const glm::dvec3& o, const glm::dvec3& d) const {
+std::array<double, 2> Clip::interval(const glm::dvec3& o, const glm::dvec3& d,
+                                     glm::dvec3* entryNormal) const {
     constexpr double kInf = std::numeric_limits<double>::infinity();
     double ta = -kInf, tb = kInf;
+    if (entryNormal) *entryNormal = glm::dvec3(0.0);
     if (cropped)
         for (int a = 0; a < 3; ++a) {
             if (d[a] == 0.0) {
@@ -48,6 +50,10 @@ std::array<double, 2> Clip::interval(const glm::dvec3& o, const glm::dvec3& d) c
                 continue;
             }
             const double u0 = (cropMin[a] - o[a]) / d[a], u1 = (cropMax[a] - o[a]) / d[a];
+            if (entryNormal && std::min(u0, u1) > ta) {
+                *entryNormal = glm::dvec3(0.0);
+                (*entryNormal)[a] = u0 < u1 ? 1.0 : -1.0;
+            }
             ta = std::max(ta, std::min(u0, u1));
             tb = std::min(tb, std::max(u0, u1));
         }
@@ -59,10 +65,15 @@ std::array<double, 2> Clip::interval(const glm::dvec3& o, const glm::dvec3& d) c
             continue;
         }
         const double t = -no / nd;
-        if (nd > 0.0)
+        if (nd > 0.0) {
+            if (entryNormal && t > ta) { // unit length by a scale that cannot overflow
+                const glm::dvec3 m = n / std::max({std::abs(n.x), std::abs(n.y), std::abs(n.z)});
+                *entryNormal = m / glm::length(m);
+            }
             ta = std::max(ta, t);
-        else
+        } else {
             tb = std::min(tb, t);
+        }
     }
     return {ta, tb};
 }
@@ -86,6 +97,7 @@ ClipF ClipF::of(const Clip& c) {
     ClipF f;
     f.cropped = c.cropped;
     f.any = c.any();
+    f.cap = c.cap;
     for (int a = 0; a < 3; ++a) {
         f.cropMin[a] = float(c.cropMin[a]);
         f.cropMax[a] = float(c.cropMax[a]);

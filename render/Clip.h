@@ -27,6 +27,10 @@ struct Clip {
     std::array<double, 3> cropMin{}, cropMax{};
     std::uint32_t planeCount = 0;
     std::array<ClipPlane, kMaxPlanes> planes{};
+    /// Capping: a ray that enters what is kept through a cut (a crop face or a plane inside
+    /// the volume's box) draws the cut face there before anything behind it, as a surface of
+    /// the material it cuts (render/MODES.md "Capping"). Composite and isosurface frames only.
+    bool cap = false;
 
     bool any() const { return cropped || planeCount > 0; }
     /// Throws std::invalid_argument naming the field: a crop box that is empty, inverted or
@@ -34,8 +38,11 @@ struct Clip {
     /// finite or whose offset is not finite ("clip[i]").
     void validate() const;
     /// The ray parameters [ta, tb] of origin `o` + t `d` (world) that are kept (ta > tb: none;
-    /// infinite ends where nothing bounds them), in double.
-    std::array<double, 2> interval(const glm::dvec3& o, const glm::dvec3& d) const;
+    /// infinite ends where nothing bounds them), in double. `entryNormal`, when given: the unit
+    /// normal (world, into the part kept) of the crop face or plane that sets ta; 0 where
+    /// nothing bounds the start.
+    std::array<double, 2> interval(const glm::dvec3& o, const glm::dvec3& d,
+                                   glm::dvec3* entryNormal = nullptr) const;
     /// Whether world box `box` lies wholly outside what is kept (the crop box misses it, or
     /// it lies on the cut side of a plane). Conservative: a box that touches is inside.
     bool outside(const Box& box) const;
@@ -47,13 +54,16 @@ struct ClipF {
     bool cropped = false;
     glm::vec3 cropMin{0.0f}, cropMax{0.0f};
     int planeCount = 0;
-    std::array<glm::vec3, Clip::kMaxPlanes> normals{};
+    std::array<glm::vec3, Clip::kMaxPlanes> normals{}; ///< of unit length
+    bool cap = false;
     std::array<float, Clip::kMaxPlanes> offsets{};
     bool any = false;
 
     static ClipF of(const Clip& c);
-    /// Clip::interval in float: [ta, tb] of o + t d kept.
-    void interval(glm::vec3 o, glm::vec3 d, float& ta, float& tb) const {
+    /// Clip::interval in float: [ta, tb] of o + t d kept; `entryNormal`, when given, the unit
+    /// normal of the face that raised ta (left as it was where none did).
+    void interval(glm::vec3 o, glm::vec3 d, float& ta, float& tb,
+                  glm::vec3* entryNormal = nullptr) const {
         if (cropped)
             for (int a = 0; a < 3; ++a) {
                 if (d[a] == 0.0f) {
@@ -62,6 +72,11 @@ struct ClipF {
                 }
                 const float inv = 1.0f / d[a];
                 const float u0 = (cropMin[a] - o[a]) * inv, u1 = (cropMax[a] - o[a]) * inv;
+                const float enter = u0 < u1 ? u0 : u1;
+                if (entryNormal && enter > ta) {
+                    *entryNormal = glm::vec3(0.0f);
+                    (*entryNormal)[a] = u0 < u1 ? 1.0f : -1.0f;
+                }
                 ta = u0 < u1 ? (u0 > ta ? u0 : ta) : (u1 > ta ? u1 : ta);
                 tb = u0 < u1 ? (u1 < tb ? u1 : tb) : (u0 < tb ? u0 : tb);
             }
@@ -74,10 +89,12 @@ struct ClipF {
                 continue;
             }
             const float t = -no / nd;
-            if (nd > 0.0f)
+            if (nd > 0.0f) {
+                if (entryNormal && t > ta) *entryNormal = n;
                 ta = t > ta ? t : ta;
-            else
+            } else {
                 tb = t < tb ? t : tb;
+            }
         }
     }
 };

@@ -86,6 +86,8 @@ Frame frameOf(const LevelGeometry& g, const ViewBasis& view, const RenderOptions
     f.mode = o.mode;
     f.clip = ClipF::of(o.clip);
     f.iso = float(o.isoValue);
+    f.capping = capsCuts(o);
+    f.capPower = o.mode == BlendMode::Composite ? float(1.0 / o.stepVoxels) : 1.0f;
     f.simd = o.simd;
     f.packets = f.simd && o.packets && !o.preintegrate;
     f.jitter = o.jitter;
@@ -262,8 +264,9 @@ class FramePasses {
     std::uint64_t draw(Batches& b, std::uint64_t keptBytes, FrameStats& stats) {
         for (std::size_t batch = 0, first = 0; batch < b.ends.size(); first = b.ends[batch++]) {
             // A maximum's or minimum's segment end may lie in a brick that only a ray done
-            // with its lattice still needs (samplesEnds()): those frames load every brick.
-            if (b.guided && batch > 0 && mMarched.visible && !samplesEnds(mF.mode))
+            // with its lattice still needs (samplesEnds()), a cut's face in one that no ray's
+            // lattice enters (capping): those frames load every brick.
+            if (b.guided && batch > 0 && mMarched.visible && !samplesEnds(mF.mode) && !mF.capping)
                 stats.bricksUnreached += detail::markUnreached(
                     mG, mPlan, first, b.ends[batch], mView, mF,
                     detail::MarchingRays(mRays, mLattice, mRegion, mMarched.rect), b.unreached);

@@ -79,6 +79,19 @@ struct RayContext {
     const PreintegratedTable* pre = nullptr; ///< with RenderOptions::preintegrate
 };
 
+/// Blinn-Phong under the headlight: `diff` = |cos| between the normal and the ray, the lit
+/// colour weighted by w in [0, 1] against the unlit one.
+std::array<double, 4> light(const std::array<double, 4>& rgba, double diff, double w) {
+    const double spec = ShadingModel::kSpecular * std::pow(diff, ShadingModel::kShininess);
+    std::array<double, 4> out = rgba;
+    for (int i = 0; i < 3; ++i) {
+        const double lit =
+            rgba[i] * (ShadingModel::kAmbient + ShadingModel::kDiffuse * diff) + spec;
+        out[i] = rgba[i] + (lit - rgba[i]) * w;
+    }
+    return out;
+}
+
 template <class Volume>
 std::array<double, 4> shade(const RayContext& c, const Volume& v, const std::array<double, 4>& rgba,
                             const glm::dvec3& p, const glm::dvec3& dir) {
@@ -88,16 +101,8 @@ std::array<double, 4> shade(const RayContext& c, const Volume& v, const std::arr
                          c.gradScale;
     const double len = glm::length(g);
     if (len <= 0.0) return rgba;
-    const double diff = std::abs(glm::dot(g / len, dir));
-    const double spec = ShadingModel::kSpecular * std::pow(diff, ShadingModel::kShininess);
-    const double w = std::clamp(len / ShadingModel::kGradientFade, 0.0, 1.0);
-    std::array<double, 4> out = rgba;
-    for (int i = 0; i < 3; ++i) {
-        const double lit =
-            rgba[i] * (ShadingModel::kAmbient + ShadingModel::kDiffuse * diff) + spec;
-        out[i] = rgba[i] + (lit - rgba[i]) * w;
-    }
-    return out;
+    return light(rgba, std::abs(glm::dot(g / len, dir)),
+                 std::clamp(len / ShadingModel::kGradientFade, 0.0, 1.0));
 }
 
 /// A ray between passes: its colour so far and its next sample.
@@ -110,6 +115,7 @@ struct RayProgress {
     /// many there were (0: none yet).
     double value = 0.0;
     std::uint64_t count = 0;
+    bool capped = false; ///< capping: the cut face at its start is drawn (or has none)
 };
 
 /// Where along the ray the value first reaches `iso` between parameters lo (below it) and
@@ -140,6 +146,36 @@ void resolveProjection(BlendMode mode, const TransferFunctionTable& table, RayPr
     s.acc = {double(f[0]) * f[3], double(f[1]) * f[3], double(f[2]) * f[3], double(f[3])};
 }
 
+/// Capping (render/MODES.md): the face of the cut where the ray enters, at voxel position p
+/// with unit normal `normal` (world), drawn into the ray before any of its samples. Composite:
+/// the table's colour at the value there and its opacity for one voxel's length (the table's
+/// is for the step: 1 - (1 - a)^(1 / step)); isosurface: where the value is at or above the
+/// iso value, the surface's colour, opaque, and the ray is done. Both shaded by the normal.
+template <class Volume>
+void takeCap(const RayContext& c, const Volume& v, const glm::dvec3& p, const glm::dvec3& normal,
+             const glm::dvec3& dir, RayProgress& s, std::uint64_t& samples) {
+    const double value = v.sample(p.x, p.y, p.z);
+    ++samples;
+    const double diff = std::abs(glm::dot(normal, dir));
+    if (c.options.mode == BlendMode::Isosurface) {
+        if (value < c.options.isoValue) return;
+        const auto f = c.table.lookup(c.options.isoValue);
+        std::array<double, 4> rgba{f[0], f[1], f[2], 1.0};
+        s.acc = c.options.shading ? light(rgba, diff, 1.0) : rgba;
+        s.done = true;
+        return;
+    }
+    const auto f = c.table.lookup(value);
+    const double a = -std::expm1(std::log1p(-double(f[3])) / c.options.stepVoxels);
+    if (!(a > 0.0)) return;
+    std::array<double, 4> rgba{f[0], f[1], f[2], std::min(a, 1.0)};
+    if (c.options.shading) rgba = light(rgba, diff, 1.0);
+    const double w = (1.0 - s.acc[3]) * rgba[3];
+    for (int i = 0; i < 3; ++i)
+        s.acc[i] += w * rgba[i];
+    s.acc[3] += w;
+}
+
 /// Marches one ray from progress.k on; `volumeAt(p)` is the volume that samples point p, or
 /// nullptr when it is not drawn in this pass (the ray stops there and goes on in a later one).
 /// Adds the ray's samples to `samples` when it ends, and to `oracle` those with non-zero
@@ -157,23 +193,37 @@ void marchRay(const RayContext& c, const Ray& ray, std::uint32_t x, std::uint32_
                        glm::dvec3(double(g.dims[0]), double(g.dims[1]), double(g.dims[2]))};
     auto [t0, t1] = intersectBox({ov, dv}, voxelBox);
     t0 = std::max(t0, 0.0);
-    double tIn = t0, tOut = t1; // the segment kept, for samplesEnds()
+    double tIn = t0, tOut = t1; // the segment kept, for samplesEnds() and capping
+    bool cut = false;           // whether tIn is a cut inside the box (capsCuts())
+    glm::dvec3 cutNormal(0.0);
     const double step = c.options.stepVoxels * g.minSpacing();
     if (c.options.jitter) t0 += (double(rayJitter(x, y)) - 0.5) * step;
     const double count = std::ceil((t1 - t0) / step - 0.5);
     auto total = count > 0 ? std::int64_t(count) : 0;
     std::int64_t first = 0;
     if (c.options.clip.any()) { // samples [first, total) of the same lattice are kept
-        const auto [ta, tb] = c.options.clip.interval(ray.origin, ray.direction);
+        const auto [ta, tb] = c.options.clip.interval(ray.origin, ray.direction, &cutNormal);
         const double last = ta <= tb ? std::ceil((tb - t0) / step - 0.5) : 0.0;
         const double from = std::ceil((ta - t0) / step - 0.5);
         if (last < double(total)) total = last > 0 ? std::int64_t(last) : 0;
         if (from > 0.0) first = from < double(total) ? std::int64_t(from) : total;
         s.k = std::max(s.k, first);
+        cut = ta > tIn;
         tIn = std::max(tIn, ta);
         tOut = std::min(tOut, tb);
     }
     const BlendMode mode = c.options.mode;
+    // The cut's face, in the pass that draws its point: the batches go front to back, so that
+    // is no later than the pass of the ray's first sample (a ray done with its samples may
+    // still wait for it: its face may lie in a brick of a later pass that holds none of them).
+    if (cut && !s.capped && first < total && capsCuts(c.options)) {
+        const glm::dvec3 p = ov + dv * tIn;
+        if (const auto* volume = volumeAt(p)) {
+            s.capped = true;
+            takeCap(c, *volume, p, cutNormal, ray.direction, s, samples);
+            if (s.done) return;
+        }
+    }
     // The segment's ends, each in the pass that draws its point (before the lattice's end: the
     // exit's brick may come in a later pass than the ray's last sample).
     bool endTaken = false;

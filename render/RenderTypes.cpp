@@ -101,6 +101,9 @@ void RenderOptions::validate() const {
     if (mode != BlendMode::Composite && preintegrate)
         throw std::invalid_argument(std::string("preintegrate: mode ") + toString(mode) +
                                     " takes no segments (composite only)");
+    if (clip.cap && isProjection(mode))
+        throw std::invalid_argument(std::string("cap: mode ") + toString(mode) +
+                                    " draws no surface to cap (composite and isosurface only)");
     clip.validate();
     octree.validate();
     occlusion.validate();

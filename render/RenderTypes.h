@@ -195,6 +195,13 @@ inline bool runsSkip(const RenderOptions& o) {
            (o.mode == BlendMode::Maximum || o.mode == BlendMode::Minimum);
 }
 
+/// Whether a frame of `o` draws the faces its cuts make (Clip::cap, render/MODES.md
+/// "Capping"): a crop or a plane, in composite or isosurface mode.
+inline bool capsCuts(const RenderOptions& o) {
+    return o.clip.cap && o.clip.any() &&
+           (o.mode == BlendMode::Composite || o.mode == BlendMode::Isosurface);
+}
+
 /// Where pixel (x, y) of the frame (y from the top) starts its samples under
 /// RenderOptions::jitter, in steps past the box entry, in [0, 1): the R2 low-discrepancy
 /// dither (Roberts 2018, fract(x a1 + y a2) with a1, a2 from the plastic number) in 32-bit

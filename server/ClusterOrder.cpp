@@ -115,6 +115,7 @@ void putOptions(Writer& w, const render::RenderOptions& o) {
     w.u8(std::uint8_t(o.mode));
     w.f64(o.isoValue);
     w.u8(o.clip.cropped);
+    w.u8(o.clip.cap);
     for (double v : o.clip.cropMin)
         w.f64(v);
     for (double v : o.clip.cropMax)
@@ -170,6 +171,7 @@ render::RenderOptions getOptions(Reader& r) {
     o.mode = render::BlendMode(mode);
     o.isoValue = r.f64("isoValue");
     o.clip.cropped = r.flag("clip.cropped");
+    o.clip.cap = r.flag("clip.cap");
     for (double& v : o.clip.cropMin)
         v = r.f64("clip.cropMin");
     for (double& v : o.clip.cropMax)

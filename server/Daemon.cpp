@@ -226,7 +226,8 @@ struct Daemon::Impl {
     /// nothing is known against the GPU renderers.
     std::uint32_t capabilities() const {
         std::uint32_t caps = protocol::kCapCpuRenderer | protocol::kCapContinuous |
-                             protocol::kCapFrameBudget | protocol::kCapModesAndClips;
+                             protocol::kCapFrameBudget | protocol::kCapModesAndClips |
+                             protocol::kCapCapping;
         if (!config.token.empty()) caps |= protocol::kCapAuthRequired;
         return caps;
     }

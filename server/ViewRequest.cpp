@@ -29,6 +29,7 @@ void applyModeAndClip(render::RenderOptions& options, const protocol::SetModeAnd
     options.clip.cropMax = m.cropMax;
     for (const protocol::ClipPlane& p : m.planes)
         options.clip.planes[options.clip.planeCount++] = {p.normal, p.offset};
+    options.clip.cap = m.cap;
 }
 
 render::RenderOptions toRenderOptions(const protocol::RenderOptions& o, std::uint32_t divisor) {

@@ -79,6 +79,10 @@ struct Frame {
     BlendMode mode = BlendMode::Composite;
     ClipF clip;    ///< RenderOptions::clip: samples outside are not taken
     float iso = 0; ///< RenderOptions::isoValue
+    /// capsCuts(): a ray entering through a cut draws the face first (takeCap()); its opacity
+    /// is the table's raised to `capPower` (1 / the step in voxels: the table's is the step's).
+    bool capping = false;
+    float capPower = 1.0f;
     /// A maximum or minimum under skipping: a ray leaves out the bricks, and with `leafBound`
     /// the octree leaves, whose samples cannot pass its value so far (passes()): BrickRef::bound,
     /// and per leaf OccupancyTrees::leafBounds() (brick i's leaves from
@@ -121,17 +125,22 @@ inline float powShininess(float x) {
     return x12 * x12;
 }
 
+/// Blinn-Phong under the headlight: `diff` = |cos| between the normal and the ray, the lit
+/// colour weighted by w in [0, 1] against the unlit one.
+inline Rgba light(Rgba c, float diff, float w) {
+    const float spec = float(ShadingModel::kSpecular) * powShininess(diff);
+    const float k = float(ShadingModel::kAmbient) + float(ShadingModel::kDiffuse) * diff;
+    auto lit = [&](float x) { return x + ((x * k + spec) - x) * w; };
+    return {lit(c.r), lit(c.g), lit(c.b), c.a};
+}
+
 /// `diffs`: v(q + e_a) - v(q - e_a), the central differences of the interpolated field.
 inline Rgba shade(const Frame& f, Rgba c, glm::vec3 diffs, glm::vec3 dir) {
     const glm::vec3 g = diffs * f.gradScale;
     const float len = glm::length(g);
     if (len <= 0.0f) return c;
-    const float diff = std::abs(glm::dot(g / len, dir));
-    const float spec = float(ShadingModel::kSpecular) * powShininess(diff);
-    const float k = float(ShadingModel::kAmbient) + float(ShadingModel::kDiffuse) * diff;
-    const float w = std::clamp(len / float(ShadingModel::kGradientFade), 0.0f, 1.0f);
-    auto lit = [&](float x) { return x + ((x * k + spec) - x) * w; };
-    return {lit(c.r), lit(c.g), lit(c.b), c.a};
+    return light(c, std::abs(glm::dot(g / len, dir)),
+                 std::clamp(len / float(ShadingModel::kGradientFade), 0.0f, 1.0f));
 }
 
 /// A ray's colour so far (premultiplied) and its transmittance t = 1 - alpha. Compositing
@@ -454,10 +463,11 @@ inline bool marchConstant(const Frame& f, float value, int& k, int kEnd, Accum& 
 /// step) to those `clip` keeps along o + t d, and gives the parameters it keeps, [ta, tb];
 /// false when no sample is left.
 inline bool clipLattice(const ClipF& clip, glm::vec3 o, glm::vec3 d, float t0, float invStep,
-                        int& first, int& total, float& ta, float& tb) {
+                        int& first, int& total, float& ta, float& tb,
+                        glm::vec3* entryNormal = nullptr) {
     ta = -3.0e38f;
     tb = 3.0e38f;
-    clip.interval(o, d, ta, tb);
+    clip.interval(o, d, ta, tb, entryNormal);
     if (!(ta <= tb)) return false;
     const float kb = std::ceil((tb - t0) * invStep - 0.5f);
     if (kb < float(total)) total = kb > 0.0f ? int(kb) : 0;
@@ -603,13 +613,19 @@ struct RayWalk {
     }
 };
 
-/// Where the ray of image-plane position (sx, sy) enters and leaves the segment it keeps (the
-/// volume's box, narrowed by the crop and clip planes), in voxels, as RayWalk::begin() sets it
-/// up; false when the ray has no sample of its lattice (`shift`: begin()'s) to draw.
-/// samplesEnds(): a maximum or minimum samples these two points besides its lattice. Scalar
+/// The segment a ray keeps: the volume's box narrowed by the crop and clip planes.
+struct KeptSegment {
+    glm::vec3 ov, dv; ///< origin and direction in voxels (position ov + t dv)
+    glm::vec3 d;      ///< direction, world
+    float tIn, tOut;
+    bool cut = false; ///< tIn is a cut inside the box (a crop face or a plane), not its face
+    glm::vec3 cutNormal{0.0f}; ///< with cut: its unit normal, world
+};
+
+/// The segment the ray of image-plane position (sx, sy) keeps, as RayWalk::begin() sets it
+/// up; false when the ray has no sample of its lattice (`shift`: begin()'s) to draw. Scalar
 /// arithmetic throughout (glm's component-wise functions are calls here, at a ray's cost).
-inline bool segmentEnds(const Frame& f, float sx, float sy, float shift, glm::vec3& in,
-                        glm::vec3& out) {
+inline bool keptSegment(const Frame& f, float sx, float sy, float shift, KeptSegment& s) {
     glm::vec3 o = f.eye, d = f.forward;
     for (int a = 0; a < 3; ++a) {
         if (f.ortho)
@@ -638,19 +654,91 @@ inline bool segmentEnds(const Frame& f, float sx, float sy, float shift, glm::ve
     const float invStep = 1.0f / f.stepMm, lattice = t0 + shift * f.stepMm;
     int total = int(std::ceil((t1 - lattice) * invStep - 0.5f));
     if (total <= 0) return false;
-    float tIn = t0, tOut = t1;
+    s.ov = ov;
+    s.dv = dv;
+    s.d = d;
+    s.tIn = t0;
+    s.tOut = t1;
+    s.cut = false;
     if (f.clip.any) { // as RayWalk::clipSamples()
         int first = 0;
         float ta, tb;
-        if (!clipLattice(f.clip, o, d, lattice, invStep, first, total, ta, tb)) return false;
-        tIn = std::max(tIn, ta);
-        tOut = std::min(tOut, tb);
-    }
-    for (int a = 0; a < 3; ++a) {
-        in[a] = ov[a] + dv[a] * tIn;
-        out[a] = ov[a] + dv[a] * tOut;
+        if (!clipLattice(f.clip, o, d, lattice, invStep, first, total, ta, tb, &s.cutNormal))
+            return false;
+        s.cut = ta > t0;
+        s.tIn = std::max(s.tIn, ta);
+        s.tOut = std::min(s.tOut, tb);
     }
     return true;
+}
+
+/// Where the ray of image-plane position (sx, sy) enters and leaves the segment it keeps, in
+/// voxels (keptSegment()); false when the ray has no sample of its lattice to draw.
+/// samplesEnds(): a maximum or minimum samples these two points besides its lattice.
+inline bool segmentEnds(const Frame& f, float sx, float sy, float shift, glm::vec3& in,
+                        glm::vec3& out) {
+    KeptSegment s;
+    if (!keptSegment(f, sx, sy, shift, s)) return false;
+    for (int a = 0; a < 3; ++a) {
+        in[a] = s.ov[a] + s.dv[a] * s.tIn;
+        out[a] = s.ov[a] + s.dv[a] * s.tOut;
+    }
+    return true;
+}
+
+/// The brick of the level holding voxel position p (in the box [0, dims] but for rounding:
+/// truncation is the floor, clamped), and p relative to its corner.
+inline int brickHolding(const Frame& f, float invBrick, glm::vec3 p, glm::vec3& local) {
+    int cell[3];
+    for (int a = 0; a < 3; ++a)
+        cell[a] = std::min(std::max(int(p[a] * invBrick), 0), f.grid[a] - 1);
+    for (int a = 0; a < 3; ++a)
+        local[a] = p[a] - float(cell[a] * f.brick);
+    return (cell[2] * f.grid.y + cell[1]) * f.grid.x + cell[0];
+}
+
+/// The value at brick-local position `local` of brick b (sampled through its apron, or its
+/// one value).
+template <class T> float valueIn(const Frame& f, const BrickRef& b, glm::vec3 local) {
+    if (b.slot != Slot::Sampled) return b.constant;
+    const float shift = float(f.apron) - 0.5f;
+    return detail::fetch(static_cast<const T*>(b.voxels), f.edge,
+                         glm::vec3(local.x + shift, local.y + shift, local.z + shift));
+}
+
+/// Capping (Frame::capping, render/MODES.md): the face of the cut where segment `s` enters,
+/// drawn into ray state `state` before any of its samples, in the pass that draws the
+/// face's brick (the batches go front to back: no later than the ray's first sample's). A
+/// brick the plan leaves out holds no visible value (composite) or none at or above the iso
+/// value: no face. Composite: the table's colour at the value there, its opacity for one
+/// voxel's length (Frame::capPower); isosurface: at or above the iso value, the surface's
+/// colour, opaque, and the ray is done. Both shaded by the cut's normal.
+template <class T>
+void takeCap(const Frame& f, const KeptSegment& s, RayState& state, RayCount& n) {
+    glm::vec3 p, local;
+    for (int a = 0; a < 3; ++a)
+        p[a] = s.ov[a] + s.dv[a] * s.tIn;
+    const BrickRef& b = f.bricks[brickHolding(f, 1.0f / float(f.brick), p, local)];
+    if (b.slot == Slot::Absent || b.batch != f.batch) return;
+    const float value = valueIn<T>(f, b, local);
+    ++n.samples;
+    const float diff =
+        std::abs(s.cutNormal.x * s.d.x + s.cutNormal.y * s.d.y + s.cutNormal.z * s.d.z);
+    Rgba c;
+    if (f.mode == BlendMode::Isosurface) {
+        if (value < f.iso) return;
+        c = classify(f, f.iso);
+        c.a = 1.0f;
+        state.phase = RayPhase::Done;
+    } else {
+        c = classify(f, value);
+        if (c.a <= 0.0f) return;
+        c.a = std::min(-std::expm1(std::log1p(-c.a) * f.capPower), 1.0f);
+        if (!(c.a > 0.0f)) return;
+    }
+    if (f.shading) c = light(c, diff, 1.0f);
+    composite(state.acc, c);
+    if (state.acc.t <= f.ertT) state.phase = RayPhase::Done;
 }
 
 /// What takeEnd() needs of the frame beyond Frame: reciprocals to locate a point (bricks, and
@@ -692,17 +780,11 @@ struct EndGrid {
 /// both, and each one's bounds cover it (as they cover the march's samples there).
 template <class T>
 void takeEnd(const Frame& f, const EndGrid& grid, glm::vec3 p, Accum& acc, RayCount& n) {
-    // p lies in the box [0, dims] but for rounding: truncation is the floor, clamped.
-    int cell[3];
-    for (int a = 0; a < 3; ++a)
-        cell[a] = std::min(std::max(int(p[a] * grid.invBrick), 0), f.grid[a] - 1);
-    const int index = (cell[2] * f.grid.y + cell[1]) * f.grid.x + cell[0];
+    glm::vec3 local;
+    const int index = brickHolding(f, grid.invBrick, p, local);
     const BrickRef& b = f.bricks[index];
     if (b.slot == Slot::Absent || b.batch != f.batch) return;
     if (f.running && !grid.matters(f, b.bound, acc)) return;
-    glm::vec3 local;
-    for (int a = 0; a < 3; ++a)
-        local[a] = p[a] - float(cell[a] * f.brick);
     if (b.slot == Slot::Sampled && f.running && f.leafBound) {
         glm::ivec3 leaf;
         for (int a = 0; a < 3; ++a)
@@ -710,12 +792,7 @@ void takeEnd(const Frame& f, const EndGrid& grid, glm::vec3 p, Accum& acc, RayCo
         const int i = index * f.leafCount + (leaf.z * f.leafAxis + leaf.y) * f.leafAxis + leaf.x;
         if (!grid.matters(f, f.leafBound[i], acc)) return;
     }
-    float value = b.constant;
-    if (b.slot == Slot::Sampled) {
-        const float shift = float(f.apron) - 0.5f;
-        value = detail::fetch(static_cast<const T*>(b.voxels), f.edge,
-                              glm::vec3(local.x + shift, local.y + shift, local.z + shift));
-    }
+    const float value = valueIn<T>(f, b, local);
     ++n.samples;
     project(f, acc, value, n.raises);
 }

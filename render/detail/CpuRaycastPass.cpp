@@ -204,6 +204,21 @@ void takeTileEnds(const Frame& f, const EndGrid& grid, const PassRays& ray, cons
     if (count > 0) flush();
 }
 
+/// The cut faces of tile `r`'s rays whose bricks this pass draws (Frame::capping, takeCap()),
+/// before the tile's march: a face lies in front of every sample of its ray. A ray done with
+/// its march may still have one: its lattice may have no sample in the bricks this frame
+/// draws (a part of a sort-last frame), or none after the face's batch. Constructs the states
+/// on batch 0 (`ray`'s operator()).
+template <class T>
+void takeTileCaps(const Frame& f, const PassRays& ray, const Tile& r, RayCount& n) {
+    for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
+            const PacketRay p = ray(x, y);
+            KeptSegment s;
+            if (keptSegment(f, p.sx, p.sy, p.shift, s) && s.cut) takeCap<T>(f, s, *p.state, n);
+        }
+}
+
 /// marchPass() for voxels of type T, on every core (TBB over 8x8 tiles).
 template <class T>
 void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
@@ -213,11 +228,13 @@ void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
     const std::optional<EndGrid> ends =
         samplesEnds(f.mode) ? std::make_optional(EndGrid(f)) : std::nullopt;
     const PassRays first(f, lattice, region, rays);
-    const PassRays ray(f, lattice, region, rays, !ends); // after the ends, which construct
+    // After the ends or the caps, which construct the states.
+    const PassRays ray(f, lattice, region, rays, !ends && !f.capping);
     tbb::parallel_for(Tile(rect.y, rect.y + rect.height, 8, rect.x, rect.x + rect.width, 8),
                       [&](const Tile& r) {
                           RayCount n;
                           if (ends) takeTileEnds<T>(f, *ends, first, r, n);
+                          if (f.capping) takeTileCaps<T>(f, first, r, n);
                           if (f.packets)
                               marchTilePackets(voxelTypeOf<T>(), f, ray, r, n);
                           else

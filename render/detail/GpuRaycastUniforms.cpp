@@ -91,6 +91,8 @@ void setModeUniforms(GLuint p, const RenderOptions& o, const BrickPool& pool) {
         planes[4 * k + 3] = f.offsets[k];
     }
     uniform1i(p, "uPlaneCount", f.planeCount);
+    uniform1i(p, "uCap", capsCuts(o));
+    f1(p, "uCapPower", o.mode == BlendMode::Composite ? 1.0 / o.stepVoxels : 1.0);
     glProgramUniform4fv(p, glGetUniformLocation(p, "uPlanes"), GLsizei(Clip::kMaxPlanes),
                         planes.data());
 }

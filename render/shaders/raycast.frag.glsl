@@ -66,6 +66,11 @@ uniform bool uCropped;
 uniform vec3 uCropMin, uCropMax;
 uniform int uPlaneCount;
 uniform vec4 uPlanes[6];
+// Capping (render/MODES.md): a ray entering through a cut draws the face there first, its
+// opacity the table's raised to uCapPower (1 / the step in voxels). A ray waiting for the
+// face's brick (guided) resumes from uResumeAt = -(k + 2).
+uniform bool uCap;
+uniform float uCapPower;
 
 out vec4 outColor;
 
@@ -164,12 +169,14 @@ vec4 isoColour() {
     return vec4(classify(uIso).rgb, 1.0);
 }
 
-// Narrows [t, tb] to what the crop box and the planes keep (world origin o, direction d).
-void clipInterval(vec3 o, vec3 d, inout float ta, inout float tb) {
+// Narrows [ta, tb] to what the crop box and the planes keep (world origin o, direction d);
+// `entry`: the unit normal of the face that raises ta (as it was where none does).
+void clipInterval(vec3 o, vec3 d, inout float ta, inout float tb, inout vec3 entry) {
     if (uCropped) {
         for (int a = 0; a < 3; ++a) {
             if (d[a] == 0.0) { if (o[a] < uCropMin[a] || o[a] > uCropMax[a]) tb = -3.0e38; continue; }
             float u0 = (uCropMin[a] - o[a]) / d[a], u1 = (uCropMax[a] - o[a]) / d[a];
+            if (min(u0, u1) > ta) { entry = vec3(0.0); entry[a] = u0 < u1 ? 1.0 : -1.0; }
             ta = max(ta, min(u0, u1));
             tb = min(tb, max(u0, u1));
         }
@@ -178,8 +185,25 @@ void clipInterval(vec3 o, vec3 d, inout float ta, inout float tb) {
         float nd = dot(uPlanes[i].xyz, d), no = dot(uPlanes[i].xyz, o) + uPlanes[i].w;
         if (nd == 0.0) { if (no < 0.0) tb = -3.0e38; continue; }
         float t = -no / nd;
-        if (nd > 0.0) ta = max(ta, t); else tb = min(tb, t);
+        if (nd > 0.0) { if (t > ta) entry = uPlanes[i].xyz; ta = max(ta, t); } else tb = min(tb, t);
     }
+}
+
+// A cut's face at texel value v (capping), `diff` = |cos| between its normal and the ray:
+// composite, the table's colour and its opacity for one voxel's length; isosurface, at or
+// above uIso, the surface's colour, opaque. Transparent where there is no face.
+vec4 capColour(float v, float diff) {
+    vec4 c;
+    if (uMode == 4) {
+        if (v < uIso) return vec4(0.0);
+        c = isoColour();
+    } else {
+        c = classify(v);
+        if (c.a <= 0.0) return vec4(0.0);
+        c.a = min(1.0 - pow(1.0 - c.a, uCapPower), 1.0);
+    }
+    if (uShading) c.rgb = c.rgb * (uAmbient + uDiffuse * diff) + uSpecular * pow(diff, uShininess);
+    return c;
 }
 
 // The coarsest octree level (1..uOctDepth) whose node holding `leaf` is empty, or 0.
@@ -208,6 +232,10 @@ float exitParameter(vec3 p0, vec3 dv, vec3 lo, float size) {
 void main() {
     vec4 acc = uFirstPass ? vec4(0.0) : texelFetch(uPrev, ivec2(gl_FragCoord.xy), 0);
     int resumeAt = uResume ? imageLoad(uResumeAt, ivec2(gl_FragCoord.xy)).r : 0;
+    // Whether the ray still has its cut's face to draw: a pass of batches draws it where the
+    // face's brick is in the batch; a resumed pass where the ray waited for it.
+    bool capPending = !uResume || resumeAt <= -2;
+    if (resumeAt <= -2) resumeAt = -resumeAt - 2;
     if (finished(acc) || resumeAt < 0) { outColor = acc; return; }
     vec2 s = 2.0 * gl_FragCoord.xy / uViewport - 1.0;
     vec3 o = uOrtho ? uEye + s.x * uRight + s.y * uUp : uEye;
@@ -234,18 +262,46 @@ void main() {
     if (total <= 0) { outColor = acc; return; }
     // A crop or clip keeps samples [kFirst, total) of the same lattice.
     int kFirst = 0;
+    uint taken = 0u, leaps = 0u;
 #if BC_MODES
     if (uCropped || uPlaneCount > 0) {
         float ta = -3.0e38, tb = 3.0e38;
-        clipInterval(o, d, ta, tb);
+        vec3 cutNormal = vec3(0.0);
+        clipInterval(o, d, ta, tb, cutNormal);
         if (!(ta <= tb)) { outColor = acc; return; }
         float kb = ceil((tb - t0) / uStepMm - 0.5);
         if (kb < float(total)) total = kb > 0.0 ? int(kb) : 0;
         float ka = ceil((ta - t0) / uStepMm - 0.5);
         if (ka > 0.0) kFirst = ka < float(total) ? int(ka) : total;
         if (kFirst >= total) { outColor = acc; return; }
+        bool cut = ta > tIn;
         tIn = max(tIn, ta);
         tOut = min(tOut, tb);
+        if (uCap && cut && capPending) { // the face, before every sample of the ray
+            vec3 p = ov + dv * tIn;
+            ivec3 c = clamp(ivec3(floor(p / float(uBrick))), ivec3(0), uGrid - 1);
+            int b = (c.z * uGrid.y + c.y) * uGrid.x + c.x;
+            ivec2 e = page[b];
+            if (e.x == -3) { // deferred: ask for it and wait, drawing nothing beyond
+                feedback[uBrickCount + b] = 1u;
+                imageStore(uResumeAt, ivec2(gl_FragCoord.xy), ivec4(-max(resumeAt, kFirst) - 2));
+                outColor = acc;
+                return;
+            }
+            if (e.x != -1) { // absent: no visible value, none at or above uIso
+                if (uFeedback && e.x >= 0) feedback[b] = 1u;
+                float v = e.x == -2 ? intBitsToFloat(e.y)
+                                    : fetch(p - vec3(c * uBrick) + (float(uApron) - 0.5), slotOrigin(e.x));
+                ++taken;
+                composite(acc, capColour(v, abs(dot(cutNormal, d))));
+                if (finished(acc)) {
+                    atomicAdd(sampleCount, taken);
+                    if (uGuided) imageStore(uResumeAt, ivec2(gl_FragCoord.xy), ivec4(-1));
+                    outColor = acc;
+                    return;
+                }
+            }
+        }
     }
 #endif
 
@@ -270,7 +326,6 @@ void main() {
     for (int a = 0; a < 3; ++a)
         tMax[a] = stepDir[a] == 0 ? 3.0e38
                                   : (float((cell[a] + (stepDir[a] > 0 ? 1 : 0)) * uBrick) - ov[a]) / dv[a];
-    uint taken = 0u, leaps = 0u;
     int suspendAt = -1;
     while (k < total) {
         float tOut = min(min(tMax.x, tMax.y), tMax.z);

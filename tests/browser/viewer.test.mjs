@@ -413,7 +413,7 @@ test('a transfer-function edit changes the image as the direct render does (exac
   });
 });
 
-test('MIP, an isosurface and a crop box with a clip plane chosen in the page each show the direct render (exact)', { timeout: 90000 }, async () => {
+test('MIP, an isosurface, a crop box with a clip plane and their capped faces chosen in the page each show the direct render (exact)', { timeout: 120000 }, async () => {
   await withDaemon({}, async ({ daemon, open }) => {
     const v = await phantomViewer(open);
     const { page } = v;
@@ -425,6 +425,8 @@ test('MIP, an isosurface and a crop box with a clip plane chosen in the page eac
       ['an isosurface at the middle value', async () => page.selectOption('#mode', '4')],
       ['a crop box and a clip plane', async () => page.evaluate(() => window.brickcast.setModeAndClip(
         { cropped: true, low: [0.1, 0.2, 0.1], high: [0.9, 0.8, 0.7], clip: true, axis: '-x', position: 0.6 }))],
+      // The direct render is asked for the page's SetModeAndClip, its cap included.
+      ['a capped crop box and clip plane', async () => page.evaluate(() => window.brickcast.setModeAndClip({ mode: 0, cap: true }))],
     ];
     for (const [what, act] of steps) {
       const before = await page.evaluate(() => JSON.stringify(window.brickcast.modeAndClip()));
@@ -438,8 +440,20 @@ test('MIP, an isosurface and a crop box with a clip plane chosen in the page eac
       previous = view;
     }
     const sent = await page.evaluate(() => window.brickcast.modeAndClip());
-    assert.equal(sent.mode, 4);
-    assert.ok(sent.crop && sent.planes.length === 1, `the cut was not sent: ${JSON.stringify(sent)}`);
+    assert.equal(sent.mode, 0);
+    assert.ok(sent.crop && sent.planes.length === 1 && sent.cap === true, `the capped cut was not sent: ${JSON.stringify(sent)}`);
+    assert.ok(await page.isChecked('#cap') && await page.isEnabled('#cap'), 'the cap box does not show the cap');
+    // The cap reached the server: the same cut uncapped renders otherwise (in composite a cap adds
+    // one voxel's length of the function at the face, so only where that shows).
+    const uncapped = await renderLikePage(daemon, 'phantom', { ...previous, modeAndClip: { ...sent, cap: false } });
+    const capChange = compareRgb(previous.pixels, uncapped.image, VIEW, VIEW);
+    assert.ok(capChange.differing > 0, 'the capped view equals the uncapped direct render');
+    // MIP draws no surface: the box is off (its tooltip says why) and no cap is sent.
+    await page.selectOption('#mode', '1');
+    await page.waitForFunction(() => window.brickcast.modeAndClip()?.mode === 1, null, { timeout: FRAME_TIMEOUT });
+    assert.equal((await page.evaluate(() => window.brickcast.modeAndClip())).cap, false);
+    assert.equal(await page.isEnabled('#cap'), false);
+    assert.match(await page.getAttribute('#cap', 'title'), /no surface to cap/);
     await assertHealthy(v);
   });
 });

@@ -143,6 +143,7 @@ std::vector<std::vector<Message>> seedMessages() {
     cut.cropped = true;
     cut.cropMax = {256, 256, 226};
     cut.planes = {ClipPlane{{1, 0, 0}, -10}, ClipPlane{{0, 0.5, -1}, 100}};
+    cut.cap = true; // the optional cutFlags byte
     return {
         {hello, Auth{"token"}, ListVolumes{}},
         {OpenVolume{"cthead"}, camera, SetRenderOptions{}, RequestFrame{FrameMode::ContinuousOn}},

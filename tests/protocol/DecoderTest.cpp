@@ -629,6 +629,32 @@ TEST(DecoderRejects, ModesAndClipsOutOfRange) {
     EXPECT_THROW(encode(nanIso), ProtocolError);
 }
 
+TEST(DecoderRejects, CutFlagsOutOfRange) {
+    SetModeAndClip capped = sampleModeAndClip();
+    capped.mode = BlendMode::Composite;
+    capped.cap = true;
+    const Bytes bytes = encode(capped, 9); // the request id expectRejected() expects
+    ASSERT_EQ(bytes.size(), encode(sampleModeAndClip(), 9).size() + 1); // cutFlags, last
+    expectAccepted(bytes);
+    const std::size_t flagsAt = bytes.size() - kHeaderBytes - 1;
+    // An unknown bit; a cap in a mode that draws no surface (every projection).
+    expectRejected(patchedBytes<std::uint8_t>(bytes, flagsAt, 3), ErrorCode::OutOfRange,
+                   "SetModeAndClip.cutFlags");
+    for (std::uint8_t mode : {1, 2, 3})
+        expectRejected(patchedBytes<std::uint8_t>(bytes, 0, mode), ErrorCode::OutOfRange,
+                       "SetModeAndClip.cutFlags");
+    expectAccepted(patchedBytes<std::uint8_t>(bytes, 0, 4)); // an isosurface caps
+    // A flags byte of 0 is accepted and means no cap (encoders leave it out).
+    Decoder decoder(kDefaultMaxServerPayloadBytes);
+    decoder.feed(patchedBytes<std::uint8_t>(bytes, flagsAt, 0));
+    const Decoder::Result r = decoder.next();
+    ASSERT_EQ(r.status, Status::Message) << r.error.message;
+    EXPECT_FALSE(std::get<SetModeAndClip>(r.message).cap);
+    SetModeAndClip projection = sampleModeAndClip();
+    projection.cap = true;
+    EXPECT_THROW(encode(projection), ProtocolError);
+}
+
 // ---- SetCamera ----------------------------------------------------------------------------
 
 TEST(DecoderRejects, NanAndInfiniteCameraValues) {

@@ -404,6 +404,15 @@ TEST(Messages, SetModeAndClipGoldenBytesRoundTrip) {
     Bytes plain{BC_HEADER(0x14, 59, 1)};
     plain.resize(plain.size() + 59, 0); // composite, iso 0, no crop, no planes
     expectGolden(SetModeAndClip{}, 1, plain);
+    // The same cut capped in composite: the optional cutFlags byte at the end.
+    SetModeAndClip capped = m;
+    capped.mode = BlendMode::Composite;
+    capped.cap = true;
+    Bytes cappedBytes = encode(m, 7);
+    cappedBytes[8] = 92;                 // the payload's length
+    cappedBytes[kHeaderBytes] = 0x00;    // mode: composite
+    cappedBytes.push_back(0x01);         // cutFlags: cap
+    expectGolden(capped, 7, cappedBytes);
 }
 
 TEST(Messages, ByeGoldenBytesRoundTrip) {

@@ -102,6 +102,7 @@ TEST(ClusterOrder, EveryFieldArrivesAsSent) {
     cut.options.clip.planeCount = 2;
     cut.options.clip.planes[0] = {{1, 0, 0}, -4};
     cut.options.clip.planes[1] = {{0, -0.5, 2}, 7};
+    cut.options.clip.cap = true;
     expectSame(decodeOrder(encodeOrder(cut)).options, cut.options);
     EXPECT_GT(encodeOrder(cut).size(), encodeOrder(sent).size());
 }

@@ -176,8 +176,8 @@ std::vector<client::ReceivedFrame> orbit(const client::ClientConfig& config,
     return out;
 }
 
-/// One frame of each mode (MIP, the isosurface at the middle value, the average), cut to a box
-/// and a plane, of one view.
+/// One frame of each mode (MIP, the isosurface at the middle value, the average, composite
+/// with the cuts capped), cut to a box and a plane, of one view.
 std::vector<client::ReceivedFrame> cutModes(const client::ClientConfig& config,
                                             const std::string& volume) {
     client::Client c(config);
@@ -197,8 +197,9 @@ std::vector<client::ReceivedFrame> cutModes(const client::ClientConfig& config,
     std::vector<client::ReceivedFrame> out;
     std::uint32_t id = 1;
     for (const auto mode : {protocol::BlendMode::Maximum, protocol::BlendMode::Isosurface,
-                            protocol::BlendMode::Average}) {
+                            protocol::BlendMode::Average, protocol::BlendMode::Composite}) {
         m.mode = mode;
+        m.cap = mode == protocol::BlendMode::Composite; // the cuts' faces drawn
         m.isoValue = mode == protocol::BlendMode::Isosurface ? 0.5 * (v.valueMin + v.valueMax) : 0;
         c.setModeAndClip(m);
         if (mode == protocol::BlendMode::Average) { // a grey ramp: a radiograph

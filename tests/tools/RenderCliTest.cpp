@@ -174,6 +174,22 @@ TEST_F(RenderCli, ModesCropsAndClipsAreDrawnAndBadOnesNamed) {
     EXPECT_EQ(compareImages(readPng(still), readPng(cpu)).maxAbs, 0.0);
     auto iso = brickcast("render " + store + " -o " + cpu + " --size 32,32 --mode iso --iso 900");
     EXPECT_EQ(iso.exitCode, 0) << iso.text;
+    // --cap: the cut faces drawn, the reference's image, not the uncapped one.
+    const std::string capView = " --size 64,64 --tf ct-bone --orbit 40,25 --crop 2,60,2,60,4,40"
+                                " --clip=-1,0.2,0,48 --cap";
+    const std::string capped = dir.file("capped.png"), cappedRef = dir.file("capped-ref.png"),
+                      uncapped = dir.file("uncapped.png");
+    for (const auto& [png, how] : {std::pair{capped, capView + " --renderer cpu"},
+                                   std::pair{cappedRef, capView + " --reference"}}) {
+        auto r = brickcast("render " + store + " -o " + png + how);
+        ASSERT_EQ(r.exitCode, 0) << r.text;
+    }
+    EXPECT_LE(compareImages(readPng(capped), readPng(cappedRef)).maxAbs, 2.0 / 255.0 + 1e-6);
+    auto u = brickcast("render " + store + " -o " + uncapped +
+                       " --size 64,64 --tf ct-bone "
+                       "--orbit 40,25 --crop 2,60,2,60,4,40 --clip=-1,0.2,0,48 --renderer cpu");
+    ASSERT_EQ(u.exitCode, 0) << u.text;
+    EXPECT_GT(compareImages(readPng(capped), readPng(uncapped)).maxAbs, 0.05);
     const std::string out = dir.file("x.png");
     const std::pair<std::string, std::string> bad[] = {
         {" --mode iso", "--iso"},
@@ -185,6 +201,7 @@ TEST_F(RenderCli, ModesCropsAndClipsAreDrawnAndBadOnesNamed) {
         {" --clip 0,0,0,1", "clip[0]: the normal is zero"},
         {" --clip 1,0,0,nan", "--clip"},
         {" --renderer splat --mode mip", "splatters: composite only, not mip"},
+        {" --mode mip --crop 1,20,1,20,1,20 --cap", "cap: mode mip draws no surface"},
     };
     for (const auto& [args, named] : bad) {
         auto r = brickcast("render " + store + " -o " + out + " --size 32,32" + args);

@@ -55,6 +55,7 @@ struct RenderCliOptions {
     std::optional<double> iso;      ///< --iso
     std::string crop;               ///< --crop X0,X1,Y0,Y1,Z0,Z1 (mm)
     std::vector<std::string> clips; ///< --clip NX,NY,NZ,D, each
+    bool cap = false;               ///< --cap
     double fov = 30.0, step = 1.0, octreeRatio = 1.0;
     std::uint32_t octreeLevelLimit = 32, cells = render::RenderOptions{}.cellVoxels;
     bool ortho = false, noShading = false, noSimd = false, noPackets = false, noRayGuided = false,
@@ -126,6 +127,7 @@ render::RenderOptions renderOptionsOf(const RenderCliOptions& o) {
         const auto p = tools::parseNumbers(text, "--clip", 4, 4);
         r.clip.planes[r.clip.planeCount++] = {{p[0], p[1], p[2]}, p[3]};
     }
+    r.clip.cap = o.cap;
     r.shading = !o.noShading;
     r.simd = !o.noSimd;
     r.packets = !o.noPackets;
@@ -653,6 +655,9 @@ void addRenderCommand(CLI::App& app) {
                     "each its own --clip (--clip=-1,0,0,90 when it starts with a minus); the "
                     "raycasters and the reference")
         ->allow_extra_args(false);
+    cmd->add_flag("--cap", o->cap,
+                  "Draw the faces the crop and clip planes cut, shaded, coloured by the transfer "
+                  "function (composite and iso modes)");
     cmd->add_option("--octree-ratio", o->octreeRatio,
                     "Draw an octree node whole once this share of its leaves is non-empty")
         ->capture_default_str();

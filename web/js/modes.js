@@ -9,6 +9,8 @@ import { Mode } from './protocol.js';
 export const CLIP_AXES = Object.freeze(['+x', '-x', '+y', '-y', '+z', '-z']);
 /** The crop sliders' step: low stays at least this far below high. */
 export const CROP_STEP = 0.001;
+/** The modes that draw no surface, as the mode select names them. */
+const SURFACELESS_MODES = Object.freeze({ [Mode.Maximum]: 'MIP', [Mode.Minimum]: 'MinIP', [Mode.Average]: 'the average' });
 /** The iso slider has about this many steps across the volume's value range. */
 const ISO_STEPS = 1000;
 
@@ -83,20 +85,34 @@ export function clampIso(volume, v) {
 
 /**
  * What the controls show on opening a volume: composite, the iso value in the middle of the
- * volume's values, no crop (the sliders at 0 and 1), no clip plane ('+x' at the middle).
+ * volume's values, no crop (the sliders at 0 and 1), no clip plane ('+x' at the middle), the
+ * cut faces not capped.
  */
 export function defaultCut(volume) {
   return {
     mode: Mode.Composite, isoValue: isoRangeOf(volume).middle,
     cropped: false, low: [0, 0, 0], high: [1, 1, 1],
-    clip: false, axis: '+x', position: 0.5,
+    clip: false, axis: '+x', position: 0.5, cap: false,
   };
+}
+
+/**
+ * Why the controls' state `cut` can have no cap, or '' where it can: the maximum, minimum and
+ * average draw no surface (the server refuses a cap with them); with nothing cropped or clipped
+ * there is no cut face.
+ */
+export function whyNoCap(cut) {
+  if (cut.mode !== Mode.Composite && cut.mode !== Mode.Isosurface)
+    return `${SURFACELESS_MODES[cut.mode] ?? `mode ${cut.mode}`} draws no surface to cap (composite and isosurface only)`;
+  if (!cut.cropped && !cut.clip) return 'nothing is cut: crop or clip first';
+  return '';
 }
 
 /**
  * The SetModeAndClip body of the controls' state `cut` (defaultCut's shape) for `volume`: the
  * iso value (kept within the volume's values) in the isosurface mode only, 0 in the others;
- * the crop box in mm when cropped; the one clip plane when on.
+ * the crop box in mm when cropped; the one clip plane when on; cap only where whyNoCap has
+ * nothing against it (else false).
  */
 export function modeAndClipOf(volume, cut) {
   return {
@@ -104,6 +120,7 @@ export function modeAndClipOf(volume, cut) {
     isoValue: cut.mode === Mode.Isosurface ? clampIso(volume, cut.isoValue) : 0,
     crop: cut.cropped ? cropBoxMm(volume, cut.low, cut.high) : null,
     planes: cut.clip ? [clipPlaneOf(volume, cut.axis, cut.position)] : [],
+    cap: cut.cap === true && whyNoCap(cut) === '',
   };
 }
 

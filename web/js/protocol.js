@@ -42,8 +42,9 @@ export function errorName(code) {
 
 // FrameBudget (bit 4, since 2026-12-06): the server takes SetFrameBudget; older servers answer it UnknownType.
 // ModesAndClips (bit 5, since 2026-12-07): the server takes SetModeAndClip; older servers answer it UnknownType.
+// Capping (bit 6, since 2026-12-08): the server takes SetModeAndClip's cutFlags; older servers answer the byte BadPayload.
 export const Capability = Object.freeze({
-  AuthRequired: 1, CpuRenderer: 2, GpuRenderer: 4, Continuous: 8, FrameBudget: 16, ModesAndClips: 32,
+  AuthRequired: 1, CpuRenderer: 2, GpuRenderer: 4, Continuous: 8, FrameBudget: 16, ModesAndClips: 32, Capping: 64,
 });
 export const Codec = Object.freeze({ Raw: 0, Zstd: 1, ZstdDelta: 2, Jpeg: 3, Png: 4 });
 // Auto (5, since 2026-12-03): the server picks the GPU raycaster on a hardware GPU, else the CPU raycaster.
@@ -73,6 +74,10 @@ export const MAX_ESTIMATED_PSNR_DB = 50;
 export const Mode = Object.freeze({ Composite: 0, Maximum: 1, Minimum: 2, Average: 3, Isosurface: 4 });
 /** SetModeAndClip: at most this many clip planes. */
 export const MAX_CLIP_PLANES = 6;
+/** SetModeAndClip.cutFlags (the optional u8 after the planes): bit 0 cap, draw the faces the cuts make. */
+export const CutFlags = Object.freeze({ Cap: 1 });
+export const CUT_FLAGS_ALL = 0x1;
+const MODE_NAMES = Object.freeze(['composite', 'maximum', 'minimum', 'average', 'isosurface']);
 /** SetModeAndClip: a plane's normal whose largest |component| is not above this is zero (it has no direction). */
 const MIN_NORMAL_COMPONENT = 1e-30;
 
@@ -293,7 +298,8 @@ function validateFrameBudget(b, code) {
  * SetModeAndClip as the server checks it (all OutOfRange, naming the field): a mode of 0..4, a
  * finite isoValue (the server also wants it within the volume's [valueMin, valueMax] in mode 4,
  * which only it knows), a crop box (null: none) of finite bounds with min < max on every axis,
- * at most MAX_CLIP_PLANES planes with finite normals and offsets, no normal zero.
+ * at most MAX_CLIP_PLANES planes with finite normals and offsets, no normal zero; cap a boolean,
+ * true only in the composite and isosurface modes (the others draw no surface), named cutFlags.
  */
 function validateModeAndClip(m) {
   checkInt(m.mode, 0, Mode.Isosurface, 'mode');
@@ -317,6 +323,9 @@ function validateModeAndClip(m) {
       throw new ProtocolError('OutOfRange', `planes[${i}].normal: (${n.join(', ')}) is zero (a plane needs a direction)`);
     checkFinite(p.offset, `planes[${i}].offset`);
   });
+  if (typeof m.cap !== 'boolean') throw new ProtocolError('OutOfRange', `cutFlags: cap is ${m.cap}, not a boolean`);
+  if (m.cap && m.mode !== Mode.Composite && m.mode !== Mode.Isosurface)
+    throw new ProtocolError('OutOfRange', `cutFlags: mode ${m.mode} (${MODE_NAMES[m.mode]}) draws no surface to cap (composite and isosurface only)`);
 }
 
 /** Three finite numbers; anything else is out of range, naming the field. */
@@ -589,8 +598,8 @@ const codecs = {
   },
   [Type.SetModeAndClip]: {
     write(m, w) {
-      // crop and planes may be left out: no crop box, no planes.
-      const b = { mode: m.mode, isoValue: m.isoValue, crop: m.crop ?? null, planes: m.planes ?? [] };
+      // crop, planes and cap may be left out: no crop box, no planes, no cap.
+      const b = { mode: m.mode, isoValue: m.isoValue, crop: m.crop ?? null, planes: m.planes ?? [], cap: m.cap ?? false };
       validateModeAndClip(b);
       w.u8(b.mode, 'mode');
       w.f64(b.isoValue, 'isoValue');
@@ -604,6 +613,8 @@ const codecs = {
         for (let a = 0; a < 3; ++a) w.f64(p.normal[a], `planes[${i}].normal[${a}]`);
         w.f64(p.offset, `planes[${i}].offset`);
       });
+      // Only when not 0: an uncapped message keeps the layout servers before 2026-12-08 read.
+      if (b.cap) w.u8(CutFlags.Cap, 'cutFlags');
     },
     read(r) {
       const mode = r.u8('mode');
@@ -618,7 +629,11 @@ const codecs = {
       if (count > MAX_CLIP_PLANES) throw new ProtocolError('OutOfRange', `planes: ${count}, more than ${MAX_CLIP_PLANES}`);
       const planes = [];
       for (let i = 0; i < count; ++i) planes.push({ normal: vec(`planes[${i}].normal`), offset: r.f64(`planes[${i}].offset`) });
-      const m = { mode, isoValue, crop: cropped ? { min, max } : null, planes };
+      // Optional: a payload that ends after the planes means 0 (a present 0 is accepted too).
+      const cutFlags = r.left() > 0 ? r.u8('cutFlags') : 0;
+      if (cutFlags & ~CUT_FLAGS_ALL)
+        throw new ProtocolError('OutOfRange', `cutFlags: 0x${cutFlags.toString(16)} has bits other than 0x${CUT_FLAGS_ALL.toString(16)}`);
+      const m = { mode, isoValue, crop: cropped ? { min, max } : null, planes, cap: (cutFlags & CutFlags.Cap) !== 0 };
       validateModeAndClip(m);
       return m;
     },
@@ -749,8 +764,10 @@ export const encodeSetFrameBudget = (m, request) => encode(Type.SetFrameBudget, 
 /**
  * SetModeAndClip: {mode (Mode, u8), isoValue (f64, finite; used in mode 4, within the volume's
  * [valueMin, valueMax]), crop (null, or {min: [3], max: [3]} in world mm with min < max), planes
- * (0..6 of {normal: [3], offset}: each keeps the points x (mm) with dot(normal, x) + offset >= 0)};
- * 59 + 32 × planes bytes. Only for a server whose Hello has Capability.ModesAndClips.
+ * (0..6 of {normal: [3], offset}: each keeps the points x (mm) with dot(normal, x) + offset >= 0),
+ * cap (boolean, default false: draw the faces the cuts make; composite and isosurface only)};
+ * 59 + 32 × planes bytes, one more with cap. Only for a server whose Hello has
+ * Capability.ModesAndClips, and cap true only for one that also has Capability.Capping.
  */
 export const encodeSetModeAndClip = (m, request) => encode(Type.SetModeAndClip, m, request);
 /** Error the client sends before it closes: {code, fatal, offendingType, message}. */

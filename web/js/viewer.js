@@ -11,7 +11,7 @@ import { Trackball } from './trackball.js';
 import { attachControls } from './controls.js';
 import { TfEditor } from './tfeditor.js';
 import {
-  CLIP_AXES, clampIso, clipLabel, cropLabels, defaultCut, isoRangeOf, modeAndClipOf, orderCropRange, snapIso,
+  CLIP_AXES, clampIso, clipLabel, cropLabels, defaultCut, isoRangeOf, modeAndClipOf, orderCropRange, snapIso, whyNoCap,
 } from './modes.js';
 import { CutOverlay } from './cutoverlay.js';
 import {
@@ -31,6 +31,8 @@ const REST_PSNR_TITLE = 'at rest, refine until the estimated PSNR against the co
 const NO_FRAME_BUDGET = 'this server does not support frame budgets (SetFrameBudget, Hello capability bit 4)';
 const NO_MODES = 'this server does not draw modes and cuts (SetModeAndClip, Hello capability bit 5)';
 const MODES_NEED_VOLUME = 'modes and cuts: open a volume first';
+const CAP_TITLE = 'draw the faces the crop box and the clip plane cut as a shaded surface: coloured by the transfer function in composite, in the surface\'s colour where the value is at or above the iso value in the isosurface mode';
+const NO_CAPPING = 'this server does not cap cuts (SetModeAndClip cutFlags, Hello capability bit 6)';
 
 const $ = (id) => document.getElementById(id);
 const els = {
@@ -43,7 +45,7 @@ const els = {
   authMessage: $('auth-message'), token: $('token'), tokenRemember: $('token-remember'),
   modeAndCut: $('mode-and-cut'), mode: $('mode'), isoRow: $('iso-row'), iso: $('iso'),
   isoRange: $('iso-range'), crop: $('crop'), clip: $('clip'), clipAxis: $('clip-axis'),
-  clipPosition: $('clip-position'), clipPositionValue: $('clip-position-value'),
+  clipPosition: $('clip-position'), clipPositionValue: $('clip-position-value'), cap: $('cap'),
   cropAxes: ['x', 'y', 'z'].map((a) => ({ low: $(`crop-${a}-low`), high: $(`crop-${a}-high`), value: $(`crop-${a}-value`) })),
   cutOverlay: $('cut-overlay'),
 };
@@ -76,9 +78,11 @@ const state = {
   frameBudget: { interactiveMs: 0, restPsnrDb: 0 },
   lastFrameBudget: null,
   // The mode and cut controls (modes.js defaultCut's shape), whether the server takes
-  // SetModeAndClip (Capability.ModesAndClips, and no UnknownType since), and the last sent.
+  // SetModeAndClip (Capability.ModesAndClips, and no UnknownType since) and its cap
+  // (Capability.Capping), and the last sent.
   cut: defaultCut({ valueMin: 0, valueMax: 0 }),
   modesSupported: false,
+  cappingSupported: false,
   lastModeAndClip: null,
   maxEdge: 1024,
   deviceSize: { width: 0, height: 0 },
@@ -197,12 +201,12 @@ function sendFrameBudget(force = false) {
 
 /**
  * Sends SetModeAndClip as the mode and cut controls say when the server takes it
- * (Capability.ModesAndClips) and it differs from the last sent (or always, with `force`);
- * returns what was sent or null.
+ * (Capability.ModesAndClips) and it differs from the last sent (or always, with `force`); the
+ * cap only to a server that takes it (Capability.Capping). Returns what was sent or null.
  */
 function sendModeAndClip(force = false) {
   if (!state.volume || conn.state !== 'ready' || !state.modesSupported) return null;
-  const m = modeAndClipOf(state.volume, state.cut);
+  const m = modeAndClipOf(state.volume, { ...state.cut, cap: state.cut.cap && state.cappingSupported });
   if (!force && JSON.stringify(m) === JSON.stringify(state.lastModeAndClip)) return null;
   if (!trySend(Type.SetModeAndClip, m)) return null;
   state.lastModeAndClip = m;
@@ -330,6 +334,7 @@ function onReady() {
   showFrameBudgetControls(conn.can(Capability.FrameBudget));
   // Sent on every (re)open of a volume (onVolumeOpened).
   state.modesSupported = conn.can(Capability.ModesAndClips);
+  state.cappingSupported = conn.can(Capability.Capping);
   state.lastModeAndClip = null;
   showModeControls();
   conn.request(Type.ListVolumes, {}, Type.VolumeList).catch(report);
@@ -640,7 +645,8 @@ function setRenderOptions(partial) {
 // ---- mode and cut ------------------------------------------------------------------------
 
 // The controls' own titles (or none), put back when the group is enabled again; the group has none then.
-const modeTitles = new Map([els.modeAndCut, ...els.modeAndCut.querySelectorAll('input, select')].map((el) => [el, el.title]));
+// The cap's title says why it is off (showCap).
+const modeTitles = new Map([els.modeAndCut, ...els.modeAndCut.querySelectorAll('input:not(#cap), select')].map((el) => [el, el.title]));
 modeTitles.set(els.modeAndCut, '');
 
 /**
@@ -654,7 +660,22 @@ function showModeControls() {
     if (why || title) el.title = why || title;
     else el.removeAttribute('title');
   }
+  showCap();
   drawCutOverlay();
+}
+
+/**
+ * The cap box: checked when the cut faces are capped; disabled, its tooltip saying why, with a
+ * server that does not cap (Capability.Capping), in MIP, MinIP or average, or with nothing cut.
+ * It keeps the choice for when capping is possible again.
+ */
+function showCap() {
+  const why = !state.cappingSupported ? NO_CAPPING : whyNoCap(state.cut);
+  els.cap.disabled = !!why;
+  els.cap.checked = state.cut.cap && !why;
+  // The disabled group's tooltip says why first; the label has it too (a disabled box shows none in some browsers).
+  const title = els.modeAndCut.disabled ? els.modeAndCut.title : why ? `cap the cut faces: ${why}` : CAP_TITLE;
+  els.cap.title = els.cap.parentElement.title = title;
 }
 
 /** Shows state.cut in the controls: the iso value only in the isosurface mode, the sliders of a cut only while it is on. */
@@ -688,6 +709,7 @@ function showCut() {
   els.clipPosition.value = String(c.position);
   els.clipAxis.disabled = els.clipPosition.disabled = !c.clip;
   els.clipPositionValue.textContent = v ? clipLabel(v, c.axis, c.position) : '';
+  showCap();
   tfEditor.setIso(iso && v ? c.isoValue : null);
   drawCutOverlay();
 }
@@ -723,15 +745,17 @@ els.cropAxes.forEach((axis, a) => {
 els.clip.addEventListener('change', () => { state.cut.clip = els.clip.checked; cutChanged(); });
 els.clipAxis.addEventListener('change', () => { state.cut.axis = els.clipAxis.value; cutChanged(); });
 els.clipPosition.addEventListener('input', () => { state.cut.position = Number(els.clipPosition.value); cutChanged(); });
+els.cap.addEventListener('change', () => { state.cut.cap = els.cap.checked; cutChanged(); });
 
 /**
  * Merges a partial mode and cut state ({mode, isoValue, cropped, low, high, clip, axis,
- * position}, fractions of the volume's extent) into the controls, shows it and sends it now.
+ * position, cap}, fractions of the volume's extent) into the controls, shows it and sends it now.
  */
 function setModeAndClip(partial) {
   if (!state.volume) throw new Error('no volume is open');
   const cut = { ...structuredClone(state.cut), ...structuredClone(partial) };
   if (!CLIP_AXES.includes(cut.axis)) throw new RangeError(`axis: '${cut.axis}' is not one of ${CLIP_AXES.join(' ')}`);
+  if (typeof cut.cap !== 'boolean') throw new TypeError(`cap: ${cut.cap} is not a boolean`);
   for (let a = 0; a < 3; ++a) ({ low: cut.low[a], high: cut.high[a] } = orderCropRange(cut.low[a], cut.high[a]));
   cut.position = Number.isFinite(cut.position) ? Math.min(1, Math.max(0, cut.position)) : 0.5;
   // Checked before the controls change: encode() would refuse it after.
@@ -969,13 +993,14 @@ window.brickcast = {
    * connected). Throws ProtocolError on a value out of range.
    */
   setFrameBudget: (partial) => setFrameBudget(partial),
-  /** The last SetModeAndClip sent on this session ({mode, isoValue, crop, planes}), or null (none yet, or unknown after an Error). */
+  /** The last SetModeAndClip sent on this session ({mode, isoValue, crop, planes, cap}), or null (none yet, or unknown after an Error). */
   modeAndClip: () => clone(state.lastModeAndClip),
   /**
    * Merges a partial {mode, isoValue, cropped, low: [3], high: [3], clip, axis ('+x' .. '-z'),
-   * position} (low, high and position fractions of the volume's extent) into the mode and cut
-   * controls, shows it and sends it now; returns what was sent, or null when the server does not
-   * take SetModeAndClip (or is not connected). Throws on a value out of range.
+   * position, cap} (low, high and position fractions of the volume's extent) into the mode and
+   * cut controls, shows it and sends it now (cap only with a cut, in composite or isosurface
+   * mode, to a server that caps); returns what was sent, or null when the server does not take
+   * SetModeAndClip (or is not connected). Throws on a value out of range.
    */
   setModeAndClip: (partial) => setModeAndClip(partial),
   /**

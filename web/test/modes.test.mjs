@@ -3,7 +3,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
   CLIP_AXES, CROP_STEP, extentMm, orderCropRange, cropBoxMm, clipPlaneOf, isoRangeOf, clampIso, defaultCut, modeAndClipOf,
-  formatMm, cropLabels, clipLabel, snapIso,
+  formatMm, cropLabels, clipLabel, snapIso, whyNoCap,
 } from '../js/modes.js';
 import { Mode, decode, encodeSetModeAndClip } from '../js/protocol.js';
 
@@ -82,9 +82,9 @@ test('iso value range: the volume\'s values, a power-of-ten step, the middle by 
 
 test('the controls\' SetModeAndClip: composite and nothing cut by default', () => {
   const cut = defaultCut(cthead);
-  assert.deepEqual(cut, { mode: Mode.Composite, isoValue: 2047.5, cropped: false, low: [0, 0, 0], high: [1, 1, 1], clip: false, axis: '+x', position: 0.5 });
+  assert.deepEqual(cut, { mode: Mode.Composite, isoValue: 2047.5, cropped: false, low: [0, 0, 0], high: [1, 1, 1], clip: false, axis: '+x', position: 0.5, cap: false });
   const m = modeAndClipOf(cthead, cut);
-  assert.deepEqual(m, { mode: 0, isoValue: 0, crop: null, planes: [] });
+  assert.deepEqual(m, { mode: 0, isoValue: 0, crop: null, planes: [], cap: false });
   // That is the all-zero message of PROTOCOL.md.
   assert.deepEqual(Array.from(new Uint8Array(encodeSetModeAndClip(m, 1))).slice(16), Array(59).fill(0));
 });
@@ -97,19 +97,45 @@ test('the controls\' SetModeAndClip: iso value in isosurface mode only, crop box
   const m = modeAndClipOf(cthead, cut);
   assert.deepEqual(m, {
     mode: 4, isoValue: 4095, crop: { min: [64, 0, 113], max: [192, 256, 226] },
-    planes: [{ normal: [0, -1, 0], offset: 64 }],
+    planes: [{ normal: [0, -1, 0], offset: 64 }], cap: false,
   });
   assert.deepEqual(decode(encodeSetModeAndClip(m, 2)).body, m);
   assert.equal(modeAndClipOf(cthead, { ...cut, mode: Mode.Maximum }).isoValue, 0);
   assert.equal(modeAndClipOf(cthead, { ...cut, isoValue: 1200 }).isoValue, 1200);
-  // Every mode, crop and plane the controls can make encodes.
+  // Every mode, crop, plane and cap the controls can make encodes.
   for (const mode of Object.values(Mode)) {
     for (const axis of CLIP_AXES) {
       for (const [lo, hi] of [[0, 1], [0.5, 0.5], [1, 0], [0.999, 1]]) {
-        encodeSetModeAndClip(modeAndClipOf(cthead, { ...cut, mode, axis, low: [lo, lo, lo], high: [hi, hi, hi] }));
+        for (const cap of [false, true]) {
+          encodeSetModeAndClip(modeAndClipOf(cthead, { ...cut, mode, axis, low: [lo, lo, lo], high: [hi, hi, hi], cap }));
+        }
       }
     }
   }
+});
+
+test('the controls\' SetModeAndClip: cap only with a cut, in composite or isosurface mode', () => {
+  const cut = { ...defaultCut(cthead), cropped: true, low: [0.25, 0, 0.5], high: [0.75, 1, 1], cap: true };
+  assert.equal(whyNoCap(cut), '');
+  const m = modeAndClipOf(cthead, cut);
+  assert.equal(m.cap, true);
+  assert.deepEqual(decode(encodeSetModeAndClip(m, 1)).body, m);
+  assert.equal(modeAndClipOf(cthead, { ...cut, mode: Mode.Isosurface }).cap, true);
+  assert.equal(modeAndClipOf(cthead, { ...cut, cropped: false, clip: true }).cap, true);
+  // Nothing cut: no face to cap.
+  const uncut = { ...cut, cropped: false, clip: false };
+  assert.equal(modeAndClipOf(cthead, uncut).cap, false);
+  assert.match(whyNoCap(uncut), /nothing is cut/);
+  // MIP, MinIP and average draw no surface (the server would refuse the cap): the cap is left off.
+  for (const [mode, name] of [[Mode.Maximum, 'MIP'], [Mode.Minimum, 'MinIP'], [Mode.Average, 'average']]) {
+    assert.equal(modeAndClipOf(cthead, { ...cut, mode }).cap, false);
+    assert.match(whyNoCap({ ...cut, mode }), new RegExp(`${name} draws no surface to cap`));
+    encodeSetModeAndClip(modeAndClipOf(cthead, { ...cut, mode, clip: true }));
+  }
+  // Not asked for: off, whatever the cut; only true asks for it.
+  assert.equal(modeAndClipOf(cthead, { ...cut, cap: false }).cap, false);
+  assert.equal(modeAndClipOf(cthead, { ...cut, cap: undefined }).cap, false);
+  assert.equal(modeAndClipOf(cthead, { ...cut, cap: 1 }).cap, false);
 });
 
 test('labels: the crop box and what the plane keeps, in mm', () => {

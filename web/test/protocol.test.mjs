@@ -7,7 +7,7 @@ import {
   encodeSetRenderOptions, encodeSetTransferFunction, encodeAuth, encodeOpenVolume,
   encodeRequestHistogram, encodeRequestFrame, encodeListVolumes, encodeRequestStats, encodeBye,
   encodeError, encodeSetFrameBudget, encodeSetModeAndClip, errorName, typeName, MAX_CLIENT_PAYLOAD, RenderFlags,
-  Renderer, Capability, Mode, MAX_CLIP_PLANES,
+  Renderer, Capability, Mode, MAX_CLIP_PLANES, CutFlags,
 } from '../js/protocol.js';
 
 const header = (type, length, request) => [
@@ -327,7 +327,7 @@ test('SetFrameBudget: values out of range are refused, naming the field', () => 
 // The example of PROTOCOL.md: MIP, cropped to (0, 10, 20)..(100, 110, 120) mm, keeping x >= 50 mm.
 const modeAndClip = {
   mode: Mode.Maximum, isoValue: 0, crop: { min: [0, 10, 20], max: [100, 110, 120] },
-  planes: [{ normal: [1, 0, 0], offset: -50 }],
+  planes: [{ normal: [1, 0, 0], offset: -50 }], cap: false,
 };
 const modeAndClipBytes = [
   ...header(0x14, 91, 7), 0x01, ...f64(0), 0x01,
@@ -340,13 +340,13 @@ test('SetModeAndClip: type 0x14, u8 mode, f64 isoValue, bool cropped, f64 cropMi
   assert.deepEqual(bytes(got), modeAndClipBytes);
   assert.deepEqual(decode(got), { type: Type.SetModeAndClip, name: 'SetModeAndClip', flags: 0, request: 7, body: modeAndClip });
   // Composite, no crop, no planes: 59 bytes, all 0.
-  const none = { mode: Mode.Composite, isoValue: 0, crop: null, planes: [] };
+  const none = { mode: Mode.Composite, isoValue: 0, crop: null, planes: [], cap: false };
   assert.deepEqual(bytes(encodeSetModeAndClip(none, 1)), [...header(0x14, 59, 1), ...Array(59).fill(0)]);
   assert.deepEqual(decode(encodeSetModeAndClip(none, 1)).body, none);
   // crop and planes left out: none.
   assert.deepEqual(bytes(encodeSetModeAndClip({ mode: 0, isoValue: 0 }, 1)), [...header(0x14, 59, 1), ...Array(59).fill(0)]);
   // 59 + 32 bytes a plane, up to six.
-  const six = { mode: Mode.Isosurface, isoValue: 1200.5, crop: null, planes: Array.from({ length: 6 }, (_, i) => ({ normal: [0, 0, i % 2 ? -1 : 1], offset: i })) };
+  const six = { mode: Mode.Isosurface, isoValue: 1200.5, crop: null, planes: Array.from({ length: 6 }, (_, i) => ({ normal: [0, 0, i % 2 ? -1 : 1], offset: i })), cap: false };
   const b = encodeSetModeAndClip(six, 3);
   assert.equal(b.byteLength, 16 + 59 + 32 * 6);
   assert.deepEqual(decode(b).body, six);
@@ -414,6 +414,45 @@ test('SetModeAndClip: decoding as the server does', () => {
   throwsCode(() => decode(buf(noPlanes)), 'BadPayload', /left over/);
 });
 
+// The capped example: the one above in composite, cap on: the same body, then cutFlags 0x01.
+const cappedBytes = [...header(0x14, 92, 7), 0x00, ...modeAndClipBytes.slice(16 + 1), 0x01];
+
+test('SetModeAndClip: an optional u8 cutFlags after the planes, bit 0 cap, written only when not 0', () => {
+  const capped = { ...modeAndClip, mode: Mode.Composite, cap: true };
+  const got = encodeSetModeAndClip(capped, 7);
+  assert.deepEqual(bytes(got), cappedBytes);
+  assert.deepEqual(decode(got).body, capped);
+  // cap false or left out: no flags byte, the 91 bytes servers before 2026-12-08 read.
+  assert.deepEqual(bytes(encodeSetModeAndClip({ ...capped, cap: false }, 7)), [...header(0x14, 91, 7), 0x00, ...modeAndClipBytes.slice(16 + 1)]);
+  const { cap, ...noCap } = capped;
+  assert.equal(encodeSetModeAndClip(noCap, 7).byteLength, 16 + 91);
+  // Decoding: no byte is no cap; a present 0 is accepted too.
+  assert.equal(decode(buf(modeAndClipBytes)).body.cap, false);
+  const zero = [...header(0x14, 92, 7), ...modeAndClipBytes.slice(16), 0x00];
+  assert.deepEqual(decode(buf(zero)).body, modeAndClip);
+  // The isosurface caps too.
+  const iso = { ...capped, mode: Mode.Isosurface, isoValue: 1200 };
+  assert.deepEqual(decode(encodeSetModeAndClip(iso, 1)).body, iso);
+  assert.equal(CutFlags.Cap, 1);
+  assert.equal(Capability.Capping, 1 << 6);
+});
+
+test('SetModeAndClip: cutFlags with other bits, or a cap with MIP, MinIP or average, is out of range', () => {
+  for (const flags of [0x02, 0x03, 0x80, 0xff]) {
+    const b = cappedBytes.slice(); b[b.length - 1] = flags;
+    throwsCode(() => decode(buf(b)), 'OutOfRange', /cutFlags/);
+  }
+  for (const mode of [Mode.Maximum, Mode.Minimum, Mode.Average]) {
+    throwsCode(() => encodeSetModeAndClip({ ...modeAndClip, mode, cap: true }), 'OutOfRange', /cutFlags: mode \d \(\w+\) draws no surface to cap/);
+    const b = cappedBytes.slice(); b[16] = mode;
+    throwsCode(() => decode(buf(b)), 'OutOfRange', /cutFlags/);
+  }
+  throwsCode(() => encodeSetModeAndClip({ ...modeAndClip, mode: Mode.Maximum, cap: true }), 'OutOfRange', /mode 1 \(maximum\)/);
+  for (const cap of [1, 'true']) throwsCode(() => encodeSetModeAndClip({ ...modeAndClip, mode: 0, cap }), 'OutOfRange', /cutFlags/);
+  // A byte after the flags is left over.
+  throwsCode(() => decode(buf([...header(0x14, 93, 7), ...cappedBytes.slice(16), 0x00])), 'BadPayload', /left over/);
+});
+
 test('Stats: decodes the golden bytes of MessagesTest.cpp', () => {
   const m = decode(buf([
     ...header(0x0e, 32, 8), 0x02, 0x00, 0x06, 0x00, ...ascii('frames'), ...f64(12),
@@ -448,7 +487,8 @@ test('round trips: every type decodes to what was encoded', () => {
     [Type.AuthOk, {}], [Type.ListVolumes, {}], [Type.RequestStats, {}], [Type.RequestHistogram, {}],
     [Type.Auth, { token: 'tøken' }], [Type.RequestFrame, { mode: 2 }], [Type.Bye, { reason: 1 }],
     [Type.SetFrameBudget, { interactiveMs: 200, restPsnrDb: 45 }],
-    [Type.SetModeAndClip, { mode: Mode.Average, isoValue: -3.25, crop: null, planes: [{ normal: [0.6, 0.8, 0], offset: 12 }] }],
+    [Type.SetModeAndClip, { mode: Mode.Average, isoValue: -3.25, crop: null, planes: [{ normal: [0.6, 0.8, 0], offset: 12 }], cap: false }],
+    [Type.SetModeAndClip, { mode: Mode.Isosurface, isoValue: 7, crop: { min: [1, 2, 3], max: [4, 5, 6] }, planes: [], cap: true }],
     [Type.Stats, { counters: [{ name: 'bricks resident', value: 3 }] }],
     [Type.Histogram, { valueMin: 0, valueMax: 255, counts: new Float64Array([1, 2, 3, 4]) }],
     [Type.Error, { code: 13, fatal: false, offendingType: 0x0b, message: 'no OpenGL' }],
