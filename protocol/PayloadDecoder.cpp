@@ -307,9 +307,14 @@ Message readSetModeAndClip(PayloadReader& r) {
         m.planes[i].offset = r.f64("offset");
     }
     r.rules().item(nullptr);
-    if (r.rules().ok() && r.remaining() > 0) { // cutFlags, optional: absent means 0
+    // cutFlags, optional: absent means 0 (more than one byte left is left over).
+    if (r.rules().ok() && r.remaining() == 1) {
         const std::uint8_t flags = r.u8("cutFlags");
         r.rules().bits("cutFlags", flags, kCutCap);
+        // One encoding per message: no flags leave the byte out.
+        if (flags == 0)
+            r.rules().fail(ErrorCode::OutOfRange, "cutFlags",
+                           "is 0 (sent by leaving the byte out)");
         m.cap = (flags & kCutCap) != 0;
     }
     return m;

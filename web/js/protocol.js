@@ -629,10 +629,14 @@ const codecs = {
       if (count > MAX_CLIP_PLANES) throw new ProtocolError('OutOfRange', `planes: ${count}, more than ${MAX_CLIP_PLANES}`);
       const planes = [];
       for (let i = 0; i < count; ++i) planes.push({ normal: vec(`planes[${i}].normal`), offset: r.f64(`planes[${i}].offset`) });
-      // Optional: a payload that ends after the planes means 0 (a present 0 is accepted too).
-      const cutFlags = r.left() > 0 ? r.u8('cutFlags') : 0;
+      // Optional: a payload that ends after the planes means 0; a present 0 is refused, so
+      // that a message has one encoding.
+      const hasFlags = r.left() === 1; // more is left over
+      const cutFlags = hasFlags ? r.u8('cutFlags') : 0;
       if (cutFlags & ~CUT_FLAGS_ALL)
         throw new ProtocolError('OutOfRange', `cutFlags: 0x${cutFlags.toString(16)} has bits other than 0x${CUT_FLAGS_ALL.toString(16)}`);
+      if (hasFlags && cutFlags === 0)
+        throw new ProtocolError('OutOfRange', 'cutFlags: 0 is sent by leaving the byte out');
       const m = { mode, isoValue, crop: cropped ? { min, max } : null, planes, cap: (cutFlags & CutFlags.Cap) !== 0 };
       validateModeAndClip(m);
       return m;
