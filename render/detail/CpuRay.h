@@ -709,17 +709,24 @@ template <class T> float valueIn(const Frame& f, const BrickRef& b, glm::vec3 lo
 /// Capping (Frame::capping, render/MODES.md): the face of the cut where segment `s` enters,
 /// drawn into ray state `state` before any of its samples, in the pass that draws the
 /// face's brick (the batches go front to back: no later than the ray's first sample's). A
-/// brick the plan leaves out holds no visible value (composite) or none at or above the iso
-/// value: no face. Composite: the table's colour at the value there, its opacity for one
-/// voxel's length (Frame::capPower); isosurface: at or above the iso value, the surface's
-/// colour, opaque, and the ray is done. Both shaded by the cut's normal.
+/// brick the plan leaves out, or an empty octree leaf, holds no visible value (composite) or
+/// none at or above the iso value: no face. Composite: the table's colour at the value there, its
+/// opacity for one voxel's length (Frame::capPower); isosurface: at or above the iso value, the
+/// surface's colour, opaque, and the ray is done. Both shaded by the cut's normal.
 template <class T>
 void takeCap(const Frame& f, const KeptSegment& s, RayState& state, RayCount& n) {
     glm::vec3 p, local;
     for (int a = 0; a < 3; ++a)
         p[a] = s.ov[a] + s.dv[a] * s.tIn;
-    const BrickRef& b = f.bricks[brickHolding(f, 1.0f / float(f.brick), p, local)];
+    const int index = brickHolding(f, 1.0f / float(f.brick), p, local);
+    const BrickRef& b = f.bricks[index];
     if (b.slot == Slot::Absent || b.batch != f.batch) return;
+    if (b.slot == Slot::Sampled && f.occ) { // an empty leaf holds no face, as it holds no sample
+        glm::ivec3 leaf;
+        for (int a = 0; a < 3; ++a)
+            leaf[a] = std::min(std::max(int(local[a] / f.leaf), 0), f.leafAxis - 1);
+        if (emptyLevel(f, f.occ + std::size_t(index) * f.occWords, leaf) > 0) return;
+    }
     const float value = valueIn<T>(f, b, local);
     ++n.samples;
     const float diff =
