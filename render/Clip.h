@@ -60,10 +60,9 @@ struct ClipF {
     bool any = false;
 
     static ClipF of(const Clip& c);
-    /// Clip::interval in float: [ta, tb] of o + t d kept; `entryNormal`, when given, the unit
-    /// normal of the face that raised ta (left as it was where none did).
-    void interval(glm::vec3 o, glm::vec3 d, float& ta, float& tb,
-                  glm::vec3* entryNormal = nullptr) const {
+    /// Clip::interval in float: [ta, tb] of o + t d kept (cutEntriesSimd() in
+    /// render/detail/CpuMarchBegin-inl.h has its operations a vector of rays at a time).
+    void interval(glm::vec3 o, glm::vec3 d, float& ta, float& tb) const {
         if (cropped)
             for (int a = 0; a < 3; ++a) {
                 if (d[a] == 0.0f) {
@@ -72,11 +71,6 @@ struct ClipF {
                 }
                 const float inv = 1.0f / d[a];
                 const float u0 = (cropMin[a] - o[a]) * inv, u1 = (cropMax[a] - o[a]) * inv;
-                const float enter = u0 < u1 ? u0 : u1;
-                if (entryNormal && enter > ta) {
-                    *entryNormal = glm::vec3(0.0f);
-                    (*entryNormal)[a] = u0 < u1 ? 1.0f : -1.0f;
-                }
                 ta = u0 < u1 ? (u0 > ta ? u0 : ta) : (u1 > ta ? u1 : ta);
                 tb = u0 < u1 ? (u1 < tb ? u1 : tb) : (u0 < tb ? u0 : tb);
             }
@@ -89,12 +83,10 @@ struct ClipF {
                 continue;
             }
             const float t = -no / nd;
-            if (nd > 0.0f) {
-                if (entryNormal && t > ta) *entryNormal = n;
+            if (nd > 0.0f)
                 ta = t > ta ? t : ta;
-            } else {
+            else
                 tb = t < tb ? t : tb;
-            }
         }
     }
 };

@@ -225,6 +225,106 @@ void segmentEndsOf(const Frame& f, const PacketRay* rays, std::size_t count, glm
     }
 }
 
+/// cutEntriesSimd() for rays [0, count) of `rays`, a vector at a time: the volume's box as
+/// RayWalk::begin() finds it, then the crop box's and the planes' kept interval with
+/// ClipF::interval()'s operations, tracking which face raises its start, and the lattice's
+/// samples kept as clipLattice() counts them.
+void cutEntriesOf(const Frame& f, const PacketRay* rays, std::size_t count, CutEntry* entries,
+                  bool* cut) {
+    const DF df;
+    const DI di;
+    constexpr std::size_t kMax = hn::MaxLanes(DF());
+    const std::size_t lanes = hn::Lanes(df);
+    const VF zero = hn::Zero(df), half = hn::Set(df, 0.5f), invStep = hn::Set(df, 1.0f / f.stepMm);
+    const ClipF& c = f.clip;
+    for (std::size_t base = 0; base < count; base += lanes) {
+        const std::size_t n = std::min(lanes, count - base);
+        HWY_ALIGN float sx[kMax] = {}, sy[kMax] = {}, shift[kMax] = {};
+        for (std::size_t i = 0; i < n; ++i) {
+            sx[i] = rays[base + i].sx;
+            sy[i] = rays[base + i].sy;
+            shift[i] = rays[base + i].shift;
+        }
+        VF o[3], d[3];
+        rayBasis(f, hn::Load(df, sx), hn::Load(df, sy), o, d);
+        VF ov[3], dv[3], inv[3], t0, t1;
+        auto miss = clipToVolume(f, o, d, n, ov, dv, inv, t0, t1);
+        const VF lattice = hn::Add(t0, hn::Mul(hn::Load(df, shift), hn::Set(df, f.stepMm)));
+        VF total = hn::Ceil(hn::Sub(hn::Mul(hn::Sub(t1, lattice), invStep), half));
+        miss = hn::Or(miss, hn::Not(hn::Gt(total, zero)));
+        // The interval kept and the face raising its start: 2a (+ 1 for the high one) for a
+        // crop face on axis a, 6 + i for plane i, -1 for none.
+        VF ta = hn::Set(df, -3.0e38f), tb = hn::Set(df, 3.0e38f);
+        VI face = hn::Set(di, -1);
+        if (c.cropped)
+            for (int a = 0; a < 3; ++a) {
+                const VF lo = hn::Set(df, c.cropMin[a]), hi = hn::Set(df, c.cropMax[a]);
+                const auto still = hn::Eq(d[a], zero);
+                miss = hn::Or(miss, hn::And(still, hn::Or(hn::Lt(o[a], lo), hn::Gt(o[a], hi))));
+                const VF invD = hn::Div(hn::Set(df, 1.0f), d[a]);
+                const VF u0 = hn::Mul(hn::Sub(lo, o[a]), invD),
+                         u1 = hn::Mul(hn::Sub(hi, o[a]), invD);
+                const auto forward = hn::Lt(u0, u1);
+                const VF enter = hn::IfThenElse(forward, u0, u1),
+                         leave = hn::IfThenElse(forward, u1, u0);
+                const auto raises = hn::AndNot(still, hn::Gt(enter, ta));
+                face = hn::IfThenElse(hn::RebindMask(di, raises),
+                                      hn::IfThenElse(hn::RebindMask(di, forward),
+                                                     hn::Set(di, 2 * a), hn::Set(di, 2 * a + 1)),
+                                      face);
+                ta = hn::IfThenElse(raises, enter, ta);
+                tb = hn::IfThenElse(hn::AndNot(still, hn::Lt(leave, tb)), leave, tb);
+            }
+        for (int i = 0; i < c.planeCount; ++i) {
+            const glm::vec3& nv = c.normals[std::size_t(i)];
+            const VF nx = hn::Set(df, nv.x), ny = hn::Set(df, nv.y), nz = hn::Set(df, nv.z);
+            const VF nd = hn::Add(hn::Add(hn::Mul(nx, d[0]), hn::Mul(ny, d[1])), hn::Mul(nz, d[2]));
+            const VF no =
+                hn::Add(hn::Add(hn::Add(hn::Mul(nx, o[0]), hn::Mul(ny, o[1])), hn::Mul(nz, o[2])),
+                        hn::Set(df, c.offsets[std::size_t(i)]));
+            const auto still = hn::Eq(nd, zero);
+            miss = hn::Or(miss, hn::And(still, hn::Lt(no, zero)));
+            const VF t = hn::Div(hn::Neg(no), nd);
+            const auto raises = hn::And(hn::Gt(nd, zero), hn::Gt(t, ta));
+            face = hn::IfThenElse(hn::RebindMask(di, raises), hn::Set(di, 6 + i), face);
+            ta = hn::IfThenElse(raises, t, ta);
+            tb = hn::IfThenElse(hn::And(hn::Lt(nd, zero), hn::Lt(t, tb)), t, tb);
+        }
+        // The lattice's samples kept, [first, total) (clipLattice()).
+        miss = hn::Or(miss, hn::Not(hn::Le(ta, tb)));
+        const VF kb = hn::Ceil(hn::Sub(hn::Mul(hn::Sub(tb, lattice), invStep), half));
+        total = hn::IfThenElse(hn::Lt(kb, total), hn::Max(kb, zero), total);
+        const VF ka = hn::Ceil(hn::Sub(hn::Mul(hn::Sub(ta, lattice), invStep), half));
+        const VF first = hn::IfThenElseZero(hn::Gt(ka, zero), hn::Min(ka, total));
+        miss = hn::Or(miss, hn::Not(hn::Lt(first, total)));
+        // Through a cut: the start lies past the box's entry (not on its face).
+        const auto through = hn::AndNot(miss, hn::Gt(ta, t0));
+        HWY_ALIGN float p[3][kMax], dir[3][kMax];
+        HWY_ALIGN std::int32_t faces[kMax];
+        for (int a = 0; a < 3; ++a) {
+            hn::Store(hn::Add(ov[a], hn::Mul(dv[a], ta)), df, p[a]);
+            hn::Store(d[a], df, dir[a]);
+        }
+        hn::Store(face, di, faces);
+        std::uint8_t bits[(kMax + 7) / 8 + 8] = {};
+        hn::StoreMaskBits(df, through, bits);
+        for (std::size_t i = 0; i < n; ++i) {
+            cut[base + i] = ((bits[i >> 3] >> (i & 7)) & 1) != 0;
+            if (!cut[base + i]) continue;
+            CutEntry& e = entries[base + i];
+            e.p = {p[0][i], p[1][i], p[2][i]};
+            e.d = {dir[0][i], dir[1][i], dir[2][i]};
+            const int k = faces[i];
+            if (k >= 6) {
+                e.normal = c.normals[std::size_t(k - 6)];
+            } else {
+                e.normal = glm::vec3(0.0f);
+                e.normal[k / 2] = k % 2 == 0 ? 1.0f : -1.0f;
+            }
+        }
+    }
+}
+
 } // namespace HWY_NAMESPACE
 } // namespace bc::render::detail
 HWY_AFTER_NAMESPACE();

@@ -99,6 +99,12 @@ void SegmentEnds(const Frame& f, const PacketRay* rays, std::size_t count, glm::
     segmentEndsOf(f, rays, count, in, out, ok);
 }
 
+/// cutEntriesSimd() on this target.
+void CutEntries(const Frame& f, const PacketRay* rays, std::size_t count, CutEntry* entries,
+                bool* cut) {
+    cutEntriesOf(f, rays, count, entries, cut);
+}
+
 std::int64_t Target() {
     return HWY_TARGET;
 }
@@ -116,6 +122,7 @@ namespace bc::render::detail {
 HWY_EXPORT(MarchBrick);
 HWY_EXPORT(MarchPacket);
 HWY_EXPORT(SegmentEnds);
+HWY_EXPORT(CutEntries);
 HWY_EXPORT(Target);
 HWY_EXPORT(LaneCount);
 
@@ -134,6 +141,11 @@ void marchPacketSimd(brickstore::VoxelType type, const Frame& f, const PacketRay
 void segmentEndsSimd(const Frame& f, const PacketRay* rays, std::size_t count, glm::vec3* in,
                      glm::vec3* out, bool* ok) {
     HWY_DYNAMIC_DISPATCH(SegmentEnds)(f, rays, count, in, out, ok);
+}
+
+void cutEntriesSimd(const Frame& f, const PacketRay* rays, std::size_t count, CutEntry* entries,
+                    bool* cut) {
+    HWY_DYNAMIC_DISPATCH(CutEntries)(f, rays, count, entries, cut);
 }
 
 std::string simdTargetName() {

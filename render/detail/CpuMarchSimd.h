@@ -47,6 +47,13 @@ void marchPacketSimd(brickstore::VoxelType type, const Frame& f, const PacketRay
 void segmentEndsSimd(const Frame& f, const PacketRay* rays, std::size_t count, glm::vec3* in,
                      glm::vec3* out, bool* ok);
 
+/// Capping: where the rays `rays[0, count)` enter what they keep through a cut, a vector of rays
+/// at a time: cut[i] says whether ray i does (a crop face or a plane inside the volume's box,
+/// with a sample of its lattice behind it), entries[i] is where. Every march takes its faces
+/// from here.
+void cutEntriesSimd(const Frame& f, const PacketRay* rays, std::size_t count, CutEntry* entries,
+                    bool* cut);
+
 /// The instruction set marchBrickSimd() runs on this host ("AVX3", "AVX2", "SSE4", ...).
 std::string simdTargetName();
 /// Samples per vector there.

@@ -463,11 +463,10 @@ inline bool marchConstant(const Frame& f, float value, int& k, int kEnd, Accum& 
 /// step) to those `clip` keeps along o + t d, and gives the parameters it keeps, [ta, tb];
 /// false when no sample is left.
 inline bool clipLattice(const ClipF& clip, glm::vec3 o, glm::vec3 d, float t0, float invStep,
-                        int& first, int& total, float& ta, float& tb,
-                        glm::vec3* entryNormal = nullptr) {
+                        int& first, int& total, float& ta, float& tb) {
     ta = -3.0e38f;
     tb = 3.0e38f;
-    clip.interval(o, d, ta, tb, entryNormal);
+    clip.interval(o, d, ta, tb);
     if (!(ta <= tb)) return false;
     const float kb = std::ceil((tb - t0) * invStep - 0.5f);
     if (kb < float(total)) total = kb > 0.0f ? int(kb) : 0;
@@ -618,8 +617,6 @@ struct KeptSegment {
     glm::vec3 ov, dv; ///< origin and direction in voxels (position ov + t dv)
     glm::vec3 d;      ///< direction, world
     float tIn, tOut;
-    bool cut = false; ///< tIn is a cut inside the box (a crop face or a plane), not its face
-    glm::vec3 cutNormal{0.0f}; ///< with cut: its unit normal, world
 };
 
 /// The segment the ray of image-plane position (sx, sy) keeps, as RayWalk::begin() sets it
@@ -659,13 +656,10 @@ inline bool keptSegment(const Frame& f, float sx, float sy, float shift, KeptSeg
     s.d = d;
     s.tIn = t0;
     s.tOut = t1;
-    s.cut = false;
     if (f.clip.any) { // as RayWalk::clipSamples()
         int first = 0;
         float ta, tb;
-        if (!clipLattice(f.clip, o, d, lattice, invStep, first, total, ta, tb, &s.cutNormal))
-            return false;
-        s.cut = ta > t0;
+        if (!clipLattice(f.clip, o, d, lattice, invStep, first, total, ta, tb)) return false;
         s.tIn = std::max(s.tIn, ta);
         s.tOut = std::min(s.tOut, tb);
     }
@@ -706,19 +700,24 @@ template <class T> float valueIn(const Frame& f, const BrickRef& b, glm::vec3 lo
                          glm::vec3(local.x + shift, local.y + shift, local.z + shift));
 }
 
-/// Capping (Frame::capping, render/MODES.md): the face of the cut where segment `s` enters,
-/// drawn into ray state `state` before any of its samples, in the pass that draws the
-/// face's brick (the batches go front to back: no later than the ray's first sample's). A
-/// brick the plan leaves out, or an empty octree leaf, holds no visible value (composite) or
-/// none at or above the iso value: no face. Composite: the table's colour at the value there, its
-/// opacity for one voxel's length (Frame::capPower); isosurface: at or above the iso value, the
-/// surface's colour, opaque, and the ray is done. Both shaded by the cut's normal.
-template <class T>
-void takeCap(const Frame& f, const KeptSegment& s, RayState& state, RayCount& n) {
-    glm::vec3 p, local;
-    for (int a = 0; a < 3; ++a)
-        p[a] = s.ov[a] + s.dv[a] * s.tIn;
-    const int index = brickHolding(f, 1.0f / float(f.brick), p, local);
+/// Where a ray enters what it keeps through a cut (capping): a crop face or a plane inside the
+/// volume's box, with a sample of the ray's lattice behind it (cutEntriesSimd()).
+struct CutEntry {
+    glm::vec3 p;      ///< the point, in voxels
+    glm::vec3 normal; ///< the cut's unit normal, world
+    glm::vec3 d;      ///< the ray's direction, world
+};
+
+/// Capping (Frame::capping, render/MODES.md): the face of cut entry `e`, drawn into ray state
+/// `state` before any of its samples, in the pass that draws the face's brick (the batches go
+/// front to back: no later than the ray's first sample's). A brick the plan leaves out, or an
+/// empty octree leaf, holds no visible value (composite) or none at or above the iso value: no
+/// face. Composite: the table's colour at the value there, its opacity for one voxel's length
+/// (Frame::capPower); isosurface: at or above the iso value, the surface's colour, opaque, and
+/// the ray is done. Both shaded by the cut's normal.
+template <class T> void takeCap(const Frame& f, const CutEntry& e, RayState& state, RayCount& n) {
+    glm::vec3 local;
+    const int index = brickHolding(f, 1.0f / float(f.brick), e.p, local);
     const BrickRef& b = f.bricks[index];
     if (b.slot == Slot::Absent || b.batch != f.batch) return;
     if (b.slot == Slot::Sampled && f.occ) { // an empty leaf holds no face, as it holds no sample
@@ -729,8 +728,7 @@ void takeCap(const Frame& f, const KeptSegment& s, RayState& state, RayCount& n)
     }
     const float value = valueIn<T>(f, b, local);
     ++n.samples;
-    const float diff =
-        std::abs(s.cutNormal.x * s.d.x + s.cutNormal.y * s.d.y + s.cutNormal.z * s.d.z);
+    const float diff = std::abs(e.normal.x * e.d.x + e.normal.y * e.d.y + e.normal.z * e.d.z);
     Rgba c;
     if (f.mode == BlendMode::Isosurface) {
         if (value < f.iso) return;

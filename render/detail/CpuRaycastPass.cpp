@@ -211,12 +211,23 @@ void takeTileEnds(const Frame& f, const EndGrid& grid, const PassRays& ray, cons
 /// on batch 0 (`ray`'s operator()).
 template <class T>
 void takeTileCaps(const Frame& f, const PassRays& ray, const Tile& r, RayCount& n) {
+    constexpr std::size_t kTile = 64; // the 8x8 tiles of marchPassOf(), or fewer at an edge
+    PacketRay rays[kTile];
+    CutEntry entries[kTile];
+    bool cut[kTile];
+    std::size_t count = 0;
+    auto flush = [&] {
+        cutEntriesSimd(f, rays, count, entries, cut);
+        for (std::size_t i = 0; i < count; ++i)
+            if (cut[i]) takeCap<T>(f, entries[i], *rays[i].state, n);
+        count = 0;
+    };
     for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
         for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
-            const PacketRay p = ray(x, y);
-            KeptSegment s;
-            if (keptSegment(f, p.sx, p.sy, p.shift, s) && s.cut) takeCap<T>(f, s, *p.state, n);
+            rays[count++] = ray(x, y);
+            if (count == kTile) flush();
         }
+    if (count > 0) flush();
 }
 
 /// marchPass() for voxels of type T, on every core (TBB over 8x8 tiles).
