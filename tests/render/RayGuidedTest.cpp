@@ -5,6 +5,8 @@
 // skin surface, so most of their bricks lie behind saturated rays.
 #include "RenderTestSupport.h"
 
+#include <glm/geometric.hpp>
+
 namespace bc::render {
 namespace {
 
@@ -54,10 +56,11 @@ struct PlanSize {
 };
 
 /// What a frame at `camera` plans and what its rays enter, drawn with room for everything.
-PlanSize planSize(TestStore& t, const TransferFunction& tf, const Camera& camera) {
+PlanSize planSize(TestStore& t, const TransferFunction& tf, const Camera& camera,
+                  const RenderOptions& options = frameOptions(true)) {
     GpuRaycaster big({1ull << 30});
     FrameStats s;
-    test::gpuFrame(t, big, tf, camera, frameOptions(true), &s);
+    test::gpuFrame(t, big, tf, camera, options, &s);
     return {s.bricksVisited - s.bricksConstant, s.bricksEntered};
 }
 
@@ -148,6 +151,41 @@ TEST(RayGuided, JumpToTheFarSideAsksForWhatTheLastFrameHid) {
                 "passes, fallback %d\n",
                 (unsigned long long)s.bricksDeferred, (unsigned long long)s.bricksRequested,
                 s.resumePasses, int(s.guidedFallback));
+    EXPECT_GT(s.bricksRequested, 0u);
+    EXPECT_GE(s.resumePasses, 1u);
+}
+
+// Capped: the last frame, from the front, saw the skin and hid the middle; from behind, rays
+// enter through a plane cut through the middle, whose faces lie in bricks the last frame hid.
+// A ray waits for its face's brick before any sample, has it loaded and goes on: the images
+// are the unguided ones.
+TEST(RayGuided, ARayWaitsForItsCutFacesBrickAndTheImageIsTheUnguidedOne) {
+    auto t = phantomStore();
+    const auto tf = opaqueSkin(t->stats);
+    const Box box = LevelGeometry::of(*t->store, 0).box;
+    // Keeps the half towards the first camera: the second one looks at the cut.
+    const glm::dvec3 n = glm::normalize(Camera::orbit(box, 0, 20).eye - box.centre());
+    RenderOptions o = frameOptions(true);
+    o.clip.planeCount = 1;
+    o.clip.planes[0] = {{n.x, n.y, n.z}, -glm::dot(n, box.centre())};
+    o.clip.cap = true;
+    const PlanSize size = planSize(*t, tf, Camera::orbit(box, 0, 20), o);
+    const std::uint64_t slots = size.sampled - 1; // the plan does not fit
+    GpuRaycaster guided(budgetOf(*t, slots)), plain(budgetOf(*t, slots));
+    RenderOptions unguided = o;
+    unguided.rayGuided = false;
+    FrameStats s;
+    for (double az : {0.0, 180.0}) {
+        const Camera camera = Camera::orbit(box, az, 20);
+        const Image a = test::gpuFrame(*t, guided, tf, camera, o, &s);
+        const Image b = test::gpuFrame(*t, plain, tf, camera, unguided);
+        EXPECT_LE(compareImages(a, b).maxAbs, 1e-6) << "azimuth " << az;
+        EXPECT_GT(test::alphaSum(a), 100.0) << "azimuth " << az;
+    }
+    std::printf("[guided] capped, 0 -> 180 deg: deferred %llu, asked for %llu in %u resuming "
+                "passes\n",
+                (unsigned long long)s.bricksDeferred, (unsigned long long)s.bricksRequested,
+                s.resumePasses);
     EXPECT_GT(s.bricksRequested, 0u);
     EXPECT_GE(s.resumePasses, 1u);
 }
