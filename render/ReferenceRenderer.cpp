@@ -170,10 +170,12 @@ void takeCap(const RayContext& c, const Volume& v, const glm::dvec3& p, const gl
     if (!(a > 0.0)) return;
     std::array<double, 4> rgba{f[0], f[1], f[2], std::min(a, 1.0)};
     if (c.options.shading) rgba = light(rgba, diff, 1.0);
-    const double w = (1.0 - s.acc[3]) * rgba[3];
+    // In front of whatever the ray holds (nothing, but for a pass order that rounding could
+    // turn): the face is its front-most layer.
+    const double keep = 1.0 - rgba[3];
     for (int i = 0; i < 3; ++i)
-        s.acc[i] += w * rgba[i];
-    s.acc[3] += w;
+        s.acc[i] = rgba[3] * rgba[i] + keep * s.acc[i];
+    s.acc[3] = rgba[3] + keep * s.acc[3];
 }
 
 /// Marches one ray from progress.k on; `volumeAt(p)` is the volume that samples point p, or

@@ -742,7 +742,13 @@ template <class T> void takeCap(const Frame& f, const CutEntry& e, RayState& sta
         if (!(c.a > 0.0f)) return;
     }
     if (f.shading) c = light(c, diff, 1.0f);
-    composite(state.acc, c);
+    // In front of whatever the ray holds (nothing, but for a pass order that rounding could
+    // turn): the face is its front-most layer. On an empty ray, composite()'s floats.
+    const float keep = 1.0f - c.a;
+    state.acc.r = c.a * c.r + keep * state.acc.r;
+    state.acc.g = c.a * c.g + keep * state.acc.g;
+    state.acc.b = c.a * c.b + keep * state.acc.b;
+    state.acc.t *= keep;
     if (state.acc.t <= f.ertT) state.phase = RayPhase::Done;
 }
 

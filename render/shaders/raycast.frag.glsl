@@ -293,7 +293,9 @@ void main() {
                 float v = e.x == -2 ? intBitsToFloat(e.y)
                                     : fetch(p - vec3(c * uBrick) + (float(uApron) - 0.5), slotOrigin(e.x));
                 ++taken;
-                composite(acc, capColour(v, abs(dot(cutNormal, d))));
+                // In front of whatever the ray holds: the face is its front-most layer.
+                vec4 c = capColour(v, abs(dot(cutNormal, d)));
+                acc = vec4(c.a * c.rgb + (1.0 - c.a) * acc.rgb, c.a + (1.0 - c.a) * acc.a);
                 if (finished(acc)) {
                     atomicAdd(sampleCount, taken);
                     if (uGuided) imageStore(uResumeAt, ivec2(gl_FragCoord.xy), ivec4(-1));
