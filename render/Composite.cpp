@@ -1,5 +1,7 @@
 #include "render/Composite.h"
 
+#include "render/detail/CpuRay.h"
+
 #include "render/TransferFunction.h"
 
 #include <algorithm>
@@ -68,10 +70,14 @@ PartsCombine combineFor(BlendMode mode) {
 }
 
 void resolveProjections(Image& image, BlendMode mode, const TransferFunctionTable& table) {
-    // The CPU raycaster's classify(): its Frame's tfScale and tfOffset, its lerp.
+    // The CPU raycaster's classify(), through a Frame of the table alone (its tfScale and
+    // tfOffset as the raycaster sets them).
+    detail::Frame f;
     const double span = table.domainMax - table.domainMin, last = double(table.entries - 1);
-    const auto scale = float(last / span), offset = float(-table.domainMin * last / span);
-    const int entries = int(table.entries);
+    f.tf = table.rgba.data();
+    f.entries = int(table.entries);
+    f.tfScale = float(last / span);
+    f.tfOffset = float(-table.domainMin * last / span);
     for (std::size_t p = 0; p + 3 < image.rgba.size(); p += 4) {
         float* px = &image.rgba[p];
         const float count = px[1];
@@ -79,17 +85,12 @@ void resolveProjections(Image& image, BlendMode mode, const TransferFunctionTabl
             std::fill(px, px + 4, 0.0f);
             continue;
         }
-        const float v = mode == BlendMode::Average ? px[0] / count : px[0];
-        const float u = std::clamp(v * scale + offset, 0.0f, float(entries - 1));
-        const int i = std::min(int(u), entries - 2);
-        const float w = u - float(i);
-        const float* e = table.rgba.data() + 4 * std::size_t(i);
-        float c[4];
-        for (int k = 0; k < 4; ++k)
-            c[k] = e[k] * (1.0f - w) + e[k + 4] * w;
-        for (int k = 0; k < 3; ++k)
-            px[k] = std::clamp(c[k] * c[3], 0.0f, 1.0f);
-        px[3] = std::clamp(c[3], 0.0f, 1.0f);
+        const detail::Rgba c =
+            detail::classify(f, mode == BlendMode::Average ? px[0] / count : px[0]);
+        px[0] = std::clamp(c.r * c.a, 0.0f, 1.0f);
+        px[1] = std::clamp(c.g * c.a, 0.0f, 1.0f);
+        px[2] = std::clamp(c.b * c.a, 0.0f, 1.0f);
+        px[3] = std::clamp(c.a, 0.0f, 1.0f);
     }
 }
 

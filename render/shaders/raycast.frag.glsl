@@ -353,8 +353,10 @@ void main() {
             int base = brickIndex * uOccWords;
             uint map = uCells ? cellBase[brickIndex] : 0u;
             ivec3 checkedLeaf = ivec3(-1);           // the last leaf found to be sampled
+#if BC_MODES
             ivec3 boundLeaf = ivec3(-1);             // the leaf whose running bound is read
             float leafBound = 0.0;
+#endif
             for (; k < kEnd; ++k) {
                 float t = t0 + (float(k) + 0.5) * uStepMm;
                 vec3 q = rel + dv * t;
