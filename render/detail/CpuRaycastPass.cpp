@@ -145,11 +145,11 @@ class PassRays {
     const bool mConstructs;
 };
 
-/// The rays of tile `r` in 4x4 blocks (partial at an edge), a vector of rays at a time.
-void marchTilePackets(brickstore::VoxelType type, const Frame& f, const PassRays& ray,
-                      const Tile& r, RayCount& n) {
+/// The rays of tile `r` in 4x4 blocks (partial at an edge): neighbouring pixels next to each
+/// other, as marchPacketSimd() wants them. Constructs the states on batch 0 (`ray`).
+void tileRays(const PassRays& ray, const Tile& r, std::vector<PacketRay>& list) {
     const auto ye = r.rows().end(), xe = r.cols().end();
-    std::vector<PacketRay> list;
+    list.clear();
     list.reserve(r.rows().size() * r.cols().size());
     for (std::uint32_t by = r.rows().begin(); by < ye; by += 4)
         for (std::uint32_t bx = r.cols().begin(); bx < xe; bx += 4)
@@ -160,7 +160,6 @@ void marchTilePackets(brickstore::VoxelType type, const Frame& f, const PassRays
                     // made them: fetch them here, well before use.
                     __builtin_prefetch(list.back().state, 1);
                 }
-    marchPacketSimd(type, f, list.data(), list.size(), n);
 }
 
 /// The rays of tile `r` one by one.
@@ -176,58 +175,41 @@ void marchTileRays(const Frame& f, const PassRays& ray, const Tile& r, std::vect
         }
 }
 
-/// The segment ends of tile `r`'s rays whose bricks this pass draws (samplesEnds(), takeEnd()),
-/// before the tile's march, so that they seed its running skip; the same for every march, so
-/// the scalar and SIMD ones stay equal. Constructs the states on batch 0 (`ray`'s operator()).
+/// The segment ends of rays `rays[0, count)` whose bricks this pass draws (samplesEnds(),
+/// takeEnd()), before their march, so that they seed its running skip; the same for every
+/// march, so the scalar and SIMD ones stay equal.
 template <class T>
-void takeTileEnds(const Frame& f, const EndGrid& grid, const PassRays& ray, const Tile& r,
-                  RayCount& n) {
-    constexpr std::size_t kTile = 64; // the 8x8 tiles of marchPassOf(), or fewer at an edge
-    PacketRay rays[kTile];
-    glm::vec3 in[kTile], out[kTile];
-    bool ok[kTile];
-    std::size_t count = 0;
-    auto flush = [&] {
-        segmentEndsSimd(f, rays, count, in, out, ok);
-        for (std::size_t i = 0; i < count; ++i) {
+void takeEnds(const Frame& f, const EndGrid& grid, const PacketRay* rays, std::size_t count,
+              RayCount& n) {
+    constexpr std::size_t kChunk = 64;
+    glm::vec3 in[kChunk], out[kChunk];
+    bool ok[kChunk];
+    for (std::size_t base = 0; base < count; base += kChunk) {
+        const std::size_t m = std::min(kChunk, count - base);
+        segmentEndsSimd(f, rays + base, m, in, out, ok);
+        for (std::size_t i = 0; i < m; ++i) {
             if (!ok[i]) continue;
-            takeEnd<T>(f, grid, in[i], rays[i].state->acc, n);
-            takeEnd<T>(f, grid, out[i], rays[i].state->acc, n);
+            takeEnd<T>(f, grid, in[i], rays[base + i].state->acc, n);
+            takeEnd<T>(f, grid, out[i], rays[base + i].state->acc, n);
         }
-        count = 0;
-    };
-    for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
-        for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
-            rays[count++] = ray(x, y);
-            if (count == kTile) flush();
-        }
-    if (count > 0) flush();
+    }
 }
 
-/// The cut faces of tile `r`'s rays whose bricks this pass draws (Frame::capping, takeCap()),
-/// before the tile's march: a face lies in front of every sample of its ray. A ray done with
-/// its march may still have one: its lattice may have no sample in the bricks this frame
-/// draws (a part of a sort-last frame), or none after the face's batch. Constructs the states
-/// on batch 0 (`ray`'s operator()).
+/// The cut faces of rays `rays[0, count)` whose bricks this pass draws (Frame::capping,
+/// takeCap()), before their march: a face lies in front of every sample of its ray. A ray
+/// done with its march may still have one: its lattice may have no sample in the bricks this
+/// frame draws (a part of a sort-last frame), or none after the face's batch.
 template <class T>
-void takeTileCaps(const Frame& f, const PassRays& ray, const Tile& r, RayCount& n) {
-    constexpr std::size_t kTile = 64; // the 8x8 tiles of marchPassOf(), or fewer at an edge
-    PacketRay rays[kTile];
-    CutEntry entries[kTile];
-    bool cut[kTile];
-    std::size_t count = 0;
-    auto flush = [&] {
-        cutEntriesSimd(f, rays, count, entries, cut);
-        for (std::size_t i = 0; i < count; ++i)
-            if (cut[i]) takeCap<T>(f, entries[i], *rays[i].state, n);
-        count = 0;
-    };
-    for (std::uint32_t y = r.rows().begin(); y < r.rows().end(); ++y)
-        for (std::uint32_t x = r.cols().begin(); x < r.cols().end(); ++x) {
-            rays[count++] = ray(x, y);
-            if (count == kTile) flush();
-        }
-    if (count > 0) flush();
+void takeCaps(const Frame& f, const PacketRay* rays, std::size_t count, RayCount& n) {
+    constexpr std::size_t kChunk = 64;
+    CutEntry entries[kChunk];
+    bool cut[kChunk];
+    for (std::size_t base = 0; base < count; base += kChunk) {
+        const std::size_t m = std::min(kChunk, count - base);
+        cutEntriesSimd(f, rays + base, m, entries, cut);
+        for (std::size_t i = 0; i < m; ++i)
+            if (cut[i]) takeCap<T>(f, entries[i], *rays[base + i].state, n);
+    }
 }
 
 /// marchPass() for voxels of type T, on every core (TBB over 8x8 tiles).
@@ -238,18 +220,22 @@ void marchPassOf(const Frame& f, PixelLattice lattice, const PixelRect& region,
     std::atomic<std::uint64_t> samples{0}, leaps{0}, raises{0};
     const std::optional<EndGrid> ends =
         samplesEnds(f.mode) ? std::make_optional(EndGrid(f)) : std::nullopt;
-    const PassRays first(f, lattice, region, rays);
-    // After the ends or the caps, which construct the states.
-    const PassRays ray(f, lattice, region, rays, !ends && !f.capping);
+    // A tile's ray list, where one is needed, is built once (constructing the states on batch
+    // 0: `first`) and serves the ends, the faces and the packet march; the scalar march walks
+    // the tile itself, after the list (`listed`) or constructing the states.
+    const PassRays first(f, lattice, region, rays), listed(f, lattice, region, rays, false);
+    const bool lists = f.packets || ends || f.capping;
     tbb::parallel_for(Tile(rect.y, rect.y + rect.height, 8, rect.x, rect.x + rect.width, 8),
                       [&](const Tile& r) {
                           RayCount n;
-                          if (ends) takeTileEnds<T>(f, *ends, first, r, n);
-                          if (f.capping) takeTileCaps<T>(f, first, r, n);
+                          std::vector<PacketRay> list;
+                          if (lists) tileRays(first, r, list);
+                          if (ends) takeEnds<T>(f, *ends, list.data(), list.size(), n);
+                          if (f.capping) takeCaps<T>(f, list.data(), list.size(), n);
                           if (f.packets)
-                              marchTilePackets(voxelTypeOf<T>(), f, ray, r, n);
+                              marchPacketSimd(voxelTypeOf<T>(), f, list.data(), list.size(), n);
                           else
-                              marchTileRays<T>(f, ray, r, fronts, n);
+                              marchTileRays<T>(f, lists ? listed : first, r, fronts, n);
                           samples += n.samples;
                           leaps += n.leaps;
                           raises += n.raises;
