@@ -182,6 +182,35 @@ void beginFresh(const Frame& f, const PacketRay* rays, std::size_t count, RayWal
     unpackWalks(f, rays, count, invStep, out, walks, ok);
 }
 
+/// A vector of rays set up as RayWalk::begin() does, up to the count of their lattice.
+struct RaySetUp {
+    VF o[3], d[3];           ///< origin and direction, world
+    VF ov[3], dv[3], inv[3]; ///< in voxels, and 1 / dv
+    VF t0, t1;               ///< where they enter and leave the volume's box
+    VF lattice;              ///< t0 + shift step: sample k at lattice + (k + 1/2) step
+    VF total;                ///< samples of the lattice in the box (as a float)
+};
+
+/// Sets up the rays `rays[0, n)` (n at most a vector) in `r`; returns the lanes that miss the
+/// box, have no sample of their lattice in it, or lie past n.
+HWY_INLINE hn::Mask<DF> setUpRays(const Frame& f, const PacketRay* rays, std::size_t n,
+                                  RaySetUp& r) {
+    const DF df;
+    constexpr std::size_t kMax = hn::MaxLanes(DF());
+    HWY_ALIGN float sx[kMax] = {}, sy[kMax] = {}, shift[kMax] = {};
+    for (std::size_t i = 0; i < n; ++i) {
+        sx[i] = rays[i].sx;
+        sy[i] = rays[i].sy;
+        shift[i] = rays[i].shift;
+    }
+    rayBasis(f, hn::Load(df, sx), hn::Load(df, sy), r.o, r.d);
+    auto miss = clipToVolume(f, r.o, r.d, n, r.ov, r.dv, r.inv, r.t0, r.t1);
+    r.lattice = hn::Add(r.t0, hn::Mul(hn::Load(df, shift), hn::Set(df, f.stepMm)));
+    r.total = hn::Ceil(hn::Sub(hn::Mul(hn::Sub(r.t1, r.lattice), hn::Set(df, 1.0f / f.stepMm)),
+                               hn::Set(df, 0.5f)));
+    return hn::Or(miss, hn::Not(hn::Gt(r.total, hn::Zero(df))));
+}
+
 /// segmentEnds() for rays [0, count) of `rays`, a vector at a time: ok[i] says whether ray i
 /// has ends, in[i] and out[i] are them. A crop or clip goes to segmentEnds() ray by ray.
 void segmentEndsOf(const Frame& f, const PacketRay* rays, std::size_t count, glm::vec3* in,
@@ -196,24 +225,12 @@ void segmentEndsOf(const Frame& f, const PacketRay* rays, std::size_t count, glm
     const std::size_t lanes = hn::Lanes(df);
     for (std::size_t base = 0; base < count; base += lanes) {
         const std::size_t n = std::min(lanes, count - base);
-        HWY_ALIGN float sx[kMax] = {}, sy[kMax] = {}, shift[kMax] = {};
-        for (std::size_t i = 0; i < n; ++i) {
-            sx[i] = rays[base + i].sx;
-            sy[i] = rays[base + i].sy;
-            shift[i] = rays[base + i].shift;
-        }
-        VF o[3], d[3];
-        rayBasis(f, hn::Load(df, sx), hn::Load(df, sy), o, d);
-        VF ov[3], dv[3], inv[3], t0, t1;
-        auto miss = clipToVolume(f, o, d, n, ov, dv, inv, t0, t1);
-        const VF lattice = hn::Add(t0, hn::Mul(hn::Load(df, shift), hn::Set(df, f.stepMm)));
-        const VF total = hn::Ceil(hn::Sub(
-            hn::Mul(hn::Sub(t1, lattice), hn::Set(df, 1.0f / f.stepMm)), hn::Set(df, 0.5f)));
-        miss = hn::Or(miss, hn::Not(hn::Gt(total, hn::Zero(df))));
+        RaySetUp r;
+        const auto miss = setUpRays(f, rays + base, n, r);
         HWY_ALIGN float a[3][kMax], b[3][kMax];
         for (int axis = 0; axis < 3; ++axis) {
-            hn::Store(hn::Add(ov[axis], hn::Mul(dv[axis], t0)), df, a[axis]);
-            hn::Store(hn::Add(ov[axis], hn::Mul(dv[axis], t1)), df, b[axis]);
+            hn::Store(hn::Add(r.ov[axis], hn::Mul(r.dv[axis], r.t0)), df, a[axis]);
+            hn::Store(hn::Add(r.ov[axis], hn::Mul(r.dv[axis], r.t1)), df, b[axis]);
         }
         std::uint8_t missBits[(kMax + 7) / 8 + 8] = {};
         hn::StoreMaskBits(df, miss, missBits);
@@ -239,19 +256,12 @@ void cutEntriesOf(const Frame& f, const PacketRay* rays, std::size_t count, CutE
     const ClipF& c = f.clip;
     for (std::size_t base = 0; base < count; base += lanes) {
         const std::size_t n = std::min(lanes, count - base);
-        HWY_ALIGN float sx[kMax] = {}, sy[kMax] = {}, shift[kMax] = {};
-        for (std::size_t i = 0; i < n; ++i) {
-            sx[i] = rays[base + i].sx;
-            sy[i] = rays[base + i].sy;
-            shift[i] = rays[base + i].shift;
-        }
-        VF o[3], d[3];
-        rayBasis(f, hn::Load(df, sx), hn::Load(df, sy), o, d);
-        VF ov[3], dv[3], inv[3], t0, t1;
-        auto miss = clipToVolume(f, o, d, n, ov, dv, inv, t0, t1);
-        const VF lattice = hn::Add(t0, hn::Mul(hn::Load(df, shift), hn::Set(df, f.stepMm)));
-        VF total = hn::Ceil(hn::Sub(hn::Mul(hn::Sub(t1, lattice), invStep), half));
-        miss = hn::Or(miss, hn::Not(hn::Gt(total, zero)));
+        RaySetUp r;
+        auto miss = setUpRays(f, rays + base, n, r);
+        const VF* o = r.o;
+        const VF* d = r.d;
+        const VF lattice = r.lattice, t0 = r.t0;
+        VF total = r.total;
         // The interval kept and the face raising its start: 2a (+ 1 for the high one) for a
         // crop face on axis a, 6 + i for plane i, -1 for none.
         VF ta = hn::Set(df, -3.0e38f), tb = hn::Set(df, 3.0e38f);
@@ -302,7 +312,7 @@ void cutEntriesOf(const Frame& f, const PacketRay* rays, std::size_t count, CutE
         HWY_ALIGN float p[3][kMax], dir[3][kMax];
         HWY_ALIGN std::int32_t faces[kMax];
         for (int a = 0; a < 3; ++a) {
-            hn::Store(hn::Add(ov[a], hn::Mul(dv[a], ta)), df, p[a]);
+            hn::Store(hn::Add(r.ov[a], hn::Mul(r.dv[a], ta)), df, p[a]);
             hn::Store(d[a], df, dir[a]);
         }
         hn::Store(face, di, faces);
