@@ -18,7 +18,6 @@ using test::TestStore;
 /// 10 at the first voxel and 200 at the last, which set the values' range), in bricks of 8.
 /// No ray of alongZ() reads the columns, nor does its gradient.
 std::unique_ptr<TestStore> solidStore() {
-    const test::TempDir dir;
     const std::uint64_t n = 16;
     std::vector<std::uint8_t> voxels(n * n * n, 100);
     for (std::uint64_t z = 0; z < n; ++z)
@@ -27,11 +26,7 @@ std::unique_ptr<TestStore> solidStore() {
                 voxels[(z * n + y) * n + x] = 101;
     voxels.front() = 10;
     voxels.back() = 200;
-    const std::string raw = dir.file("solid_16x16x16_uint8.raw");
-    test::writeFile(raw, voxels.data(), voxels.size());
-    brickstore::SourceSpec spec;
-    spec.input = raw;
-    return test::ingestSpec(spec, {8, 2, 4});
+    return test::ingestVoxels(voxels, {n, n, n}, {8, 2, 4});
 }
 
 /// Looking along +z through the middle, orthographic: every ray enters at z = 0, through
@@ -81,18 +76,7 @@ void expectTheFace(const Image& capped, const Image& uncapped, const TransferFun
 
 Image underBudget(TestStore& t, Renderer& renderer, std::uint64_t budgetBytes,
                   const TransferFunction& tf, const RenderOptions& o, FrameStats& stats) {
-    brickstore::BrickCache cache(*t.store, brickstore::BrickCacheConfig{budgetBytes});
-    return renderer.render(*t.store, cache, tf, alongZ(), o, stats);
-}
-
-/// Runs `f` and returns the std::invalid_argument's message (empty when none was thrown).
-template <class F> std::string refusal(const F& f) {
-    try {
-        f();
-    } catch (const std::invalid_argument& e) {
-        return e.what();
-    }
-    return {};
+    return test::underBudget(t, renderer, budgetBytes, tf, alongZ(), o, stats);
 }
 
 TEST(CapRules, TheProjectionsRefuseACapAndTheEntryFaceIsTheCutsNormal) {
@@ -101,9 +85,10 @@ TEST(CapRules, TheProjectionsRefuseACapAndTheEntryFaceIsTheCutsNormal) {
     o.clip.planeCount = 1;
     for (const BlendMode mode : {BlendMode::Maximum, BlendMode::Minimum, BlendMode::Average}) {
         o.mode = mode;
-        EXPECT_EQ(
-            refusal([&] { o.validate(); }).rfind("cap: mode " + std::string(toString(mode)), 0),
-            0u);
+        EXPECT_EQ(test::refusal([&] {
+                      o.validate();
+                  }).rfind("cap: mode " + std::string(toString(mode)), 0),
+                  0u);
     }
     for (const BlendMode mode : {BlendMode::Composite, BlendMode::Isosurface}) {
         o.mode = mode;
@@ -286,11 +271,15 @@ TEST(Capping, AFrameDrawnInSlicesIsTheWholeFrame) {
     }
 }
 
-class CapOnScans : public ::testing::TestWithParam<std::string> {};
-
-TEST_P(CapOnScans, TheCpuRaycasterDrawsTheReferencesCappedImageAndSkippingChangesNoPixel) {
-    const auto t = test::ingestRealScan(GetParam());
-    if (!t) return test::missingData("scan " + GetParam());
+/// Scan `name` capped (ct-bone, cappedCut(), orbit 40,30), composite and isosurface, at
+/// `edge`^2: `draw(tf, camera, options)` gives the reference's image (>= 50 dB), skipping and
+/// early termination off change no pixel, and (with `uncappedDiffers`) the faces show.
+template <class Draw>
+void expectTheReferencesCappedImage(const std::string& name, std::uint32_t edge,
+                                    const std::string& label, bool uncappedDiffers,
+                                    const Draw& draw) {
+    const auto t = test::ingestRealScan(name);
+    if (!t) return test::missingData("scan " + name);
     const TransferFunction bone = TransferFunction::preset("ct-bone", t->stats);
     const Box box = LevelGeometry::of(*t->store, 0).box;
     const Camera camera = Camera::orbit(box, 40.0, 30.0);
@@ -298,25 +287,36 @@ TEST_P(CapOnScans, TheCpuRaycasterDrawsTheReferencesCappedImageAndSkippingChange
     for (const BlendMode mode : {BlendMode::Composite, BlendMode::Isosurface}) {
         SCOPED_TRACE(toString(mode));
         RenderOptions o;
-        o.width = o.height = 96;
+        o.width = o.height = edge;
         o.mode = mode;
         o.clip = cappedCut(box);
         o.isoValue = 0.5 * (bone.domainMin() + bone.domainMax());
         FrameStats refStats;
         const Image ref = reference.render(*t->store, *t->cache, bone, camera, o, refStats);
-        const Image cpu = test::cpuFrame(*t, bone, camera, o);
-        const ImageComparison c = compareImages(cpu, ref);
-        test::printComparison(GetParam() + " " + toString(mode) + " capped", c);
+        const Image fast = draw(*t, bone, camera, o);
+        const ImageComparison c = compareImages(fast, ref);
+        test::printComparison(name + " " + toString(mode) + " capped" + label, c);
         EXPECT_GE(c.psnrDb, 50.0);
         RenderOptions plain = o;
         plain.skip = SkipMode::None;
         plain.earlyTermination = mode == BlendMode::Composite;
-        EXPECT_EQ(compareImages(test::cpuFrame(*t, bone, camera, plain), cpu).maxAbs, 0.0);
+        EXPECT_EQ(compareImages(draw(*t, bone, camera, plain), fast).maxAbs, 0.0);
+        if (!uncappedDiffers) continue;
         RenderOptions uncapped = o;
         uncapped.clip.cap = false;
-        EXPECT_GT(compareImages(test::cpuFrame(*t, bone, camera, uncapped), cpu).maxAbs, 0.05)
+        EXPECT_GT(compareImages(draw(*t, bone, camera, uncapped), fast).maxAbs, 0.05)
             << "the faces change the image";
     }
+}
+
+class CapOnScans : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(CapOnScans, TheCpuRaycasterDrawsTheReferencesCappedImageAndSkippingChangesNoPixel) {
+    expectTheReferencesCappedImage(
+        GetParam(), 96, "", true,
+        [](TestStore& t, const TransferFunction& tf, const Camera& c, const RenderOptions& o) {
+            return test::cpuFrame(t, tf, c, o);
+        });
 }
 
 INSTANTIATE_TEST_SUITE_P(RealScans, CapOnScans,
@@ -326,32 +326,12 @@ class CapOnScansGl : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(CapOnScansGl, TheGpuRaycasterDrawsTheReferencesCappedImageAndSkippingChangesNoPixel) {
     test::glContext();
-    const auto t = test::ingestRealScan(GetParam());
-    if (!t) return test::missingData("scan " + GetParam());
-    const TransferFunction bone = TransferFunction::preset("ct-bone", t->stats);
-    const Box box = LevelGeometry::of(*t->store, 0).box;
-    const Camera camera = Camera::orbit(box, 40.0, 30.0);
-    ReferenceRenderer reference;
-    GpuRaycaster gpu, plainGpu;
-    for (const BlendMode mode : {BlendMode::Composite, BlendMode::Isosurface}) {
-        SCOPED_TRACE(toString(mode));
-        RenderOptions o;
-        o.width = o.height = 64;
-        o.mode = mode;
-        o.clip = cappedCut(box);
-        o.isoValue = 0.5 * (bone.domainMin() + bone.domainMax());
-        FrameStats refStats;
-        const Image ref = reference.render(*t->store, *t->cache, bone, camera, o, refStats);
-        const Image fast = test::gpuFrame(*t, gpu, bone, camera, o);
-        const ImageComparison c = compareImages(fast, ref);
-        test::printComparison(GetParam() + " " + toString(mode) + " capped gpu", c);
-        EXPECT_GE(c.psnrDb, 50.0);
-        RenderOptions plain = o;
-        plain.skip = SkipMode::None;
-        plain.earlyTermination = mode == BlendMode::Composite;
-        EXPECT_EQ(compareImages(test::gpuFrame(*t, plainGpu, bone, camera, plain), fast).maxAbs,
-                  0.0);
-    }
+    GpuRaycaster gpu;
+    expectTheReferencesCappedImage(
+        GetParam(), 64, " gpu", false,
+        [&](TestStore& t, const TransferFunction& tf, const Camera& c, const RenderOptions& o) {
+            return test::gpuFrame(t, gpu, tf, c, o);
+        });
 }
 
 INSTANTIATE_TEST_SUITE_P(RealScans, CapOnScansGl, ::testing::Values("cthead", "CT_AVM"));

@@ -19,16 +19,6 @@ namespace {
 
 using test::TestStore;
 
-/// Runs `f` and returns the std::invalid_argument's message (empty when none was thrown).
-template <class F> std::string refusal(const F& f) {
-    try {
-        f();
-    } catch (const std::invalid_argument& e) {
-        return e.what();
-    }
-    return {};
-}
-
 TEST(ClipRules, BadValuesAreRefusedNamingTheField) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const double inf = std::numeric_limits<double>::infinity();
@@ -42,7 +32,7 @@ TEST(ClipRules, BadValuesAreRefusedNamingTheField) {
         Clip bad = c;
         bad.cropMin[1] = lo;
         bad.cropMax[1] = hi;
-        const std::string why = refusal([&] { bad.validate(); });
+        const std::string why = test::refusal([&] { bad.validate(); });
         EXPECT_EQ(why.rfind("crop:", 0), 0u) << lo << ".." << hi << ": " << why;
         EXPECT_NE(why.find("axis y"), std::string::npos) << why;
     }
@@ -50,18 +40,19 @@ TEST(ClipRules, BadValuesAreRefusedNamingTheField) {
     planes.planeCount = 2;
     planes.planes[0] = {{1, 0, 0}, -3};
     planes.planes[1] = {{0, 0, 0}, 1};
-    EXPECT_EQ(refusal([&] { planes.validate(); }).rfind("clip[1]: the normal is zero", 0), 0u);
+    EXPECT_EQ(test::refusal([&] { planes.validate(); }).rfind("clip[1]: the normal is zero", 0),
+              0u);
     planes.planes[1] = {{0, nan, 1}, 1};
-    EXPECT_EQ(refusal([&] { planes.validate(); }).rfind("clip[1]:", 0), 0u);
+    EXPECT_EQ(test::refusal([&] { planes.validate(); }).rfind("clip[1]:", 0), 0u);
     planes.planes[1] = {{0, 0, 1}, inf};
-    EXPECT_EQ(refusal([&] { planes.validate(); }).rfind("clip[1]:", 0), 0u);
+    EXPECT_EQ(test::refusal([&] { planes.validate(); }).rfind("clip[1]:", 0), 0u);
     planes.planeCount = 7;
     planes.planes[1] = {{0, 0, 1}, 1};
-    EXPECT_EQ(refusal([&] { planes.validate(); }).rfind("clip: 7 planes", 0), 0u);
+    EXPECT_EQ(test::refusal([&] { planes.validate(); }).rfind("clip: 7 planes", 0), 0u);
     // Through the options, as every renderer validates them.
     RenderOptions o;
     o.clip = planes;
-    EXPECT_EQ(refusal([&] { o.validate(); }).rfind("clip:", 0), 0u);
+    EXPECT_EQ(test::refusal([&] { o.validate(); }).rfind("clip:", 0), 0u);
 }
 
 TEST(ClipRules, TheKeptIntervalAndTheBricksOutside) {

@@ -67,6 +67,40 @@ inline std::unique_ptr<TestStore> ingestSpec(const brickstore::SourceSpec& spec,
     return ingestStore(*source, geometry);
 }
 
+/// Voxels of u8 (x fastest) of `dims`, written as a raw file and ingested in `geometry`.
+inline std::unique_ptr<TestStore> ingestVoxels(const std::vector<std::uint8_t>& voxels,
+                                               const std::array<std::uint64_t, 3>& dims,
+                                               const brickstore::BrickGeometry& geometry) {
+    const TempDir dir;
+    const std::string raw =
+        dir.file("volume_" + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                 std::to_string(dims[2]) + "_uint8.raw");
+    writeFile(raw, voxels.data(), voxels.size());
+    brickstore::SourceSpec spec;
+    spec.input = raw;
+    return ingestSpec(spec, geometry);
+}
+
+/// A frame of `renderer` through a host cache of its own of `budgetBytes` (batches when the
+/// frame's bricks do not fit).
+inline render::Image underBudget(TestStore& t, render::Renderer& renderer,
+                                 std::uint64_t budgetBytes, const render::TransferFunction& tf,
+                                 const render::Camera& camera, const render::RenderOptions& o,
+                                 render::FrameStats& stats) {
+    brickstore::BrickCache cache(*t.store, brickstore::BrickCacheConfig{budgetBytes});
+    return renderer.render(*t.store, cache, tf, camera, o, stats);
+}
+
+/// Runs `f` and returns the std::invalid_argument's message (empty when none was thrown).
+template <class F> std::string refusal(const F& f) {
+    try {
+        f();
+    } catch (const std::invalid_argument& e) {
+        return e.what();
+    }
+    return {};
+}
+
 /// Real scans by short name, with the spacing MANIFEST.md gives for the raw files.
 inline std::optional<brickstore::SourceSpec> realScan(const std::string& name) {
     brickstore::SourceSpec s;

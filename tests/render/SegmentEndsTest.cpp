@@ -12,18 +12,13 @@ using test::TestStore;
 /// bricks of 8, so the last slice's brick layer (z from 8) holds no sample of a lattice of 3
 /// voxels along z (samples at z = 1.5, 4.5, 7.5: every one reads 100).
 std::unique_ptr<TestStore> facesStore() {
-    const test::TempDir dir;
     const std::uint64_t nx = 16, ny = 16, nz = 10;
     std::vector<std::uint8_t> voxels(nx * ny * nz, 100);
     for (std::uint64_t i = 0; i < nx * ny; ++i) {
         voxels[i] = 10;
         voxels[(nz - 1) * nx * ny + i] = 200;
     }
-    const std::string raw = dir.file("faces_16x16x10_uint8.raw");
-    test::writeFile(raw, voxels.data(), voxels.size());
-    brickstore::SourceSpec spec;
-    spec.input = raw;
-    return test::ingestSpec(spec, {8, 2, 4});
+    return test::ingestVoxels(voxels, {nx, ny, nz}, {8, 2, 4});
 }
 
 /// Looking along +z through the middle of the volume, orthographic: every ray enters at z = 0
@@ -64,8 +59,7 @@ void expectTheFaces(const Image& image, BlendMode mode, const std::string& what)
 
 Image underBudget(TestStore& t, Renderer& renderer, std::uint64_t budgetBytes,
                   const TransferFunction& tf, const RenderOptions& o, FrameStats& stats) {
-    brickstore::BrickCache cache(*t.store, brickstore::BrickCacheConfig{budgetBytes});
-    return renderer.render(*t.store, cache, tf, alongZ(), o, stats);
+    return test::underBudget(t, renderer, budgetBytes, tf, alongZ(), o, stats);
 }
 
 TEST(SegmentEnds, EveryCpuRendererSeesTheFacesTheLatticeStepsOverInOneBatchOrMany) {
