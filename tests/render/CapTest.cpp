@@ -32,13 +32,7 @@ std::unique_ptr<TestStore> solidStore() {
 /// Looking along +z through the middle, orthographic: every ray enters at z = 0, through
 /// x, y in [4, 12].
 Camera alongZ() {
-    Camera c;
-    c.eye = {8.0, 8.0, -40.0};
-    c.target = {8.0, 8.0, 8.0};
-    c.up = {0.0, 1.0, 0.0};
-    c.orthographic = true;
-    c.orthoHeight = 8.0;
-    return c;
+    return test::orthoAlongZ(8.0, 8.0, 8.0);
 }
 
 /// Keeps z >= 4.3 (a cut every ray enters through, face on), capped.

@@ -81,6 +81,18 @@ inline std::unique_ptr<TestStore> ingestVoxels(const std::vector<std::uint8_t>& 
     return ingestSpec(spec, geometry);
 }
 
+/// Orthographic, looking along +z from (x, y, -40) mm with `height` mm of view (y up): every
+/// ray enters a volume whose box holds (x, y) at z = 0.
+inline render::Camera orthoAlongZ(double x, double y, double height) {
+    render::Camera c;
+    c.eye = {x, y, -40.0};
+    c.target = {x, y, 0.0};
+    c.up = {0.0, 1.0, 0.0};
+    c.orthographic = true;
+    c.orthoHeight = height;
+    return c;
+}
+
 /// A frame of `renderer` through a host cache of its own of `budgetBytes` (batches when the
 /// frame's bricks do not fit).
 inline render::Image underBudget(TestStore& t, render::Renderer& renderer,

@@ -24,13 +24,7 @@ std::unique_ptr<TestStore> facesStore() {
 /// Looking along +z through the middle of the volume, orthographic: every ray enters at z = 0
 /// and leaves at z = 10.
 Camera alongZ() {
-    Camera c;
-    c.eye = {8.0, 8.0, -40.0};
-    c.target = {8.0, 8.0, 5.0};
-    c.up = {0.0, 1.0, 0.0};
-    c.orthographic = true;
-    c.orthoHeight = 8.0;
-    return c;
+    return test::orthoAlongZ(8.0, 8.0, 8.0);
 }
 
 RenderOptions stepOver(BlendMode mode) {
