@@ -612,17 +612,13 @@ struct RayWalk {
     }
 };
 
-/// The segment a ray keeps: the volume's box narrowed by the crop and clip planes.
-struct KeptSegment {
-    glm::vec3 ov, dv; ///< origin and direction in voxels (position ov + t dv)
-    glm::vec3 d;      ///< direction, world
-    float tIn, tOut;
-};
-
-/// The segment the ray of image-plane position (sx, sy) keeps, as RayWalk::begin() sets it
-/// up; false when the ray has no sample of its lattice (`shift`: begin()'s) to draw. Scalar
+/// Where the ray of image-plane position (sx, sy) enters and leaves the segment it keeps (the
+/// volume's box, narrowed by the crop and clip planes), in voxels, as RayWalk::begin() sets it
+/// up; false when the ray has no sample of its lattice (`shift`: begin()'s) to draw.
+/// samplesEnds(): a maximum or minimum samples these two points besides its lattice. Scalar
 /// arithmetic throughout (glm's component-wise functions are calls here, at a ray's cost).
-inline bool keptSegment(const Frame& f, float sx, float sy, float shift, KeptSegment& s) {
+inline bool segmentEnds(const Frame& f, float sx, float sy, float shift, glm::vec3& in,
+                        glm::vec3& out) {
     glm::vec3 o = f.eye, d = f.forward;
     for (int a = 0; a < 3; ++a) {
         if (f.ortho)
@@ -651,31 +647,17 @@ inline bool keptSegment(const Frame& f, float sx, float sy, float shift, KeptSeg
     const float invStep = 1.0f / f.stepMm, lattice = t0 + shift * f.stepMm;
     int total = int(std::ceil((t1 - lattice) * invStep - 0.5f));
     if (total <= 0) return false;
-    s.ov = ov;
-    s.dv = dv;
-    s.d = d;
-    s.tIn = t0;
-    s.tOut = t1;
+    float tIn = t0, tOut = t1;
     if (f.clip.any) { // as RayWalk::clipSamples()
         int first = 0;
         float ta, tb;
         if (!clipLattice(f.clip, o, d, lattice, invStep, first, total, ta, tb)) return false;
-        s.tIn = std::max(s.tIn, ta);
-        s.tOut = std::min(s.tOut, tb);
+        tIn = std::max(tIn, ta);
+        tOut = std::min(tOut, tb);
     }
-    return true;
-}
-
-/// Where the ray of image-plane position (sx, sy) enters and leaves the segment it keeps, in
-/// voxels (keptSegment()); false when the ray has no sample of its lattice to draw.
-/// samplesEnds(): a maximum or minimum samples these two points besides its lattice.
-inline bool segmentEnds(const Frame& f, float sx, float sy, float shift, glm::vec3& in,
-                        glm::vec3& out) {
-    KeptSegment s;
-    if (!keptSegment(f, sx, sy, shift, s)) return false;
     for (int a = 0; a < 3; ++a) {
-        in[a] = s.ov[a] + s.dv[a] * s.tIn;
-        out[a] = s.ov[a] + s.dv[a] * s.tOut;
+        in[a] = ov[a] + dv[a] * tIn;
+        out[a] = ov[a] + dv[a] * tOut;
     }
     return true;
 }
